@@ -1,0 +1,41 @@
+"""The BondGraph: elements as nodes, bonds as edges with a power direction and a dimension.
+
+This is what ``expand`` produces. Later, bodies and joints expand into the same structure
+(multibonds of dimension 3, matrix-valued elements).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .model import POWER_IN, Bond, Element, Model
+
+
+@dataclass
+class BondGraph:
+    model: Model
+    elements: dict[str, Element]
+    bonds: list[Bond]
+    ports: dict[str, list[int]]     # element name -> indices of its bonds, in file order
+
+    def other(self, b: int, node: str) -> str:
+        bond = self.bonds[b]
+        return bond.dst if bond.src == node else bond.src
+
+    def points_into(self, b: int, node: str) -> bool:
+        return self.bonds[b].dst == node
+
+    def port_sign(self, b: int, node: str) -> int:
+        """+1 if the bond's flow is the element's port flow, -1 if the bond is drawn
+        against the element's standard direction (into C, I, R; out of sources; into a
+        junction)."""
+        kind = self.elements[node].kind
+        into = self.points_into(b, node)
+        if kind in POWER_IN or kind in ("0", "1"):
+            return 1 if into else -1
+        return -1 if into else 1
+
+    def two_port(self, node: str) -> tuple[int, int]:
+        """(input bond, output bond) of a TF/GY-like element (checked by expand)."""
+        a, b = self.ports[node]
+        return (a, b) if self.points_into(a, node) else (b, a)

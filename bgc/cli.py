@@ -1,0 +1,187 @@
+"""The ``bgc`` command line: check, compile, simulate.
+
+User mistakes (BgcError) are printed as one line and exit with status 2; with ``--json``
+the same error is printed as a JSON object.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+
+import click
+import numpy as np
+
+from . import __version__, emit
+from .errors import BgcError, SimulationError
+from .pipeline import METHODS, build, compile_model, ensure_module
+
+_json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
+_method_opt = click.option("--method", type=click.Choice(METHODS), default="scalar",
+                           show_default=True, help="how constraint elements are handled")
+
+
+def _user_errors(fn):
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except BgcError as exc:
+            if kwargs.get("as_json"):
+                click.echo(json.dumps(exc.to_dict()))
+            click.echo(f"error: {exc}", err=True)
+            if isinstance(exc, SimulationError) and exc.result is not None:
+                _save_partial(exc.result, kwargs)
+            sys.exit(2)
+    return wrapper
+
+
+def _save_partial(result, kwargs):
+    from .results import write_csv
+    out = kwargs.get("out")
+    if out and len(result.t):
+        write_csv(result, out)
+        click.echo(f"partial results up to t = {result.t[-1]:.6g} written to {out}",
+                   err=True)
+
+
+@click.group()
+@click.version_option(__version__, prog_name="bgc")
+def main():
+    """bgc: compile bond-graph models to fast simulation code."""
+
+
+@main.command()
+@click.argument("model", type=click.Path(dir_okay=False))
+@_method_opt
+@_json_opt
+@_user_errors
+def check(model, method, as_json):
+    """Assign causality and derive equations; report storage causality, algebraic loops,
+    derivative causality and conflicts."""
+    c = build(model, method)
+    s = c.system
+    rep = c.causal.report()
+    report = {
+        "model": c.model.name, "file": model, "method": method,
+        "elements": len(c.model.elements), "bonds": len(c.model.bonds),
+        "states": [st.name for st in s.states],
+        "storage": rep["storage"], "resistors": rep["resistors"],
+        "derivative_causality": dict(s.dependent),
+        "algebraic_loops": [lp.__dict__ for lp in s.loops],
+        "free_choices": rep["free_choices"], "strokes": rep["bonds"],
+        "notes": s.notes, "conflicts": [],
+    }
+    if as_json:
+        click.echo(json.dumps(report, indent=2))
+        return
+    click.echo(f"{model}: {report['elements']} elements, {report['bonds']} bonds, "
+               f"{len(s.states)} states ({', '.join(report['states']) or 'none'})")
+    click.echo("causality: no conflicts")
+    for name, cz in rep["storage"].items():
+        kind = c.model.elements[name].kind
+        extra = f" (dependent state {s.dependent[name]})" if name in s.dependent else ""
+        click.echo(f"  {kind} {name}: {cz}{extra}")
+    for name, form in rep["resistors"].items():
+        click.echo(f"  R {name}: {form}")
+    loops = s.loops
+    click.echo(f"algebraic loops: {len(loops) or 'none'}")
+    for lp in loops:
+        click.echo(f"  {lp.describe()}")
+    for note in rep["free_choices"] + s.notes:
+        click.echo(f"note: {note}")
+
+
+@main.command("compile")
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="directory for <model>.py")
+@_method_opt
+@_json_opt
+@_user_errors
+def compile_cmd(model, out_dir, method, as_json):
+    """Generate the numba simulation module for MODEL."""
+    c, path = compile_model(model, out_dir, method)
+    text = path.read_text()
+    info = {"module": str(path), "states": len(c.system.states),
+            "assignments": len(c.system.assignments), "bytes": len(text.encode()),
+            "model_hash": emit.stored_hash(path), "timings": c.timings}
+    if as_json:
+        click.echo(json.dumps(info, indent=2))
+    else:
+        total = sum(c.timings.values())
+        click.echo(f"wrote {path} ({info['states']} states, {info['assignments']} "
+                   f"assignments, {info['bytes']} bytes) in {total:.3f} s")
+
+
+def _parse_params(module, items):
+    p = np.array(module.PARAMS, dtype=np.float64)
+    for item in items:
+        name, _, value = item.partition("=")
+        if name not in module.PARAM_NAMES:
+            raise BgcError(f"unknown parameter '{name}'", key="--param",
+                           hint="parameters: " + ", ".join(module.PARAM_NAMES))
+        try:
+            p[module.PARAM_NAMES.index(name)] = float(value)
+        except ValueError:
+            raise BgcError(f"'{value}' is not a number", key=f"--param {name}") from None
+    return p
+
+
+@main.command()
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("--t-end", type=float, help="end time [s] (default: the model's)")
+@click.option("--rtol", type=float, help="relative tolerance (default: the model's or 1e-6)")
+@click.option("--atol", type=float, help="absolute tolerance (default: the model's or 1e-8)")
+@click.option("--solver", help="integrator: bdf, radau, lsoda, rk45 (default: bdf)")
+@click.option("--points", type=int, help="number of output times (default 1001)")
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="override a parameter (no recompilation)")
+@click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
+@click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="where the generated module is kept")
+@_method_opt
+@_json_opt
+def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_dir, method,
+             as_json):
+    """Compile MODEL if needed and integrate it; print solver statistics."""
+    _simulate(model=model, t_end=t_end, rtol=rtol, atol=atol, solver=solver, points=points,
+              params=params, out=out, plot=plot, out_dir=out_dir, method=method,
+              as_json=as_json)
+
+
+@_user_errors
+def _simulate(*, model, t_end, rtol, atol, solver, points, params, out, plot, out_dir,
+              method, as_json):
+    from .results import plot as plot_png
+    from .results import write_csv
+    from .simulate import simulate as run
+    module, m, compiled = ensure_module(model, out_dir, method)
+    st = m.settings
+    result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
+                 atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
+                 params=_parse_params(module, params))
+    files = {}
+    if out:
+        files["csv"] = str(write_csv(result, out))
+    if plot:
+        files["png"] = str(plot_png(result, plot, title=f"{m.name} ({result.solver})"))
+    stats = result.stats.to_dict()
+    if as_json:
+        click.echo(json.dumps({"model": m.name, "solver": result.solver,
+                               "t_end": float(result.t[-1]), "stats": stats,
+                               "compiled": compiled is not None, "files": files}, indent=2))
+        return
+    click.echo(f"{m.name}: {result.solver} to t = {result.t[-1]:g} s: {stats['steps']} steps, "
+               f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
+               f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "
+               f"(+{stats['compile_time']:.2f} s JIT/cache load"
+               f"{', recompiled' if compiled else ''})")
+    for kind, f in files.items():
+        click.echo(f"  {kind}: {f}")
+
+
+if __name__ == "__main__":
+    main()

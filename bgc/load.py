@@ -1,0 +1,477 @@
+"""Stage **load**: model text (YAML) -> Model.
+
+YAML is read with node positions kept, so every error names ``file:line:col`` and the key
+path (``elements.spring.C``). Values are checked here: names, kinds, keys, numbers,
+expressions (parsed by ``bgc.expr``, never eval'd) and physically impossible parameters.
+Graph-level checks (arity, power direction) belong to ``expand``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import keyword
+import re
+from pathlib import Path
+
+import sympy as sp
+import yaml
+
+from . import expr as bexpr
+from . import signals as bsignals
+from . import symbols
+from .errors import Loc, ModelError
+from .model import (KINDS, Bond, Element, Model, Output, Parameter, Settings, Signal,
+                    Table)
+
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+TOP_KEYS = ("name", "description", "parameters", "signals", "elements", "bonds", "outputs",
+            "simulation")
+
+
+# ---------------------------------------------------------------- located YAML values
+class YMap(dict):
+    """A YAML mapping that remembers where it and each of its keys and values stand."""
+    loc: Loc
+    key_locs: dict
+    val_locs: dict
+
+
+class YList(list):
+    loc: Loc
+    item_locs: list
+
+
+def _loc(file: str, node) -> Loc:
+    m = node.start_mark
+    return Loc(file, m.line + 1, m.column + 1)
+
+
+def _read_yaml(text: str, file: str):
+    try:
+        loader = yaml.SafeLoader(text)
+        try:
+            node = loader.get_single_node()
+        finally:
+            loader.dispose()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        loc = Loc(file, mark.line + 1, mark.column + 1) if mark else Loc(file, 1)
+        raise ModelError(f"malformed YAML: {exc.problem or exc.context}", loc=loc,
+                         hint="check indentation, colons and quotes near this line") from None
+    except yaml.YAMLError as exc:
+        raise ModelError(f"malformed YAML: {exc}", loc=Loc(file, 1)) from None
+    if node is None:
+        raise ModelError("the model file is empty", loc=Loc(file, 1),
+                         hint="a model needs at least 'elements:' and 'bonds:'")
+    scalar_loader = yaml.SafeLoader("")
+
+    def build(n):
+        if isinstance(n, yaml.MappingNode):
+            out = YMap()
+            out.loc, out.key_locs, out.val_locs = _loc(file, n), {}, {}
+            for kn, vn in n.value:
+                k = build(kn)
+                if isinstance(k, (YMap, YList)):
+                    raise ModelError("a key must be a plain name", loc=_loc(file, kn))
+                if k in out:
+                    raise ModelError(f"duplicate key '{k}'", loc=_loc(file, kn), key=str(k),
+                                     hint=f"'{k}' is already defined at line "
+                                          f"{out.key_locs[k].line}")
+                out[k] = build(vn)
+                out.key_locs[k] = _loc(file, kn)
+                out.val_locs[k] = _loc(file, vn)
+            return out
+        if isinstance(n, yaml.SequenceNode):
+            out = YList(build(c) for c in n.value)
+            out.loc, out.item_locs = _loc(file, n), [_loc(file, c) for c in n.value]
+            return out
+        return scalar_loader.construct_object(n)
+
+    return build(node)
+
+
+def _plain(v):
+    """The located value as plain JSON data (for hashing)."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    return v
+
+
+# ---------------------------------------------------------------- the loader
+class _Loader:
+    def __init__(self, file: str):
+        self.file = file
+        self.names: dict[str, tuple[str, Loc]] = {}   # global namespace: name -> (what, loc)
+
+    # helpers -------------------------------------------------------------
+    def err(self, msg, loc, key, hint=None):
+        raise ModelError(msg, loc=loc, key=key, hint=hint)
+
+    def mapping(self, v, loc, key, what="a mapping") -> YMap:
+        if not isinstance(v, YMap):
+            self.err(f"expected {what}, got {_kind_of(v)}", loc, key)
+        return v
+
+    def check_keys(self, m: YMap, allowed, key):
+        for k in m:
+            if k not in allowed:
+                self.err(f"unknown key '{k}'", m.key_locs[k], f"{key}.{k}",
+                         "valid keys: " + ", ".join(allowed))
+
+    def declare(self, name, what, loc, key):
+        if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
+            self.err(f"'{name}' is not a valid name", loc, key,
+                     "use letters, digits and '_', not starting with a digit")
+        if name in bexpr.RESERVED:
+            self.err(f"'{name}' is a reserved name", loc, key,
+                     "reserved: " + ", ".join(sorted(bexpr.RESERVED)))
+        if name in self.names:
+            other, oloc = self.names[name]
+            self.err(f"duplicate name '{name}'", loc, key,
+                     f"already used by {other} at line {oloc.line}")
+        self.names[name] = (what, loc)
+
+    def number(self, v, loc, key, *, positive=False, nonneg=False) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.err(f"expected a number, got {_kind_of(v)} {v!r}", loc, key,
+                     "write a plain number such as 1.5 or 2e-3")
+        v = float(v)
+        if v != v or v in (float("inf"), float("-inf")):
+            self.err(f"expected a finite number, got {v}", loc, key)
+        if positive and v <= 0:
+            self.err(f"must be > 0, got {v}", loc, key)
+        if nonneg and v < 0:
+            self.err(f"must be >= 0, got {v}", loc, key)
+        return v
+
+    # sections ------------------------------------------------------------
+    def parameters(self, sec: YMap) -> dict[str, Parameter]:
+        out = {}
+        for name, v in sec.items():
+            key, loc = f"parameters.{name}", sec.val_locs[name]
+            self.declare(name, f"parameter '{name}'", sec.key_locs[name], key)
+            unit = None
+            if isinstance(v, YMap):
+                self.check_keys(v, ("value", "unit", "description"), key)
+                if "value" not in v:
+                    self.err("missing 'value'", v.loc, key, "write {value: 1.0, unit: kg}")
+                unit = v.get("unit")
+                loc = v.val_locs["value"]
+                v = v["value"]
+            value = self.number(v, loc, key)
+            if unit == "deg":
+                value = value * 3.141592653589793 / 180.0
+            out[name] = Parameter(name, value, loc, unit)
+        return out
+
+    def param_names(self, params) -> dict[str, sp.Expr]:
+        names = {n: symbols.param(n) for n in params}
+        names["t"] = symbols.t
+        return names
+
+    def signals(self, sec: YMap, params, tables: list[Table]) -> dict[str, Signal]:
+        out = {}
+        names = {n: symbols.param(n) for n in params}
+        for name, v in sec.items():
+            key = f"signals.{name}"
+            self.declare(name, f"signal '{name}'", sec.key_locs[name], key)
+            v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
+            kind = v.get("type")
+            if kind not in bsignals.SIGNAL_TYPES:
+                self.err(f"unknown signal type {kind!r}", v.val_locs.get("type", v.loc),
+                         f"{key}.type", "valid types: " + ", ".join(bsignals.SIGNAL_TYPES))
+            required, optional = bsignals.SIGNAL_TYPES[kind]
+            self.check_keys(v, ("type", "description") + required + tuple(optional), key)
+            vals = {}
+            for k in required:
+                if k not in v:
+                    self.err(f"missing '{k}' for a {kind} signal", v.loc, key,
+                             "needs: " + ", ".join(required))
+            for k in required + tuple(optional):
+                kk, kloc = f"{key}.{k}", v.val_locs.get(k, v.loc)
+                if kind == "table":
+                    vals[k] = self.number_list(v[k], kloc, kk)
+                elif k == "time":
+                    vals[k] = self.number(v.get(k, optional.get(k)), kloc, kk)
+                elif k == "expr":
+                    vals[k] = bexpr.parse(v[k], loc=kloc, key=kk,
+                                          names={**names, "t": symbols.t})
+                else:
+                    vals[k] = bexpr.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
+                                          names=names)
+            if kind == "table":
+                tt, yy = vals["t"], vals["values"]
+                if len(tt) != len(yy) or len(tt) < 2:
+                    self.err(f"'t' and 'values' must have the same length >= 2 "
+                             f"(got {len(tt)} and {len(yy)})", v.loc, key)
+                if any(b <= a for a, b in zip(tt, tt[1:])):
+                    self.err("'t' must be strictly increasing", v.val_locs["t"], f"{key}.t")
+                tables.append(Table(len(tables), tuple(tt), tuple(yy)))
+            if kind == "sine":
+                f = vals["frequency"]
+                if f.is_number and float(f) <= 0:
+                    self.err(f"must be > 0, got {float(f)}", v.val_locs["frequency"],
+                             f"{key}.frequency")
+            expr, bps = bsignals.build(kind, vals, len(tables) - 1)
+            out[name] = Signal(name, kind, sp.sympify(expr), v.loc, bps)
+        return out
+
+    def number_list(self, v, loc, key) -> list[float]:
+        if not isinstance(v, YList):
+            self.err(f"expected a list of numbers, got {_kind_of(v)}", loc, key)
+        return [self.number(x, v.item_locs[i], f"{key}[{i}]") for i, x in enumerate(v)]
+
+    def element_headers(self, sec: YMap) -> dict[str, tuple[str, YMap]]:
+        out = {}
+        for name, v in sec.items():
+            key = f"elements.{name}"
+            self.declare(name, f"element '{name}'", sec.key_locs[name], key)
+            v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
+            kind = v.get("type")
+            kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
+            if kind not in KINDS:
+                self.err(f"unknown element type {v.get('type')!r}",
+                         v.val_locs.get("type", v.loc), f"{key}.type",
+                         "valid types: " + ", ".join(KINDS))
+            out[name] = (kind, v)
+        return out
+
+    def bonds(self, sec: YList, elements) -> list[Bond]:
+        out, seen_names, seen_pairs = [], {}, {}
+        for i, v in enumerate(sec):
+            loc, key = sec.item_locs[i], f"bonds[{i}]"
+            name, dim = f"b{i + 1}", 1
+            if isinstance(v, YList):
+                if len(v) != 2:
+                    self.err(f"a bond is [from, to], got {len(v)} items", loc, key)
+                src, dst = v
+            elif isinstance(v, YMap):
+                self.check_keys(v, ("name", "from", "to", "dim"), key)
+                for k in ("from", "to"):
+                    if k not in v:
+                        self.err(f"missing '{k}'", v.loc, key, "write {from: a, to: b}")
+                src, dst = v["from"], v["to"]
+                if "name" in v:
+                    name = v["name"]
+                    self.declare(name, f"bond '{name}'", v.val_locs["name"], f"{key}.name")
+                if "dim" in v:
+                    dim = v["dim"]
+                    if dim != 1:
+                        self.err(f"bond dimension {dim!r} is not supported here", v.val_locs["dim"],
+                                 f"{key}.dim", "scalar bond graphs use dim: 1")
+            else:
+                self.err(f"expected [from, to] or {{from:, to:}}, got {_kind_of(v)}", loc, key)
+            if "name" not in (v if isinstance(v, YMap) else {}):
+                if name in self.names:
+                    self.err(f"default bond name '{name}' is already used by "
+                             f"{self.names[name][0]}", loc, key, "give this bond a name:")
+                self.names[name] = (f"bond '{name}'", loc)
+            for end in (src, dst):
+                if end not in elements:
+                    self.err(f"bond connects unknown element {end!r}", loc, key,
+                             "declared elements: " + ", ".join(elements))
+            if src == dst:
+                self.err(f"bond connects '{src}' to itself", loc, key)
+            pair = frozenset((src, dst))
+            if pair in seen_pairs:
+                self.err(f"duplicate bond between '{src}' and '{dst}'", loc, key,
+                         f"the same pair is already bonded at line {seen_pairs[pair].line}")
+            seen_pairs[pair] = loc
+            seen_names[name] = loc
+            out.append(Bond(name, src, dst, loc, dim))
+        return out
+
+    def element_fields(self, headers, params, signals, bonds) -> dict[str, Element]:
+        kinds = {n: k for n, (k, _) in headers.items()}
+        bond_names = {b.name for b in bonds}
+        base = self.param_names(params)
+        base.update({n: symbols.signal(n) for n in signals})
+        pvals = {symbols.param(p.name): p.value for p in params.values()}
+
+        def resolver(key, loc):
+            def resolve(target, attr):
+                return self.resolve_ref(target, attr, kinds, bond_names, key, loc)
+            return resolve
+
+        out = {}
+        for name, (kind, v) in headers.items():
+            spec, key = KINDS[kind], f"elements.{name}"
+            allowed = ("type", "description") + spec.laws + ((spec.initial,) if spec.initial
+                                                             else ())
+            self.check_keys(v, allowed, key)
+            given = [k for k in spec.laws if k in v]
+            if spec.laws and len(given) != 1:
+                self.err(f"{kind} needs exactly one of: " + ", ".join(spec.laws)
+                         + (f" (got {', '.join(given)})" if given else ""), v.loc, key,
+                         KINDS[kind].doc)
+            el = Element(name, kind, v.loc, description=v.get("description"))
+            for k in given:
+                kloc, kk = v.val_locs[k], f"{key}.{k}"
+                names = dict(base)
+                law_is_local = k in ("effort", "flow") and kind in ("C", "I", "R")
+                if law_is_local:
+                    names.update({n: symbols.LOCAL[n] for n in spec.local})
+                    if kind == "R":
+                        names = {n: s for n, s in names.items()
+                                 if n != ("f" if k == "flow" else "e")}
+                if kind in ("TF", "GY"):    # constant ratio: parameters only
+                    names = {n: s for n, s in names.items() if n in params}
+                e = bexpr.parse(v[k], loc=kloc, key=kk, names=names,
+                                resolve_ref=resolver(kk, kloc) if spec.modulated else None)
+                if law_is_local:
+                    own = {symbols.LOCAL[n] for n in spec.local if not (
+                        kind == "R" and n == ("f" if k == "flow" else "e"))}
+                    if not (e.free_symbols & own):
+                        hint = {"C": "write it in q, e.g. k*q + k3*q**3",
+                                "I": "write it in p, e.g. p/m",
+                                "R": "write effort in f (e.g. R*f) or flow in e"}[kind]
+                        self.err(f"the law does not use the element's variable", kloc, kk, hint)
+                el.fields[k] = e
+                el.field_locs[k] = kloc
+                self.check_physical(el, k, e, pvals, params, kloc, kk)
+            if spec.initial:
+                k = spec.initial
+                if k in v:
+                    kloc = v.val_locs[k]
+                    e = bexpr.parse(v[k], loc=kloc, key=f"{key}.{k}", names={
+                        n: symbols.param(n) for n in params})
+                    el.initial = e
+                else:
+                    el.initial = sp.S.Zero
+            out[name] = el
+        return out
+
+    def check_physical(self, el, key, e, pvals, params, loc, kk):
+        """Reject values that cannot be physical where they are constant."""
+        rule = {("C", "C"): "positive", ("C", "k"): "nonneg", ("I", "I"): "positive",
+                ("R", "R"): "nonneg", ("TF", "ratio"): "nonzero",
+                ("GY", "r"): "nonzero"}.get((el.kind, key))
+        if rule is None or not e.free_symbols <= set(pvals):
+            return
+        val = float(e.xreplace(pvals))
+        bad = {"positive": val <= 0, "nonneg": val < 0, "nonzero": val == 0}[rule]
+        if bad:
+            what = {"positive": "must be > 0", "nonneg": "must be >= 0",
+                    "nonzero": "must not be 0"}[rule]
+            src = [p for p in params if symbols.param(p) in e.free_symbols]
+            origin = "".join(f"; parameter '{p}' is set at line {params[p].loc.line}"
+                             for p in src)
+            hint = {"positive": "it divides in the law; use a small positive value",
+                    "nonneg": "a negative value generates energy; write a law if intended",
+                    "nonzero": "a zero ratio divides in the other causality"}[rule]
+            self.err(f"{el.kind} {key} {what}, got {val:g}{origin}", loc, kk, hint)
+
+    def resolve_ref(self, target, attr, kinds, bond_names, key, loc):
+        if target in bond_names:
+            if attr not in ("e", "f"):
+                self.err(f"a bond has .e and .f, not .{attr}", loc, key)
+            return symbols.ref(target, attr)
+        if target not in kinds:
+            self.err(f"'{target}.{attr}' names no element or bond", loc, key,
+                     "write element.e, element.f, C.q, I.p or bond.e, bond.f")
+        kind = kinds[target]
+        valid = {"C": ("e", "f", "q"), "I": ("e", "f", "p")}.get(
+            kind, ("e", "f") if KINDS[kind].ports == 1 else ())
+        if attr not in valid:
+            if not valid:
+                self.err(f"{kind} '{target}' has several bonds; '.{attr}' is ambiguous", loc,
+                         key, "name one of its bonds and refer to bond.e or bond.f")
+            self.err(f"{kind} '{target}' has no '.{attr}'", loc, key,
+                     "valid: " + ", ".join(f"{target}.{a}" for a in valid))
+        return symbols.ref(target, attr)
+
+    def outputs(self, sec: YMap, params, signals, elements, bonds) -> list[Output]:
+        kinds = {n: e.kind for n, e in elements.items()}
+        bond_names = {b.name for b in bonds}
+        names = self.param_names(params)
+        names.update({n: symbols.signal(n) for n in signals})
+        out = []
+        for name, v in sec.items():
+            key, loc = f"outputs.{name}", sec.val_locs[name]
+            self.declare(name, f"output '{name}'", sec.key_locs[name], key)
+            e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at: (
+                self.resolve_ref(tg, at, kinds, bond_names, key, loc)))
+            out.append(Output(name, e, loc))
+        return out
+
+    def settings(self, sec: YMap) -> Settings:
+        allowed = ("t_end", "rtol", "atol", "solver", "points")
+        self.check_keys(sec, allowed, "simulation")
+        kw = {}
+        for k in allowed:
+            if k in sec:
+                loc, kk = sec.val_locs[k], f"simulation.{k}"
+                if k == "solver":
+                    kw[k] = str(sec[k])
+                elif k == "points":
+                    kw[k] = int(self.number(sec[k], loc, kk, positive=True))
+                else:
+                    kw[k] = self.number(sec[k], loc, kk, positive=True)
+        return Settings(**kw)
+
+
+def _kind_of(v) -> str:
+    if isinstance(v, dict):
+        return "a mapping"
+    if isinstance(v, list):
+        return "a list"
+    if v is None:
+        return "nothing"
+    return type(v).__name__
+
+
+def loads(text: str, file: str = "<string>") -> Model:
+    """Parse model text; ``file`` is used in error locations and for the default name."""
+    doc = _read_yaml(text, file)
+    ld = _Loader(file)
+    if not isinstance(doc, YMap):
+        raise ModelError(f"a model file is a mapping of sections, got {_kind_of(doc)}",
+                         loc=Loc(file, 1), hint="sections: " + ", ".join(TOP_KEYS))
+    ld.check_keys(doc, TOP_KEYS, "model")
+
+    def section(key, kind=YMap):
+        if key not in doc or doc[key] is None:
+            return kind() if kind is YMap else YList()
+        v = doc[key]
+        if not isinstance(v, kind):
+            ld.err(f"expected {'a mapping' if kind is YMap else 'a list'}, got {_kind_of(v)}",
+                   doc.val_locs[key], key)
+        return v
+
+    for required in ("elements", "bonds"):
+        if not doc.get(required):
+            ld.err(f"missing section '{required}'", doc.loc, required,
+                   "a model needs elements and the bonds between them")
+    name = doc.get("name", Path(file).stem)
+    if not isinstance(name, str) or not _IDENT.match(name):
+        ld.err(f"model name {name!r} is not a valid module name",
+               doc.val_locs.get("name", doc.loc), "name",
+               "use letters, digits and '_' (it names generated/<name>.py)")
+    params = ld.parameters(section("parameters"))
+    tables: list[Table] = []
+    sigs = ld.signals(section("signals"), params, tables)
+    headers = ld.element_headers(section("elements"))
+    bonds = ld.bonds(section("bonds", YList), headers)
+    elements = ld.element_fields(headers, params, sigs, bonds)
+    outputs = ld.outputs(section("outputs"), params, sigs, elements, bonds)
+    settings = ld.settings(section("simulation"))
+    digest = hashlib.sha256(json.dumps(_plain(doc), sort_keys=True, default=str)
+                            .encode()).hexdigest()
+    return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,
+                 tables=tables, elements=elements, bonds=bonds, outputs=outputs,
+                 settings=settings, description=doc.get("description"))
+
+
+def load(path: str | Path) -> Model:
+    """Read and parse a model file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ModelError(f"no such model file: {path}", loc=None) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelError(f"cannot read model file {path}: {exc}") from None
+    return loads(text, str(path))

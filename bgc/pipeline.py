@@ -1,0 +1,59 @@
+"""The stages chained: model file -> equation system -> generated module."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import causality, emit, equations, expand, load
+from .causality import CausalGraph
+from .equations import EquationSystem
+from .model import Model
+
+METHODS = ("scalar",)
+
+
+@dataclass
+class Compiled:
+    model: Model
+    causal: CausalGraph
+    system: EquationSystem
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def build(model_path: str | Path, method: str = "scalar") -> Compiled:
+    """Run load -> expand -> causality -> equations, timing each stage."""
+    timings = {}
+    t0 = time.perf_counter()
+    model = load.load(model_path)
+    timings["load"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    graph = expand.expand(model)
+    cg = causality.assign(graph)
+    timings["causality"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    system = equations.derive(cg, method)
+    timings["equations"] = time.perf_counter() - t0
+    return Compiled(model, cg, system, timings)
+
+
+def compile_model(model_path: str | Path, out_dir: str | Path = "generated",
+                  method: str = "scalar") -> tuple[Compiled, Path]:
+    """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
+    c = build(model_path, method)
+    t0 = time.perf_counter()
+    path = emit.write(c.system, out_dir)
+    c.timings["emit"] = time.perf_counter() - t0
+    return c, path
+
+
+def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
+                  method: str = "scalar"):
+    """The generated module for a model, recompiled only if missing or stale."""
+    model = load.load(model_path)
+    path = emit.module_path(model.name, out_dir)
+    compiled = None
+    if emit.is_stale(path, model.digest, method):
+        compiled, path = compile_model(model_path, out_dir, method)
+    return emit.import_module(path), model, compiled

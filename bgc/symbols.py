@@ -1,0 +1,65 @@
+"""The one place that names sympy symbols after model objects.
+
+Every symbol's name is also its identifier in the generated code, so the emitter can
+print expressions as they are. Display names (``spring.q``, ``L1.f``) are kept beside.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+t = sp.Symbol("t", real=True)
+
+# Local names inside a constitutive law: the element's own port variables and state.
+LOCAL = {name: sp.Symbol(f"LOCAL_{name}", real=True) for name in ("e", "f", "q", "p")}
+
+
+def _sym(name: str) -> sp.Symbol:
+    return sp.Symbol(name, real=True)
+
+
+def param(name: str) -> sp.Symbol:
+    return _sym(f"P_{name}")
+
+
+def signal(name: str) -> sp.Symbol:
+    return _sym(f"U_{name}")
+
+
+def ref(target: str, attr: str) -> sp.Symbol:
+    """A reference such as ``spring.e`` in a user expression, resolved after causality."""
+    return _sym(f"REF_{target}__{attr}")
+
+
+def effort(bond: str) -> sp.Symbol:
+    return _sym(f"E_{bond}")
+
+
+def flow(bond: str) -> sp.Symbol:
+    return _sym(f"F_{bond}")
+
+
+def state(element: str, kind: str) -> sp.Symbol:
+    return _sym(f"X_{element}__{kind}")
+
+
+def dstate(element: str, kind: str) -> sp.Symbol:
+    return _sym(f"DX_{element}__{kind}")
+
+
+def algebraic(element: str, kind: str) -> sp.Symbol:
+    """A storage variable that is not a state (derivative causality), e.g. q of a C."""
+    return _sym(f"V_{element}__{kind}")
+
+
+def output(name: str) -> sp.Symbol:
+    return _sym(f"Y_{name}")
+
+
+def is_ref(s: sp.Symbol) -> bool:
+    return s.name.startswith("REF_")
+
+
+def split_ref(s: sp.Symbol) -> tuple[str, str]:
+    target, attr = s.name[4:].split("__")
+    return target, attr

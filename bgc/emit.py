@@ -146,7 +146,12 @@ def is_stale(path: Path, model_digest: str, method: str) -> bool:
 def import_module(path: Path):
     """Import a generated module from its file (numba's cache sits beside it)."""
     path = Path(path).resolve()
-    name = f"_bgc_generated_{path.stem}_{hashlib.sha1(str(path).encode()).hexdigest()[:8]}"
+    # Always the name `from <dir> import <model>` gives: numba's on-disk cache records the
+    # module name, and loading it under another name would fail.
+    name = f"{path.parent.name}.{path.stem}"
+    if name in sys.modules and getattr(sys.modules[name], "__file__", None) == str(path) \
+            and getattr(sys.modules[name], "MODEL_HASH", None) == stored_hash(path):
+        return sys.modules[name]
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module

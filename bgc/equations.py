@@ -263,7 +263,11 @@ class _Builder:
         out = {}
         bonds = {bd.name: i for i, bd in enumerate(self.g.bonds)}
         for name, el in self.g.elements.items():
-            if len(self.g.ports[name]) == 1:
+            if el.kind in ("0", "1"):
+                first = self.g.ports[name][0]
+                common = self.E(first) if el.kind == "0" else self.F(first)
+                out[symbols.ref(name, "e" if el.kind == "0" else "f")] = common
+            elif len(self.g.ports[name]) == 1:
                 b, s, E, F = self._port(name)
                 out[symbols.ref(name, "e")] = E
                 out[symbols.ref(name, "f")] = s * F

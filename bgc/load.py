@@ -135,6 +135,11 @@ class _Loader:
         self.names[name] = (what, loc)
 
     def number(self, v, loc, key, *, positive=False, nonneg=False) -> float:
+        if isinstance(v, str):      # YAML 1.1 reads 1e-3 and 4.0e6 as strings
+            try:
+                v = float(v)
+            except ValueError:
+                pass
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.err(f"expected a number, got {_kind_of(v)} {v!r}", loc, key,
                      "write a plain number such as 1.5 or 2e-3")
@@ -373,9 +378,13 @@ class _Loader:
             self.err(f"'{target}.{attr}' names no element or bond", loc, key,
                      "write element.e, element.f, C.q, I.p or bond.e, bond.f")
         kind = kinds[target]
-        valid = {"C": ("e", "f", "q"), "I": ("e", "f", "p")}.get(
+        valid = {"C": ("e", "f", "q"), "I": ("e", "f", "p"), "0": ("e",), "1": ("f",)}.get(
             kind, ("e", "f") if KINDS[kind].ports == 1 else ())
         if attr not in valid:
+            if kind in ("0", "1"):
+                self.err(f"a {kind}-junction shares one {'effort' if kind == '0' else 'flow'}"
+                         f"; '{target}.{attr}' differs per bond", loc, key,
+                         f"write {target}.{valid[0]}, or name a bond and use bond.{attr}")
             if not valid:
                 self.err(f"{kind} '{target}' has several bonds; '.{attr}' is ambiguous", loc,
                          key, "name one of its bonds and refer to bond.e or bond.f")

@@ -60,20 +60,39 @@ class _Scap:
     def __init__(self, graph: BondGraph):
         self.g = graph
         self.effort_in: list[str | None] = [None] * len(graph.bonds)
+        self.forced_by: list[str | None] = [None] * len(graph.bonds)  # whose rule set it
         self.queue: list[str] = []
 
-    def assign(self, b: int, receiver: str):
+    def assign(self, b: int, receiver: str, by: str):
         cur = self.effort_in[b]
         if cur is not None:
             if cur != receiver:
-                raise _Conflict(receiver, [b], "assigned")
+                raise self._clash(b, by)
             return
         self.effort_in[b] = receiver
+        self.forced_by[b] = by
         bond = self.g.bonds[b]
         self.queue += [bond.src, bond.dst]
 
+    def _clash(self, b: int, by: str) -> _Conflict:
+        """A bond asked for the other causality: blame the junction (or two-port) whose
+        rule decided it, naming the bonds that imposed that rule and the new one."""
+        for node in (self.forced_by[b], by):
+            rule = _rule(self.g.elements[node].kind) if node else "free"
+            if rule in ("one_in", "one_out"):
+                want = rule == "one_in"
+                hits = [x for x in self.g.ports[node] if x != b and self.effort_in[x]
+                        is not None and (self.effort_in[x] == node) is want]
+                if not hits:   # b was this node's last chance to satisfy its rule
+                    return _Conflict(node, list(self.g.ports[node]),
+                                     "none_in" if want else "none_out")
+                return _Conflict(node, hits + [b], rule)
+            if rule == "same":
+                return _Conflict(node, list(self.g.ports[node]), rule)
+        return _Conflict(by, [b], "assigned")
+
     def set_port(self, node: str, b: int, receives: bool):
-        self.assign(b, node if receives else self.g.other(b, node))
+        self.assign(b, node if receives else self.g.other(b, node), node)
 
     def propagate(self):
         while self.queue:
@@ -106,7 +125,7 @@ class _Scap:
         elif len(free) == 1:
             self.set_port(node, free[0], want)
         elif not free:
-            raise _Conflict(node, bonds, rule)
+            raise _Conflict(node, bonds, "none_in" if want else "none_out")
 
     def attempt(self, node: str, b: int, receives: bool) -> bool:
         """Try a free choice; undo it and return False if it leads to a conflict."""
@@ -133,14 +152,18 @@ def _conflict_error(g: BondGraph, c: _Conflict, during: str) -> CausalityError:
     what = {"one_in": f"receives effort from {len(c.bonds)} bonds, it takes exactly one",
             "one_out": f"has its flow imposed by {len(c.bonds)} bonds, it takes exactly one",
             "same": "needs both bonds effort-in or both effort-out",
+            "none_in": "has no bond to take its effort from, it needs exactly one",
+            "none_out": "has no bond to take its flow from, it needs exactly one",
             "assigned": "gets two causalities on one bond"}[c.rule]
-    if c.rule in ("one_in", "one_out") and len(c.bonds) == len(g.ports[c.node]):
-        what = ("has no bond to take its effort from" if c.rule == "one_in"
-                else "has no bond to take its flow from")
-    hint = {"0": "two effort sources (or an effort source and a C) cannot share a "
-                 "0-junction; put an R between them",
-            "1": "two flow sources (or a flow source and an I) cannot share a 1-junction; "
-                 "put an R or C between them"}.get(el.kind, "check the sources' placement")
+    hint = {("0", "one_in"): "two effort sources (or an effort source and a C) cannot "
+                             "share a 0-junction; put an R between them",
+            ("1", "one_out"): "two flow sources (or a flow source and an I) cannot share a "
+                              "1-junction; put an R or C between them",
+            ("0", "none_in"): "nothing sets this junction's effort: add a C, an effort "
+                              "source or an R to it",
+            ("1", "none_out"): "nothing sets this junction's flow: add an I, a flow source "
+                               "or an R to it"}.get((el.kind, c.rule),
+                                                    "check the sources' placement")
     return CausalityError(f"causality conflict while assigning {during}: {el.kind} "
                           f"'{c.node}' {what}: {bonds} (from {others})", loc=el.loc,
                           key=f"elements.{c.node}", hint=hint)

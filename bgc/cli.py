@@ -157,7 +157,11 @@ def _simulate(*, model, t_end, rtol, atol, solver, points, params, out, plot, ou
               method, as_json):
     from .results import plot as plot_png
     from .results import write_csv
+    from .simulate import SOLVERS
     from .simulate import simulate as run
+    if solver is not None and solver not in SOLVERS:
+        raise BgcError(f"unknown solver '{solver}'", key="--solver",
+                       hint="valid solvers: " + ", ".join(SOLVERS))
     module, m, compiled = ensure_module(model, out_dir, method)
     st = m.settings
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from sympy.solvers.solveset import NonlinearError
+
 from . import symbols
 from .causality import CausalGraph
 from .errors import EquationError
@@ -380,7 +382,7 @@ def _solve_loop(b: _Builder, comp: list, deps: dict) -> tuple[list, Loop]:
                      "variables)", "break it with a small storage element")
     try:
         A, rhs = sp.linear_eq_to_matrix(residuals, tears)
-    except sp.solvers.solveset.NonlinearError:
+    except NonlinearError:
         raise refuse("nonlinear algebraic loop",
                      "make a loop element linear, or break the loop with a small parasitic "
                      "C or I (its value sets how stiff the result is)") from None

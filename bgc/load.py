@@ -55,10 +55,16 @@ def _read_yaml(text: str, file: str):
         finally:
             loader.dispose()
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
+        # An unclosed [ or { is best shown where it was opened (the context mark).
+        opened = exc.context_mark is not None and "flow" in (exc.context or "")
+        mark = (exc.context_mark if opened else exc.problem_mark) or exc.context_mark
         loc = Loc(file, mark.line + 1, mark.column + 1) if mark else Loc(file, 1)
-        raise ModelError(f"malformed YAML: {exc.problem or exc.context}", loc=loc,
-                         hint="check indentation, colons and quotes near this line") from None
+        what = exc.problem or exc.context
+        if opened:
+            what = f"{exc.context} that is never closed ({exc.problem})"
+        raise ModelError(f"malformed YAML: {what}", loc=loc, key=_section_at(text, loc.line),
+                         hint="check indentation, colons, brackets and quotes near this "
+                              "line") from None
     except yaml.YAMLError as exc:
         raise ModelError(f"malformed YAML: {exc}", loc=Loc(file, 1)) from None
     if node is None:
@@ -66,29 +72,41 @@ def _read_yaml(text: str, file: str):
                          hint="a model needs at least 'elements:' and 'bonds:'")
     scalar_loader = yaml.SafeLoader("")
 
-    def build(n):
+    def build(n, path=""):
         if isinstance(n, yaml.MappingNode):
             out = YMap()
             out.loc, out.key_locs, out.val_locs = _loc(file, n), {}, {}
             for kn, vn in n.value:
                 k = build(kn)
+                key = f"{path}.{k}" if path else str(k)
                 if isinstance(k, (YMap, YList)):
-                    raise ModelError("a key must be a plain name", loc=_loc(file, kn))
+                    raise ModelError("a key must be a plain name", loc=_loc(file, kn),
+                                     key=path or None, hint="write name: value")
                 if k in out:
-                    raise ModelError(f"duplicate key '{k}'", loc=_loc(file, kn), key=str(k),
+                    raise ModelError(f"duplicate key '{k}'", loc=_loc(file, kn), key=key,
                                      hint=f"'{k}' is already defined at line "
                                           f"{out.key_locs[k].line}")
-                out[k] = build(vn)
+                out[k] = build(vn, key)
                 out.key_locs[k] = _loc(file, kn)
                 out.val_locs[k] = _loc(file, vn)
             return out
         if isinstance(n, yaml.SequenceNode):
-            out = YList(build(c) for c in n.value)
+            out = YList(build(c, f"{path}[{i}]") for i, c in enumerate(n.value))
             out.loc, out.item_locs = _loc(file, n), [_loc(file, c) for c in n.value]
             return out
         return scalar_loader.construct_object(n)
 
     return build(node)
+
+
+def _section_at(text: str, line: int) -> str | None:
+    """The top-level section a (1-based) line of the model text belongs to."""
+    section = None
+    for ln in text.splitlines()[:line]:
+        m = re.match(r"^([A-Za-z_][A-Za-z0-9_]*)\s*:", ln)
+        if m:
+            section = m.group(1)
+    return section
 
 
 def _plain(v):
@@ -367,7 +385,10 @@ class _Loader:
             hint = {"positive": "it divides in the law; use a small positive value",
                     "nonneg": "a negative value generates energy; write a law if intended",
                     "nonzero": "a zero ratio divides in the other causality"}[rule]
-            self.err(f"{el.kind} {key} {what}, got {val:g}{origin}", loc, kk, hint)
+            label = {"C": "capacitance C", "k": "stiffness k", "I": "inertance I",
+                     "R": "resistance R", "ratio": "ratio", "r": "ratio r"}[key]
+            self.err(f"{label} of {el.kind} '{el.name}' {what}, got {val:g}{origin}", loc, kk,
+                     hint)
 
     def resolve_ref(self, target, attr, kinds, bond_names, key, loc):
         if target in bond_names:

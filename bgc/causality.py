@@ -129,13 +129,13 @@ class _Scap:
 
     def attempt(self, node: str, b: int, receives: bool) -> bool:
         """Try a free choice; undo it and return False if it leads to a conflict."""
-        saved = list(self.effort_in)
+        saved = list(self.effort_in), list(self.forced_by)
         try:
             self.set_port(node, b, receives)
             self.propagate()
             return True
         except _Conflict:
-            self.effort_in, self.queue = saved, []
+            (self.effort_in, self.forced_by), self.queue = saved, []
             return False
 
 
@@ -173,15 +173,26 @@ def assign(graph: BondGraph) -> CausalGraph:
     """Run SCAP and return the causal graph, or raise CausalityError."""
     s = _Scap(graph)
     els = graph.elements
-    # 1. sources: fixed causality
+    # 1. sources: fixed causality. A conflicting source is set aside so that every
+    #    conflict in the model is found and reported together.
+    conflicts: list[CausalityError] = []
     for name, el in els.items():
         if el.kind in _FIXED:
             b = graph.ports[name][0]
+            saved = list(s.effort_in), list(s.forced_by)
             try:
                 s.set_port(name, b, _FIXED[el.kind] == "in")
                 s.propagate()
             except _Conflict as c:
-                raise _conflict_error(graph, c, f"source '{name}'") from None
+                conflicts.append(_conflict_error(graph, c, f"source '{name}'"))
+                (s.effort_in, s.forced_by), s.queue = saved, []
+    if conflicts:
+        first = conflicts[0]
+        also = "".join(f"; also: {e.loc}: {e.message}" for e in conflicts[1:])
+        err = CausalityError(first.message + also, loc=first.loc, key=first.key,
+                             hint=first.hint)
+        err.conflicts = conflicts
+        raise err
     choices: list[str] = []
     # 2. storage, preferring integral causality
     for name, el in els.items():

@@ -61,7 +61,15 @@ class ModelError(BgcError):
 
 
 class CausalityError(BgcError):
-    """Causality cannot be assigned without a conflict."""
+    """Causality cannot be assigned without a conflict; ``conflicts`` lists all found."""
+
+    conflicts: list = []
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        out["conflicts"] = [{"file": c.loc.file, "line": c.loc.line, "key": c.key,
+                             "message": c.message} for c in (self.conflicts or [self])]
+        return out
 
 
 class EquationError(BgcError):

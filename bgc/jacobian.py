@@ -18,7 +18,7 @@ def chain_rule(assignments, states):
     extra = []
     for v, e in assignments:
         acc: dict[int, sp.Expr] = {}
-        for s in sorted(e.free_symbols & set(sens), key=lambda s: s.name):
+        for s in sorted((s for s in e.free_symbols if s in sens), key=lambda s: s.name):
             partial = sp.diff(e, s)
             if partial == 0:
                 continue

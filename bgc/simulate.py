@@ -8,6 +8,7 @@ Statistics are kept honestly: what an integrator does not report is ``None``, no
 
 from __future__ import annotations
 
+import abc
 import time
 from dataclasses import dataclass, field
 
@@ -59,13 +60,14 @@ class Segment:
     message: str = ""
 
 
-class Solver:
+class Solver(abc.ABC):
     """One integration method. ``integrate`` covers a segment with no discontinuity."""
     name = ""
     description = ""
 
+    @abc.abstractmethod
     def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats: Stats) -> Segment:
-        raise NotImplementedError
+        """Integrate from t0 to t1, recording the states at ``t_eval``."""
 
 
 class ScipySolver(Solver):

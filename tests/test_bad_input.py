@@ -516,3 +516,27 @@ def test_executable_exits_2_without_traceback(tmp_path):
     lines = proc.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}:"), detail
     assert not out_dir.exists() or not list(out_dir.iterdir()), detail
+
+
+def test_every_causality_conflict_is_reported(tmp_path):
+    """Two independent conflicts in one model: both are named, in text and in --json."""
+    import json
+    model = tmp_path / "two.yaml"
+    model.write_text(
+        "elements:\n"
+        "  e1: {type: Se, effort: 1.0}\n"
+        "  e2: {type: Se, effort: 2.0}\n"
+        "  n: {type: '0'}\n"
+        "  r: {type: R, R: 1.0}\n"
+        "  f1: {type: Sf, flow: 1.0}\n"
+        "  f2: {type: Sf, flow: 2.0}\n"
+        "  j: {type: '1'}\n"
+        "  c: {type: C, C: 1.0}\n"
+        "bonds: [[e1, n], [e2, n], [n, r], [f1, j], [f2, j], [j, c]]\n")
+    result = CliRunner().invoke(main, ["check", str(model), "--json"])
+    assert result.exit_code == 2
+    report = json.loads(result.stdout)
+    assert [c["key"] for c in report["conflicts"]] == ["elements.n", "elements.j"]
+    assert [c["line"] for c in report["conflicts"]] == [4, 8]
+    line = result.stderr.strip()
+    assert "'e1'" in line and "'e2'" in line and "'f1'" in line and "'f2'" in line

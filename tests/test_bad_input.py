@@ -503,8 +503,7 @@ def test_simulate_unknown_solver(tmp_path, monkeypatch):
 # ------------------------------------------------------ the real executable
 def test_executable_exits_2_without_traceback(tmp_path):
     exe = shutil.which("bgc")
-    if exe is None:
-        pytest.skip("the bgc executable is not on PATH")
+    assert exe is not None, "the console script `bgc` is installed by `pip install -e .`"
     path = tmp_path / "model.yaml"
     path.write_text(model_text(TWO_SE_ON_0))
     out_dir = tmp_path / "out"

@@ -109,8 +109,8 @@ class _Builder:
     def law(self, el, key, **local) -> sp.Expr:
         return el.fields[key].xreplace({symbols.LOCAL[k]: v for k, v in local.items()})
 
-    def invert(self, el, key, have: str, value, want: str) -> sp.Expr:
-        """Solve the law ``have = law(want)`` for ``want`` (a law in the other causality)."""
+    def invert(self, el, key, value, want: str) -> sp.Expr:
+        """Solve ``value = law(want)`` for ``want`` (a law used in the other causality)."""
         w = sp.Dummy(want, real=True)
         law = self.law(el, key, **{want: w})
         sols = sp.solve(sp.Eq(law, value), w, dict=False)
@@ -172,13 +172,12 @@ class _Builder:
             self.display[x], self.display[dx] = f"{name}.{qname}", f"d({name}.{qname})/dt"
         else:
             v = symbols.algebraic(name, qname)
-            e_or_f = "e" if el.kind == "C" else "f"
             if el.law == el.kind:
                 value = el.fields[el.kind] * out_var
             elif el.law == "k":
                 value = out_var / el.fields["k"]
             else:
-                value = self.invert(el, el.law, e_or_f, out_var, qname)
+                value = self.invert(el, el.law, out_var, qname)
             self.define(v, value, name, b)
             self.display[v] = f"{name}.{qname}"
             self.dependent[name] = v
@@ -201,7 +200,7 @@ class _Builder:
             elif el.law == "effort":
                 value = self.law(el, "effort", f=f)
             else:
-                value = self.invert(el, "flow", "f", f, "e")
+                value = self.invert(el, "flow", f, "e")
             self.define(E, value, name, b)
         else:
             if el.law == "R":
@@ -215,7 +214,7 @@ class _Builder:
             elif el.law == "flow":
                 value = self.law(el, "flow", e=E)
             else:
-                value = self.invert(el, "effort", "e", E, "f")
+                value = self.invert(el, "effort", E, "f")
             self.define(F, s * value, name, b)
 
     def _el_zero(self, name, el):
@@ -416,7 +415,7 @@ def derive(cg: CausalGraph, method: str = "scalar") -> EquationSystem:
     params = [(symbols.param(p.name), p.name, p.value) for p in b.m.parameters.values()]
     system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
                             {n: b.display[v] for n, v in b.dependent.items()}, b.display)
-    for name, v in b.dependent.items():
+    for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:
             system.notes.append(f"{el.kind} '{name}' has derivative causality: its initial "

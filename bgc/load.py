@@ -263,7 +263,7 @@ class _Loader:
         return out
 
     def bonds(self, sec: YList, elements) -> list[Bond]:
-        out, seen_names, seen_pairs = [], {}, {}
+        out, seen_pairs = [], {}
         for i, v in enumerate(sec):
             loc, key = sec.item_locs[i], f"bonds[{i}]"
             name, dim = f"b{i + 1}", 1
@@ -303,7 +303,6 @@ class _Loader:
                 self.err(f"duplicate bond between '{src}' and '{dst}'", loc, key,
                          f"the same pair is already bonded at line {seen_pairs[pair].line}")
             seen_pairs[pair] = loc
-            seen_names[name] = loc
             out.append(Bond(name, src, dst, loc, dim))
         return out
 
@@ -351,7 +350,7 @@ class _Loader:
                         hint = {"C": "write it in q, e.g. k*q + k3*q**3",
                                 "I": "write it in p, e.g. p/m",
                                 "R": "write effort in f (e.g. R*f) or flow in e"}[kind]
-                        self.err(f"the law does not use the element's variable", kloc, kk, hint)
+                        self.err("the law does not use the element's variable", kloc, kk, hint)
                 el.fields[k] = e
                 el.field_locs[k] = kloc
                 self.check_physical(el, k, e, pvals, params, kloc, kk)
@@ -422,8 +421,8 @@ class _Loader:
         for name, v in sec.items():
             key, loc = f"outputs.{name}", sec.val_locs[name]
             self.declare(name, f"output '{name}'", sec.key_locs[name], key)
-            e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at: (
-                self.resolve_ref(tg, at, kinds, bond_names, key, loc)))
+            e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
+                            loc=loc: self.resolve_ref(tg, at, kinds, bond_names, key, loc))
             out.append(Output(name, e, loc))
         return out
 

@@ -29,7 +29,7 @@ def test_jacobian_matches_finite_differences(compiled, name):
     st = load.load(MODELS / f"{name}.yaml").settings
     run = simulate(mod, t_end=st.t_end, points=50, solver=st.solver, rtol=st.rtol, atol=st.atol)
     scale = np.maximum(np.abs(run.x).max(0), 1e-3)
-    for trial in range(3):
+    for _ in range(3):
         x = mod.X0 + scale * rng.uniform(-0.5, 0.5, n)
         t = float(rng.uniform(0, st.t_end))
         J = mod.jac(t, x, p)

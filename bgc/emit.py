@@ -19,8 +19,8 @@ from pathlib import Path
 import jinja2
 
 from . import __version__
-from .equations import EquationSystem
-from .jacobian import chain_rule
+from .equations import EquationSystem, LinearBlock
+from .jacobian import BlockSensitivity, chain_rule
 from .printer import code
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("bgc", "templates"),
@@ -34,21 +34,52 @@ def model_hash(model_digest: str, method: str) -> str:
     return hashlib.sha256(f"{model_digest}|{method}|{__version__}".encode()).hexdigest()[:32]
 
 
+def _defines(item) -> list:
+    if isinstance(item, LinearBlock):
+        return list(item.unknowns)
+    if isinstance(item, BlockSensitivity):
+        return item.defines
+    return [item[0]]
+
+
+def _free(item) -> set:
+    return item.free_symbols if isinstance(item, (LinearBlock, BlockSensitivity)) \
+        else item[1].free_symbols
+
+
 def _cone(assignments, targets):
     """The assignments that ``targets`` depend on, in their original order."""
     need = set()
     for e in targets:
         need |= e.free_symbols
     keep = []
-    for v, e in reversed(assignments):
-        if v in need:
-            keep.append((v, e))
-            need |= e.free_symbols
+    for item in reversed(assignments):
+        if any(v in need for v in _defines(item)):
+            keep.append(item)
+            need |= _free(item)
     return keep[::-1], need
 
 
 def _body(assignments):
-    return [f"{v.name} = {code(e)}" for v, e in assignments]
+    lines = []
+    for item in assignments:
+        if isinstance(item, LinearBlock):
+            k, n = item.index, len(item.unknowns)
+            lines.append(f"_A{k} = np.zeros(({n}, {n}))")
+            lines += [f"_A{k}[{i}, {j}] = {code(e)}" for i, j, e in item.A]
+            lines.append(f"_b{k} = np.empty({n})")
+            lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
+            lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
+            lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
+        elif isinstance(item, BlockSensitivity):
+            k, n, m = item.index, len(item.unknowns), len(item.cols)
+            lines.append(f"_R{k} = np.zeros(({n}, {m}))")
+            lines += [f"_R{k}[{i}, {c}] = {code(e)}" for i, c, e in item.R]
+            lines.append(f"_D{k} = np.linalg.solve(_A{k}, _R{k})")
+        else:
+            v, e = item
+            lines.append(f"{v.name} = {code(e)}")
+    return lines
 
 
 def _prologue(system, used):

@@ -56,13 +56,38 @@ class Loop:
                 f"{', '.join(self.tearing)}")
 
 
+@dataclass(frozen=True)
+class LinearBlock:
+    """A linear loop solved numerically at run time: ``A(w) u = b(w)`` by LU, for loops
+    too large to solve symbolically without expression swell. ``A`` holds the non-zero
+    entries only."""
+    index: int
+    unknowns: tuple[sp.Symbol, ...]
+    A: tuple[tuple[int, int, sp.Expr], ...]
+    b: tuple[sp.Expr, ...]
+
+    @property
+    def free_symbols(self) -> set:
+        out = set()
+        for _, _, e in self.A:
+            out |= e.free_symbols
+        for e in self.b:
+            out |= e.free_symbols
+        return out
+
+    def xreplace(self, mapping) -> "LinearBlock":
+        return LinearBlock(self.index, self.unknowns,
+                           tuple((i, j, e.xreplace(mapping)) for i, j, e in self.A),
+                           tuple(e.xreplace(mapping) for e in self.b))
+
+
 @dataclass
 class EquationSystem:
     model: Model
     method: str
     states: list[State]
     params: list[tuple[sp.Symbol, str, float]]   # (symbol, name, default)
-    assignments: list[tuple[sp.Symbol, sp.Expr]]  # causal order
+    assignments: list  # causal order: (symbol, expr) pairs and LinearBlocks
     outputs: list[tuple[str, sp.Expr]]
     loops: list[Loop] = field(default_factory=list)
     dependent: dict[str, str] = field(default_factory=dict)  # storage -> dependent state
@@ -353,7 +378,24 @@ def _tear(comp: list, deps: dict) -> list:
         rest.remove(best)
 
 
-def _solve_loop(b: _Builder, comp: list, deps: dict) -> tuple[list, Loop]:
+def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
+    """The whole loop as one linear system in all its variables (simple coefficients,
+    nothing substituted), to be factorized numerically in the generated code."""
+    residuals = [v - b.eqs[v] for v in comp]
+    try:
+        A, rhs = sp.linear_eq_to_matrix(residuals, comp)
+    except NonlinearError:
+        raise refuse("nonlinear algebraic loop",
+                     "break the loop with a small parasitic C or I") from None
+    if any(e.has(*comp) for e in list(A) + list(rhs)):
+        raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
+    entries = tuple((i, j, A[i, j]) for i in range(A.rows) for j in range(A.cols)
+                    if A[i, j] != 0)
+    return LinearBlock(index, tuple(comp), entries, tuple(rhs))
+
+
+def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
+                block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
     tears = _tear(comp, deps)
     rest = [v for v in comp if v not in tears]
@@ -376,9 +418,9 @@ def _solve_loop(b: _Builder, comp: list, deps: dict) -> tuple[list, Loop]:
                              loc=where.loc if where else None,
                              key=f"elements.{elements[0]}" if elements else None, hint=hint)
 
-    if len(tears) > MAX_SYMBOLIC_LOOP:
-        raise refuse(f"algebraic loop too large to solve symbolically ({len(tears)} tearing "
-                     "variables)", "break it with a small storage element")
+    if len(tears) > max_symbolic:
+        loop.tearing = ["numeric LU of all " + str(len(comp)) + " loop variables"]
+        return [_numeric_block(b, comp, block_index, refuse)], loop
     try:
         A, rhs = sp.linear_eq_to_matrix(residuals, tears)
     except NonlinearError:
@@ -395,8 +437,10 @@ def _solve_loop(b: _Builder, comp: list, deps: dict) -> tuple[list, Loop]:
     return out, loop
 
 
-def derive(cg: CausalGraph, method: str = "scalar") -> EquationSystem:
-    """Build, sort and solve the causal equations of a causal graph."""
+def derive(cg: CausalGraph, method: str = "scalar",
+           max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
+    """Build, sort and solve the causal equations of a causal graph. Loops with more
+    than ``max_symbolic_loop`` tearing variables are solved numerically at run time."""
     b = _Builder(cg)
     b.build()
     b.resolve_refs()
@@ -405,7 +449,8 @@ def derive(cg: CausalGraph, method: str = "scalar") -> EquationSystem:
     assignments, loops = [], []
     for comp in strongly_connected(list(b.eqs), deps):
         if is_cyclic(comp, deps):
-            solved, loop = _solve_loop(b, comp, deps)
+            blocks = sum(isinstance(a, LinearBlock) for a in assignments)
+            solved, loop = _solve_loop(b, comp, deps, max_symbolic_loop, blocks)
             assignments += solved
             loops.append(loop)
         else:
@@ -429,7 +474,11 @@ def _drop_aliases(assignments):
     state derivatives stay, since the right-hand side returns them."""
     aliases: dict = {}
     kept = []
-    for v, e in assignments:
+    for item in assignments:
+        if isinstance(item, LinearBlock):
+            kept.append(item.xreplace(aliases))
+            continue
+        v, e = item
         e = e.xreplace(aliases)
         trivial = e.is_Symbol or e.is_Number or (e.could_extract_minus_sign()
                                                   and (-e).is_Symbol)

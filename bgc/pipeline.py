@@ -22,8 +22,9 @@ class Compiled:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def build(model_path: str | Path, method: str = "scalar") -> Compiled:
-    """Run load -> expand -> causality -> equations, timing each stage."""
+def build(model_path: str | Path, method: str = "scalar", **derive_options) -> Compiled:
+    """Run load -> expand -> causality -> equations, timing each stage.
+    ``derive_options`` go to ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     timings = {}
     t0 = time.perf_counter()
     model = load.load(model_path)
@@ -33,15 +34,15 @@ def build(model_path: str | Path, method: str = "scalar") -> Compiled:
     cg = causality.assign(graph)
     timings["causality"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    system = equations.derive(cg, method)
+    system = equations.derive(cg, method, **derive_options)
     timings["equations"] = time.perf_counter() - t0
     return Compiled(model, cg, system, timings)
 
 
 def compile_model(model_path: str | Path, out_dir: str | Path = "generated",
-                  method: str = "scalar") -> tuple[Compiled, Path]:
+                  method: str = "scalar", **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
-    c = build(model_path, method)
+    c = build(model_path, method, **derive_options)
     t0 = time.perf_counter()
     path = emit.write(c.system, out_dir)
     c.timings["emit"] = time.perf_counter() - t0

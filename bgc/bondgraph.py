@@ -6,9 +6,9 @@ This is what ``expand`` produces. Later, bodies and joints expand into the same 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from .model import POWER_IN, Bond, Element, Model
+from .model import POWER_IN, Body, Bond, Element, Model
 
 
 @dataclass
@@ -17,6 +17,7 @@ class BondGraph:
     elements: dict[str, Element]
     bonds: list[Bond]
     ports: dict[str, list[int]]     # element name -> indices of its bonds, in file order
+    bodies: dict[str, Body] = field(default_factory=dict)
 
     def other(self, b: int, node: str) -> str:
         bond = self.bonds[b]
@@ -31,7 +32,7 @@ class BondGraph:
         junction)."""
         kind = self.elements[node].kind
         into = self.points_into(b, node)
-        if kind in POWER_IN or kind in ("0", "1"):
+        if kind in POWER_IN or kind in ("0", "1"):  # EJS: the junctions' power goes in
             return 1 if into else -1
         return -1 if into else 1
 

@@ -46,5 +46,6 @@ def angles(R) -> tuple[float, float, float]:
 
 
 def gimbal_margin(b):
-    """|cos b|: the distance from the Cardan singularity (0 at gimbal lock)."""
-    return sp.Abs(sp.cos(b))
+    """cos b: positive for |b| < 90 deg, zero at gimbal lock. Signed, so that an
+    integrator stepping across the singularity still sees the margin change sign."""
+    return sp.cos(b)

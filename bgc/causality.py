@@ -177,11 +177,11 @@ def assign(graph: BondGraph) -> CausalGraph:
     #    conflict in the model is found and reported together.
     conflicts: list[CausalityError] = []
     for name, el in els.items():
-        if el.kind in _FIXED:
-            b = graph.ports[name][0]
+        if el.kind in _FIXED or el.kind == "EJS":   # C2: the EJS is flow-in on every port
             saved = list(s.effort_in), list(s.forced_by)
             try:
-                s.set_port(name, b, _FIXED[el.kind] == "in")
+                for b in graph.ports[name]:
+                    s.set_port(name, b, _FIXED.get(el.kind) == "in")
                 s.propagate()
             except _Conflict as c:
                 conflicts.append(_conflict_error(graph, c, f"source '{name}'"))

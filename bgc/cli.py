@@ -65,7 +65,8 @@ def check(model, method, as_json):
     rep = c.causal.report()
     report = {
         "model": c.model.name, "file": model, "method": method,
-        "elements": len(c.model.elements), "bonds": len(c.model.bonds),
+        "elements": len(c.causal.graph.elements), "bonds": len(c.causal.graph.bonds),
+        "bodies": len(c.model.bodies),
         "states": [st.name for st in s.states],
         "storage": rep["storage"], "resistors": rep["resistors"],
         "derivative_causality": dict(s.dependent),
@@ -76,11 +77,12 @@ def check(model, method, as_json):
     if as_json:
         click.echo(json.dumps(report, indent=2))
         return
-    click.echo(f"{model}: {report['elements']} elements, {report['bonds']} bonds, "
+    click.echo(f"{model}: {report['bodies']} bodies, {report['elements']} elements, "
+               f"{report['bonds']} bonds, "
                f"{len(s.states)} states ({', '.join(report['states']) or 'none'})")
     click.echo("causality: no conflicts")
     for name, cz in rep["storage"].items():
-        kind = c.model.elements[name].kind
+        kind = c.causal.graph.elements[name].kind
         extra = f" (dependent state {s.dependent[name]})" if name in s.dependent else ""
         click.echo(f"  {kind} {name}: {cz}{extra}")
     for name, form in rep["resistors"].items():

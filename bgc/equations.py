@@ -22,13 +22,14 @@ import sympy as sp
 
 from sympy.solvers.solveset import NonlinearError
 
-from . import symbols
+from . import cardan, symbols
 from .causality import CausalGraph
+from .expand import AXES, body_junction
 from .errors import EquationError
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
 
-# Largest loop solved symbolically (tearing variables); larger loops are refused for now.
+# Largest loop solved symbolically (tearing variables); larger loops become numeric blocks.
 MAX_SYMBOLIC_LOOP = 6
 
 
@@ -93,6 +94,8 @@ class EquationSystem:
     dependent: dict[str, str] = field(default_factory=dict)  # storage -> dependent state
     display: dict[sp.Symbol, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    # (what, margin expression): the run stops where a margin reaches GUARD_TOLERANCE
+    guards: list[tuple[str, sp.Expr]] = field(default_factory=list)
 
     @property
     def tables(self) -> list[Table]:
@@ -117,6 +120,7 @@ class _Builder:
         self.states: list[State] = []
         self.dependent: dict[str, sp.Symbol] = {}
         self.refs: dict[sp.Symbol, sp.Expr] = {}
+        self.guards: list[tuple[str, sp.Expr]] = []
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var: sp.Symbol, expr, element: str, bond: int | None = None):
@@ -160,6 +164,7 @@ class _Builder:
             self.display[self.F(b)] = f"{bond.name}.f"
         for name, el in self.g.elements.items():
             getattr(self, f"_el_{ {'0': 'zero', '1': 'one'}.get(el.kind, el.kind) }")(name, el)
+        self.kinematics()
 
     def _port(self, name):
         b = self.g.ports[name][0]
@@ -193,8 +198,9 @@ class _Builder:
             self.define(E if el.kind == "C" else F, value if el.kind == "C" else s * value,
                         name, b)
             self.define(dx, in_var, name, b)
-            self.states.append(State(f"{name}.{qname}", x, dx, el.initial, name))
-            self.display[x], self.display[dx] = f"{name}.{qname}", f"d({name}.{qname})/dt"
+            label = f"{name}.{qname}".replace("__", ".")   # box__mx -> box.mx.p
+            self.states.append(State(label, x, dx, el.initial, name))
+            self.display[x], self.display[dx] = label, f"d({label})/dt"
         else:
             v = symbols.algebraic(name, qname)
             if el.law == el.kind:
@@ -284,6 +290,38 @@ class _Builder:
 
     _el_MGY = _el_GY
 
+    def _el_EJS(self, name, el):
+        """Euler's gyroscopic torque omega x (J omega), omega in the principal body frame."""
+        bonds = self.g.ports[name]
+        w = sp.Matrix([self.g.port_sign(b, name) * self.F(b) for b in bonds])
+        h = sp.Matrix([el.fields["J"][i] * w[i] for i in range(3)])
+        torque = w.cross(h)
+        for i, b in enumerate(bonds):
+            self.define(self.E(b), torque[i], name, b)
+
+    def common_flow(self, junction: str) -> sp.Symbol:
+        return self.F(self.g.ports[junction][0])
+
+    def kinematics(self):
+        """Position of G (R0) and XYZ Cardan angles of every body, integrated from the
+        junction velocities: x' = v, [a b c]' = E(a, b, c)^-1 omega (paper Fig. 11.2)."""
+        for n, body in self.g.bodies.items():
+            v = [self.common_flow(body_junction(n, "v", k)) for k in range(3)]
+            w = [self.common_flow(body_junction(n, "w", k)) for k in range(3)]
+            pos = [symbols.state(n, a) for a in AXES]
+            ang = [symbols.state(n, f"a{a}") for a in AXES]
+            rates = cardan.angle_rates(*ang, w)
+            init = cardan.angles(body.frame)
+            self.guards.append((f"Cardan singularity (gimbal lock, cos {n}.ay -> 0) of body "
+                                f"'{n}'", cardan.gimbal_margin(ang[1])))
+            for k in range(3):
+                for x, rate, x0, label in ((pos[k], v[k], body.com[k], AXES[k]),
+                                           (ang[k], rates[k], init[k], f"a{AXES[k]}")):
+                    dx = symbols.dstate(n, label)
+                    self.define(dx, rate, n)
+                    self.states.append(State(f"{n}.{label}", x, dx, sp.Float(x0), n))
+                    self.display[x], self.display[dx] = f"{n}.{label}", f"d({n}.{label})/dt"
+
     # --- references, derivatives --------------------------------------------------------
     def ref_map(self) -> dict[sp.Symbol, sp.Expr]:
         out = {}
@@ -301,6 +339,12 @@ class _Builder:
             out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
         for name, v in self.dependent.items():
             out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
+        for n in self.g.bodies:
+            for k, a in enumerate(AXES):
+                out[symbols.ref(n, a)] = symbols.state(n, a)
+                out[symbols.ref(n, f"a{a}")] = symbols.state(n, f"a{a}")
+                out[symbols.ref(n, f"v{a}")] = self.common_flow(body_junction(n, "v", k))
+                out[symbols.ref(n, f"w{a}")] = self.common_flow(body_junction(n, "w", k))
         for bname, i in bonds.items():
             out[symbols.ref(bname, "e")] = self.E(i)
             out[symbols.ref(bname, "f")] = self.F(i)
@@ -459,7 +503,8 @@ def derive(cg: CausalGraph, method: str = "scalar",
     outputs = [(o.name, o.expr.xreplace(b.refs).xreplace(aliases)) for o in b.m.outputs]
     params = [(symbols.param(p.name), p.name, p.value) for p in b.m.parameters.values()]
     system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
-                            {n: b.display[v] for n, v in b.dependent.items()}, b.display)
+                            {n: b.display[v] for n, v in b.dependent.items()}, b.display,
+                            guards=b.guards)
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

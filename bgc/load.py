@@ -21,12 +21,13 @@ from . import expr as bexpr
 from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
-from .model import (KINDS, Bond, Element, Model, Output, Parameter, Settings, Signal,
-                    Table)
+from .model import (KINDS, Body, Bond, Element, Model, Output, Parameter, Settings,
+                    Signal, Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-TOP_KEYS = ("name", "description", "parameters", "signals", "elements", "bonds", "outputs",
-            "simulation")
+TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "elements",
+            "bonds", "outputs", "simulation")
+BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
 
 
 # ---------------------------------------------------------------- located YAML values
@@ -123,6 +124,7 @@ class _Loader:
     def __init__(self, file: str):
         self.file = file
         self.names: dict[str, tuple[str, Loc]] = {}   # global namespace: name -> (what, loc)
+        self.bodies: dict[str, Body] = {}
 
     # helpers -------------------------------------------------------------
     def err(self, msg, loc, key, hint=None):
@@ -143,6 +145,9 @@ class _Loader:
         if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
             self.err(f"'{name}' is not a valid name", loc, key,
                      "use letters, digits and '_', not starting with a digit")
+        if "__" in name:
+            self.err(f"'{name}' contains '__', which bgc keeps for the names it generates",
+                     loc, key, "use a single '_'")
         if name in bexpr.RESERVED:
             self.err(f"'{name}' is a reserved name", loc, key,
                      "reserved: " + ", ".join(sorted(bexpr.RESERVED)))
@@ -255,10 +260,10 @@ class _Loader:
             v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
             kind = v.get("type")
             kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
-            if kind not in KINDS:
+            if kind not in KINDS or not KINDS[kind].user:
                 self.err(f"unknown element type {v.get('type')!r}",
                          v.val_locs.get("type", v.loc), f"{key}.type",
-                         "valid types: " + ", ".join(KINDS))
+                         "valid types: " + ", ".join(k for k in KINDS if KINDS[k].user))
             out[name] = (kind, v)
         return out
 
@@ -390,6 +395,11 @@ class _Loader:
                      hint)
 
     def resolve_ref(self, target, attr, kinds, bond_names, key, loc):
+        if target in self.bodies:
+            if attr not in Body.ATTRS:
+                self.err(f"body '{target}' has no '.{attr}'", loc, key,
+                         "valid: " + ", ".join(f"{target}.{a}" for a in Body.ATTRS))
+            return symbols.ref(target, attr)
         if target in bond_names:
             if attr not in ("e", "f"):
                 self.err(f"a bond has .e and .f, not .{attr}", loc, key)
@@ -424,6 +434,90 @@ class _Loader:
             e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
                             loc=loc: self.resolve_ref(tg, at, kinds, bond_names, key, loc))
             out.append(Output(name, e, loc))
+        return out
+
+    def vector(self, v, loc, key) -> tuple[float, float, float]:
+        vals = self.number_list(v, loc, key)
+        if len(vals) != 3:
+            self.err(f"expected 3 numbers [x, y, z], got {len(vals)}", loc, key)
+        return tuple(vals)
+
+    def gravity(self, doc) -> tuple[float, float, float]:
+        if "gravity" not in doc:
+            return (0.0, 0.0, 0.0)
+        v, loc = doc["gravity"], doc.val_locs["gravity"]
+        if isinstance(v, YList):
+            return self.vector(v, loc, "gravity")
+        return (0.0, 0.0, -self.number(v, loc, "gravity", nonneg=True))
+
+    def bodies_section(self, sec: YMap) -> dict[str, Body]:
+        import numpy as np
+        out = {}
+        for name, v in sec.items():
+            key = f"bodies.{name}"
+            self.declare(name, f"body '{name}'", sec.key_locs[name], key)
+            v = self.mapping(v, sec.val_locs[name], key, "a mapping with mass, com, inertia")
+            self.check_keys(v, BODY_KEYS, key)
+            for k in ("mass", "com", "inertia"):
+                if k not in v:
+                    self.err(f"missing '{k}'", v.loc, key, "a body needs mass, com and inertia")
+
+            def at(k, v=v, key=key):
+                return v.val_locs[k], f"{key}.{k}"
+            mass = self.number(v["mass"], *at("mass"), positive=True)
+            com = np.array(self.vector(v["com"], *at("com")))
+            inertia = v["inertia"]
+            loc, kk = at("inertia")
+            frame = np.eye(3)
+            if "frame" in v:
+                fr = self.mapping(v["frame"], *at("frame"), "a mapping {x: [..], y: [..], z: [..]}")
+                self.check_keys(fr, ("x", "y", "z"), f"{key}.frame")
+                if set(fr) != {"x", "y", "z"}:
+                    self.err("a frame needs its three axes x, y, z", fr.loc, f"{key}.frame")
+                cols = [np.array(self.vector(fr[a], fr.val_locs[a], f"{key}.frame.{a}"))
+                        for a in "xyz"]
+                frame = np.column_stack([c / np.linalg.norm(c) if np.linalg.norm(c) > 0
+                                         else c for c in cols])
+                if (np.abs(frame.T @ frame - np.eye(3)).max() > 1e-6
+                        or np.linalg.det(frame) < 0):
+                    self.err("the frame axes must be orthogonal and right-handed (x cross y = z)",
+                             fr.loc, f"{key}.frame", "give unit axes such as x: [1, 0, 0] ...")
+            if isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
+                if len(inertia) != 3:
+                    self.err("an inertia matrix has 3 rows", loc, kk)
+                M = np.array([self.vector(r, inertia.item_locs[i], f"{kk}[{i}]")
+                              for i, r in enumerate(inertia)])
+                if np.abs(M - M.T).max() > 1e-9 * max(np.abs(M).max(), 1e-30):
+                    self.err("the inertia matrix is not symmetric", loc, kk)
+                moments, axes = np.linalg.eigh(frame @ M @ frame.T if "frame" in v else M)
+                if np.linalg.det(axes) < 0:
+                    axes[:, 2] = -axes[:, 2]
+                frame = axes
+            else:
+                moments = np.array(self.vector(inertia, loc, kk))
+            if moments.min() <= 0:
+                self.err(f"the inertia tensor must be positive definite (principal moments "
+                         f"{', '.join(f'{m:g}' for m in moments)})", loc, kk)
+            a, b, c = sorted(moments)
+            if a + b < c * (1 - 1e-9):
+                self.err(f"principal moments {a:g}, {b:g}, {c:g} break the triangle "
+                         "inequality (no rigid mass distribution has them)", loc, kk)
+            points = {}
+            if "points" in v:
+                pts = self.mapping(v["points"], *at("points"))
+                for pn, pv in pts.items():
+                    if not isinstance(pn, str) or not _IDENT.match(pn):
+                        self.err(f"'{pn}' is not a valid point name", pts.key_locs[pn],
+                                 f"{key}.points")
+                    pos = np.array(self.vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
+                    points[pn] = tuple(float(x) for x in frame.T @ (pos - com))
+            vel = self.vector(v["velocity"], *at("velocity")) if "velocity" in v else (0, 0, 0)
+            omg = self.vector(v["omega"], *at("omega")) if "omega" in v else (0, 0, 0)
+            out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
+                             tuple(tuple(float(x) for x in row) for row in frame),
+                             tuple(float(x) for x in com), points,
+                             tuple(float(x) for x in vel), tuple(float(x) for x in omg))
+        self.bodies = out
         return out
 
     def settings(self, sec: YMap) -> Settings:
@@ -470,10 +564,14 @@ def loads(text: str, file: str = "<string>") -> Model:
                    doc.val_locs[key], key)
         return v
 
-    for required in ("elements", "bonds"):
-        if not doc.get(required):
-            ld.err(f"missing section '{required}'", doc.loc, required,
-                   "a model needs elements and the bonds between them")
+    if not doc.get("bodies"):
+        for required in ("elements", "bonds"):
+            if not doc.get(required):
+                ld.err(f"missing section '{required}'", doc.loc, required,
+                       "a model needs elements and the bonds between them (or bodies)")
+    elif doc.get("elements") and not doc.get("bonds"):
+        ld.err("missing section 'bonds'", doc.loc, "bonds",
+               "elements need the bonds between them")
     name = doc.get("name", Path(file).stem)
     if not isinstance(name, str) or not _IDENT.match(name):
         ld.err(f"model name {name!r} is not a valid module name",
@@ -482,6 +580,8 @@ def loads(text: str, file: str = "<string>") -> Model:
     params = ld.parameters(section("parameters"))
     tables: list[Table] = []
     sigs = ld.signals(section("signals"), params, tables)
+    gravity = ld.gravity(doc)
+    bodies = ld.bodies_section(section("bodies"))
     headers = ld.element_headers(section("elements"))
     bonds = ld.bonds(section("bonds", YList), headers)
     elements = ld.element_fields(headers, params, sigs, bonds)
@@ -491,7 +591,8 @@ def loads(text: str, file: str = "<string>") -> Model:
                             .encode()).hexdigest()
     return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bonds, outputs=outputs,
-                 settings=settings, description=doc.get("description"))
+                 settings=settings, description=doc.get("description"), bodies=bodies,
+                 gravity=gravity)
 
 
 def load(path: str | Path) -> Model:

@@ -58,6 +58,7 @@ class Segment:
     t_reached: float
     ok: bool
     message: str = ""
+    event: int | None = None      # index of the guard that stopped the segment
 
 
 class Solver(abc.ABC):
@@ -66,8 +67,10 @@ class Solver(abc.ABC):
     description = ""
 
     @abc.abstractmethod
-    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats: Stats) -> Segment:
-        """Integrate from t0 to t1, recording the states at ``t_eval``."""
+    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats: Stats,
+                  events=()) -> Segment:
+        """Integrate from t0 to t1, recording the states at ``t_eval``; stop early where
+        one of ``events`` (functions of (t, x)) falls through zero."""
 
 
 class ScipySolver(Solver):
@@ -76,10 +79,10 @@ class ScipySolver(Solver):
     def __init__(self, name: str, method: str, description: str):
         self.name, self.method, self.description = name, method, description
 
-    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats):
+    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats, events=()):
         kw = {"jac": jac} if self.method in ("BDF", "Radau", "LSODA") else {}
         sol = solve_ivp(rhs, (t0, t1), x0, method=self.method, rtol=rtol, atol=atol,
-                        dense_output=True, **kw)
+                        dense_output=True, events=list(events) or None, **kw)
         stats.steps += max(len(sol.t) - 1, 0)
         stats.rhs_calls += int(sol.nfev)
         stats.jac_calls += int(sol.njev)
@@ -91,6 +94,11 @@ class ScipySolver(Solver):
             reached = t_eval[t_eval <= t_ok]
             xs = sol.sol(reached).T if sol.sol is not None else np.empty((0, len(x0)))
             return Segment(xs, x_end, t_ok, False, sol.message)
+        if sol.status == 1:       # a guard fired: keep what lies before it
+            k = next(i for i, te in enumerate(sol.t_events) if len(te))
+            reached = t_eval[t_eval <= t_ok]
+            return Segment(sol.sol(reached).T.reshape(len(reached), len(x0)), x_end, t_ok,
+                           False, "", event=k)
         return Segment(sol.sol(t_eval).T.reshape(len(t_eval), len(x0)), x_end, t_ok, True)
 
 
@@ -100,6 +108,25 @@ SOLVERS: dict[str, Solver] = {s.name: s for s in (
     ScipySolver("lsoda", "LSODA", "scipy LSODA (ODEPACK), switches stiff/non-stiff"),
     ScipySolver("rk45", "RK45", "scipy Dormand-Prince 5(4), non-stiff"),
 )}
+
+
+# A run stops where a guard margin (e.g. |cos b| of a body's Cardan angles) falls below this.
+GUARD_TOLERANCE = 1e-3
+
+
+_GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's frame so that "
+               "its large rotations are not about its y axis")
+
+
+def _guard_events(module, p):
+    names = getattr(module, "GUARD_NAMES", ())
+    events = []
+    for k in range(len(names)):
+        def event(t, x, k=k):
+            return module.guards(t, x, p)[k] - GUARD_TOLERANCE
+        event.terminal, event.direction = True, -1
+        events.append(event)
+    return events
 
 
 def _segments(t_end: float, breakpoints) -> list[tuple[float, float]]:
@@ -128,6 +155,13 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     module.rhs(0.0, x, p)
     module.jac(0.0, x, p)
     module.outputs(0.0, x, p)
+    events = _guard_events(module, p)
+    if events:
+        margins = module.guards(0.0, x, p)
+        if margins.min() <= GUARD_TOLERANCE:
+            k = int(np.argmin(margins))
+            raise SimulationError(f"{module.GUARD_NAMES[k]} at the initial state (margin "
+                                  f"{margins[k]:.3g})", hint=_GUARD_HINT)
     stats.compile_time = time.perf_counter() - t0
 
     def rhs(t, xx):
@@ -139,6 +173,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     grid = np.linspace(0.0, t_end, int(points))
     ts, xs = [], []
     ok, message = True, ""
+    hint = ("tighten --rtol/--atol, try another --solver, or check the model for a "
+            "singularity at that time")
     t_start = time.perf_counter()
     segs = _segments(t_end, module.BREAKPOINTS)
     for k, (a, b) in enumerate(segs):
@@ -148,9 +184,14 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             ts.append(sel)
             xs.append(np.zeros((len(sel), 0)))
             continue
-        seg = method.integrate(rhs, jac, a, b, x, sel, rtol, atol, stats)
+        seg = method.integrate(rhs, jac, a, b, x, sel, rtol, atol, stats, events)
         ts.append(sel[:len(seg.x_eval)])
         xs.append(seg.x_eval)
+        if seg.event is not None:
+            ok, message = False, (f"{module.GUARD_NAMES[seg.event]} reached at "
+                                  f"t = {seg.t_reached:.6g}")
+            hint = _GUARD_HINT
+            break
         if not seg.ok:
             ok, message = False, f"{method.name} failed at t = {seg.t_reached:.6g}: {seg.message}"
             break
@@ -163,9 +204,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver, stats, ok, message)
     if not ok:
-        raise SimulationError(message, result=result,
-                              hint="tighten --rtol/--atol, try another --solver, or check "
-                                   "the model for a singularity at that time")
+        raise SimulationError(message, result=result, hint=hint)
     if not np.all(np.isfinite(x_all)):
         bad = t_all[np.argmax(~np.all(np.isfinite(x_all), axis=1))]
         raise SimulationError(f"the solution became non-finite at t = {bad:.6g}",

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "de326ff4721d6ad5b874b5a454157507"
+MODEL_HASH = "87aa571cdbb6b7059a44b4748062679f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("L_a.p", "J.p", )
 PARAM_NAMES = ("Ra", "La", "km", "b_m", "ratio", "J_load", "b_load", "T_load", "U", )
 OUTPUT_NAMES = ("current", "motor_speed", "load_momentum", "load_speed", "motor_torque", )
+GUARD_NAMES = ()
 PARAMS = np.array([1.2, 0.003, 0.05, 2e-05, 0.1, 0.002, 0.001, 0.05, 24.0], dtype=np.float64)
 BREAKPOINTS = np.array([0.01], dtype=np.float64)
 
@@ -116,3 +117,10 @@ def outputs(t, x, p):
     y[3] = F_b9
     y[4] = E_b_motor
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "240d78bcc0fc62149f5ef4f4e418b05c"
+MODEL_HASH = "b56e22e735bf58aef2a09eb31bbf0901"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )
 OUTPUT_NAMES = ("position", "force", "energy", )
+GUARD_NAMES = ()
 PARAMS = np.array([0.5, 200.0, 4000000.0, 0.02], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
 
@@ -80,3 +81,10 @@ def outputs(t, x, p):
     y[1] = E_b2
     y[2] = (0.5)*P_k*X_spring__q**2 + (0.25)*P_k3*X_spring__q**4 + (0.5)*X_mass__p**2/P_m
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "4733db63cf4b92df5e23200b87902683"
+MODEL_HASH = "6e6869b40b43fd2546dfac3907a995c5"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )
 OUTPUT_NAMES = ("load_angle", "load_speed", "rotor_speed", "load_momentum", )
+GUARD_NAMES = ()
 PARAMS = np.array([2.0, 0.001, 0.05, 0.25, 40.0, 0.2], dtype=np.float64)
 BREAKPOINTS = np.array([0.0], dtype=np.float64)
 
@@ -94,3 +95,10 @@ def outputs(t, x, p):
     y[2] = F_b2
     y[3] = V_J_l__p
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "988442e1e184d4ca46018d4ad9e8e5e4"
+MODEL_HASH = "72867626c39a1a93d22268dbc30adc07"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "F0", "f_drive", )
 OUTPUT_NAMES = ("position", "velocity", "power_in", )
+GUARD_NAMES = ()
 PARAMS = np.array([1.5, 600.0, 6.0, 10.0, 3.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
 
@@ -85,3 +86,10 @@ def outputs(t, x, p):
     y[1] = F_b2
     y[2] = F_b2*U_force
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

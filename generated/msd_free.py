@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "dc98df88fb0d20e8c3883cfadf893a4a"
+MODEL_HASH = "661f6792f8c4dde0f8ff90c4f3375d02"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )
 OUTPUT_NAMES = ("position", "velocity", "spring_force", )
+GUARD_NAMES = ()
 PARAMS = np.array([2.0, 800.0, 4.0, 0.01], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
 
@@ -82,3 +83,10 @@ def outputs(t, x, p):
     y[1] = F_b1
     y[2] = E_b2
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "5ff671a71b598c114d691e3ff816cce0"
+MODEL_HASH = "3c6fb108b8a5484946063e63c8965ea8"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
 OUTPUT_NAMES = ("v_in", "v_C", )
+GUARD_NAMES = ()
 PARAMS = np.array([2000.0, 1e-06], dtype=np.float64)
 BREAKPOINTS = np.array([0.0, 0.01, 0.03], dtype=np.float64)
 TABLE_T0 = np.array([0.0, 0.01, 0.03])
@@ -80,3 +81,10 @@ def outputs(t, x, p):
     y[0] = U_profile
     y[1] = E_b3
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

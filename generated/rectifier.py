@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "032fcf23e219625edb892bf9ff59f60a"
+MODEL_HASH = "6c8768eddf16d8d4bf1ed74ff3d22d9c"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("Vpk", "f_line", "Is", "Vt", "C", "R_load", )
 OUTPUT_NAMES = ("v_out", "i_diode", )
+GUARD_NAMES = ()
 PARAMS = np.array([10.0, 50.0, 1e-12, 0.02585, 0.0001, 1000.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
 
@@ -93,3 +94,10 @@ def outputs(t, x, p):
     y[0] = E_b4
     y[1] = F_b2
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

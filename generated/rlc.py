@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "1c901a2fade3159406da462ac5fbd0b9"
+MODEL_HASH = "26e554d8bd54e2d3d4a34349cfd76bc5"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )
 OUTPUT_NAMES = ("current", "v_C", "v_R", )
+GUARD_NAMES = ()
 PARAMS = np.array([12.0, 10.0, 0.05, 2e-05], dtype=np.float64)
 BREAKPOINTS = np.array([0.001], dtype=np.float64)
 
@@ -86,3 +87,10 @@ def outputs(t, x, p):
     y[1] = E_b4
     y[2] = E_b2
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "be10679f1d724f1e29cd705d04833320"
+MODEL_HASH = "a1c6c77d5bcae9ab8910b7daed011261"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )
 OUTPUT_NAMES = ("v_C", "v_node", "i_source", )
+GUARD_NAMES = ()
 PARAMS = np.array([10.0, 1000.0, 3000.0, 500.0, 1e-06], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
 
@@ -87,3 +88,10 @@ def outputs(t, x, p):
     y[1] = E_b3
     y[2] = F_b3
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

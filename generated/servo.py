@@ -13,13 +13,14 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "1ac0e3aab6a800c6dfda26b04ad15f6d"
+MODEL_HASH = "e75d49b0e9f8a836e0a529ac41f5be06"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
 STATE_NAMES = ("L_a.p", "J_rotor.p", "angle.q", )
 PARAM_NAMES = ("Ra", "La", "km", "J_m", "ratio", "J_load", "b_load", "Kp", "Kd", "target", )
 OUTPUT_NAMES = ("ref", "theta", "voltage", "current", )
+GUARD_NAMES = ()
 PARAMS = np.array([2.0, 0.001, 0.08, 5e-05, 0.05, 0.01, 0.002, 60.0, 1.5, 1.0], dtype=np.float64)
 BREAKPOINTS = np.array([0.05], dtype=np.float64)
 
@@ -125,3 +126,10 @@ def outputs(t, x, p):
     y[2] = E_b1
     y[3] = F_b3
     return y
+
+
+@njit(cache=True)
+def guards(t, x, p):
+    """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
+    g = np.empty(0)
+    return g

@@ -47,5 +47,6 @@ def test_angles_inverts_rotation():
 
 
 def test_gimbal_margin_vanishes_at_the_singularity():
-    assert float(cardan.gimbal_margin(sp.pi / 2)) < 1e-15
+    assert abs(float(cardan.gimbal_margin(sp.pi / 2))) < 1e-15
+    assert float(cardan.gimbal_margin(2.0)) < 0     # beyond the singularity
     assert np.isclose(float(cardan.gimbal_margin(0.0)), 1.0)

@@ -8,6 +8,7 @@ Graph-level checks (arity, power direction) belong to ``expand``.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import keyword
@@ -159,10 +160,8 @@ class _Loader:
 
     def number(self, v, loc, key, *, positive=False, nonneg=False) -> float:
         if isinstance(v, str):      # YAML 1.1 reads 1e-3 and 4.0e6 as strings
-            try:
+            with contextlib.suppress(ValueError):
                 v = float(v)
-            except ValueError:
-                pass
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.err(f"expected a number, got {_kind_of(v)} {v!r}", loc, key,
                      "write a plain number such as 1.5 or 2e-3")

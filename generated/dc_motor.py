@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "87aa571cdbb6b7059a44b4748062679f"
+MODEL_HASH = "f04cfed6161f8f868b7993a36d63fa40"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "b56e22e735bf58aef2a09eb31bbf0901"
+MODEL_HASH = "90dda856fd2becb222b9a5008da7a998"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "6e6869b40b43fd2546dfac3907a995c5"
+MODEL_HASH = "d926c2b20ca9adc67da468af4685273e"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

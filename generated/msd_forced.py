@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "72867626c39a1a93d22268dbc30adc07"
+MODEL_HASH = "f285229c0b1d26126f645865983f4b51"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "661f6792f8c4dde0f8ff90c4f3375d02"
+MODEL_HASH = "b81c4af5ee0fa21a6bcc1a0a14a5e54a"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "3c6fb108b8a5484946063e63c8965ea8"
+MODEL_HASH = "f616c02254133f55ab4e290f392fbdd4"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

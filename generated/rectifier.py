@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "6c8768eddf16d8d4bf1ed74ff3d22d9c"
+MODEL_HASH = "8dbf1950907f0051cf9ed9404cafba4c"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

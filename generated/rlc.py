@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "26e554d8bd54e2d3d4a34349cfd76bc5"
+MODEL_HASH = "1ab061e428c12038ba01aa9f657ad210"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "a1c6c77d5bcae9ab8910b7daed011261"
+MODEL_HASH = "e9ae1aedfa2f263dd3d2f78a5f75ad1d"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "e75d49b0e9f8a836e0a529ac41f5be06"
+MODEL_HASH = "fe6f4e9892c5bdac39511c42b3888efd"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

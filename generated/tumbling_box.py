@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "26142b4f6dd17e70b25ce67b5183f7e3"
+MODEL_HASH = "e4809c5d07218669a95b6c74d79eff30"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -146,17 +146,10 @@ def _parse_params(module, items):
               help="where the generated module is kept")
 @_method_opt
 @_json_opt
+@_user_errors
 def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_dir, method,
              as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
-    _simulate(model=model, t_end=t_end, rtol=rtol, atol=atol, solver=solver, points=points,
-              params=params, out=out, plot=plot, out_dir=out_dir, method=method,
-              as_json=as_json)
-
-
-@_user_errors
-def _simulate(*, model, t_end, rtol, atol, solver, points, params, out, plot, out_dir,
-              method, as_json):
     from .results import plot as plot_png
     from .results import write_csv
     from .simulate import SOLVERS

@@ -490,11 +490,11 @@ def derive(cg: CausalGraph, method: str = "scalar",
     b.resolve_refs()
     b.resolve_derivatives()
     deps = _deps(b.eqs)
-    assignments, loops = [], []
+    assignments, loops, blocks = [], [], 0
     for comp in strongly_connected(list(b.eqs), deps):
         if is_cyclic(comp, deps):
-            blocks = sum(isinstance(a, LinearBlock) for a in assignments)
             solved, loop = _solve_loop(b, comp, deps, max_symbolic_loop, blocks)
+            blocks += sum(isinstance(a, LinearBlock) for a in solved)
             assignments += solved
             loops.append(loop)
         else:

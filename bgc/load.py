@@ -194,8 +194,10 @@ class _Loader:
             out[name] = Parameter(name, value, loc, unit)
         return out
 
-    def param_names(self, params) -> dict[str, sp.Expr]:
+    def expr_names(self, params, signals=()) -> dict[str, sp.Expr]:
+        """What a bare name in an expression may be: a parameter, a signal or ``t``."""
         names = {n: symbols.param(n) for n in params}
+        names.update({n: symbols.signal(n) for n in signals})
         names["t"] = symbols.t
         return names
 
@@ -313,8 +315,7 @@ class _Loader:
     def element_fields(self, headers, params, signals, bonds) -> dict[str, Element]:
         kinds = {n: k for n, (k, _) in headers.items()}
         bond_names = {b.name for b in bonds}
-        base = self.param_names(params)
-        base.update({n: symbols.signal(n) for n in signals})
+        base = self.expr_names(params, signals)
         pvals = {symbols.param(p.name): p.value for p in params.values()}
 
         def resolver(key, loc):
@@ -424,8 +425,7 @@ class _Loader:
     def outputs(self, sec: YMap, params, signals, elements, bonds) -> list[Output]:
         kinds = {n: e.kind for n, e in elements.items()}
         bond_names = {b.name for b in bonds}
-        names = self.param_names(params)
-        names.update({n: symbols.signal(n) for n in signals})
+        names = self.expr_names(params, signals)
         out = []
         for name, v in sec.items():
             key, loc = f"outputs.{name}", sec.val_locs[name]

@@ -22,12 +22,13 @@ class Compiled:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def build(model_path: str | Path, method: str = "scalar", **derive_options) -> Compiled:
-    """Run load -> expand -> causality -> equations, timing each stage.
-    ``derive_options`` go to ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
+def build(model: str | Path | Model, method: str = "scalar", **derive_options) -> Compiled:
+    """Run load (unless given a Model) -> expand -> causality -> equations, timing each
+    stage. ``derive_options`` go to ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     timings = {}
     t0 = time.perf_counter()
-    model = load.load(model_path)
+    if not isinstance(model, Model):
+        model = load.load(model)
     timings["load"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     graph = expand.expand(model)
@@ -39,10 +40,10 @@ def build(model_path: str | Path, method: str = "scalar", **derive_options) -> C
     return Compiled(model, cg, system, timings)
 
 
-def compile_model(model_path: str | Path, out_dir: str | Path = "generated",
+def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
                   method: str = "scalar", **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
-    c = build(model_path, method, **derive_options)
+    c = build(model, method, **derive_options)
     t0 = time.perf_counter()
     path = emit.write(c.system, out_dir)
     c.timings["emit"] = time.perf_counter() - t0
@@ -56,5 +57,5 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
     path = emit.module_path(model.name, out_dir)
     compiled = None
     if emit.is_stale(path, model.digest, method):
-        compiled, path = compile_model(model_path, out_dir, method)
+        compiled, path = compile_model(model, out_dir, method)
     return emit.import_module(path), model, compiled

@@ -19,9 +19,9 @@ class NumbaPrinter(NumPyPrinter):
 
     def _print_Piecewise(self, expr):
         pieces = list(expr.args)
-        out = self._print(pieces[-1].expr) if pieces[-1].cond == True else "np.nan"  # noqa: E712
-        if pieces[-1].cond == True:  # noqa: E712
-            pieces = pieces[:-1]
+        out = "np.nan"
+        if pieces[-1].cond == True:  # noqa: E712  (sympy's true, not Python's)
+            out = self._print(pieces.pop().expr)
         for piece in reversed(pieces):
             out = f"({self._print(piece.expr)} if {self._print(piece.cond)} else {out})"
         return out

@@ -119,11 +119,20 @@ _GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's fr
 
 
 def _guard_events(module, p):
+    """One terminal event per guard; the integrator asks each at the same (t, x), so the
+    margins are computed once per point and shared."""
     names = getattr(module, "GUARD_NAMES", ())
+    last: list = [None, None, None]          # t, x, margins
+
+    def margins(t, x):
+        if last[0] != t or not np.array_equal(last[1], x):
+            last[:] = [t, np.array(x), module.guards(t, x, p)]
+        return last[2]
+
     events = []
     for k in range(len(names)):
         def event(t, x, k=k):
-            return module.guards(t, x, p)[k] - GUARD_TOLERANCE
+            return margins(t, x)[k] - GUARD_TOLERANCE
         event.terminal, event.direction = True, -1
         events.append(event)
     return events

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "f04cfed6161f8f868b7993a36d63fa40"
+MODEL_HASH = "71191b212f3b2b7b380b5b1fcb53f7ea"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

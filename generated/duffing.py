@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "90dda856fd2becb222b9a5008da7a998"
+MODEL_HASH = "28f0db5c196c261d56f35c6a7ef560ad"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

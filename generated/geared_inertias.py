@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "d926c2b20ca9adc67da468af4685273e"
+MODEL_HASH = "d789d8e08a426626c9deb7dd689829bc"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "f285229c0b1d26126f645865983f4b51"
+MODEL_HASH = "a6ce1d0748eae7e4265f8eeaee319a3f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

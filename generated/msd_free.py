@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "b81c4af5ee0fa21a6bcc1a0a14a5e54a"
+MODEL_HASH = "28eec51ad9e7d17301393e2290c1f39e"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "8dbf1950907f0051cf9ed9404cafba4c"
+MODEL_HASH = "02d4156e3e4dc5caf33dc2bfcd4842d5"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

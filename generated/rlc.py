@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "1ab061e428c12038ba01aa9f657ad210"
+MODEL_HASH = "ce9e1b58592704fb40b3024adc413286"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "e9ae1aedfa2f263dd3d2f78a5f75ad1d"
+MODEL_HASH = "696fe8a0b0f4ed23ac9ab031ec994e71"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "fe6f4e9892c5bdac39511c42b3888efd"
+MODEL_HASH = "963da1ce729c9438ed0fda06ff083b20"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "e4809c5d07218669a95b6c74d79eff30"
+MODEL_HASH = "30eb88eb90742aa817484adf15faf974"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -1,7 +1,7 @@
 """The BondGraph: elements as nodes, bonds as edges with a power direction and a dimension.
 
-This is what ``expand`` produces. Later, bodies and joints expand into the same structure
-(multibonds of dimension 3, matrix-valued elements).
+This is what ``expand`` produces: user elements, bodies and joints in one structure, with
+multibonds of dimension 3 and matrix-valued elements where bodies and joints need them.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ class BondGraph:
     bonds: list[Bond]
     ports: dict[str, list[int]]     # element name -> indices of its bonds, in file order
     bodies: dict[str, Body] = field(default_factory=dict)
+    joints: dict[str, list] = field(default_factory=dict)   # joint -> its Directions
 
     def other(self, b: int, node: str) -> str:
         bond = self.bonds[b]

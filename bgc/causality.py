@@ -1,7 +1,8 @@
 """Stage **causality**: BondGraph -> CausalGraph, by the Sequential Causality Assignment
 Procedure (SCAP, Karnopp & Rosenberg).
 
-Order: fixed-causality sources first, then storage elements preferring integral causality,
+Order: fixed-causality elements first (sources; by the vector rule C2 the EJS and the
+cross-product TFs; one-way matrix transformers; the ports of bodies of negligible mass), then storage elements preferring integral causality,
 then R elements (in the form their law is written in), then any bond still free. Each
 choice is propagated through junctions, TF and GY before the next one; a free choice that
 leads to a conflict is undone and the other one taken. A conflict between fixed causalities
@@ -49,11 +50,37 @@ class _Conflict(Exception):
 
 # What each kind requires of the bonds at a node, with 'in' = the node receives effort.
 def _rule(kind: str) -> str:
-    return {"0": "one_in", "1": "one_out", "TF": "one_in", "MTF": "one_in",
+    return {"0": "one_in", "1": "one_out", "TF": "one_in", "MTF": "one_in", "XTF": "one_in",
             "GY": "same", "MGY": "same"}.get(kind, "free")
 
 
 _FIXED = {"Se": "out", "MSe": "out", "Sf": "in", "MSf": "in"}
+
+
+def one_way(el) -> bool:
+    """A two-port that only works flow-in at its input, flow-out at its output (rule C2):
+    the cross-product TF, and a TF/MTF whose matrix ratio has no usable inverse (not
+    square, or modulated and not a rotation)."""
+    if el.kind == "XTF":
+        return True
+    ratio = el.fields.get("ratio")
+    if el.kind in ("TF", "MTF") and hasattr(ratio, "shape"):
+        if ratio.shape[0] != ratio.shape[1]:
+            return True
+        return el.kind == "MTF" and not el.orthogonal
+    return False
+
+
+def _fixed_ports(graph: BondGraph, name: str, el) -> list[tuple[int, bool]]:
+    """(bond, element receives effort) for every port of a fixed-causality element."""
+    if el.kind in _FIXED:
+        return [(b, _FIXED[el.kind] == "in") for b in graph.ports[name]]
+    if el.kind == "EJS":            # C2: flow in, effort out
+        return [(b, False) for b in graph.ports[name]]
+    if el.kind == "M0":             # its flow is the unknown twist: effort in
+        return [(b, True) for b in graph.ports[name]]
+    a, c = graph.two_port(name)     # one-way two-port: flow in at a, flow out at c
+    return [(a, False), (c, True)]
 
 
 class _Scap:
@@ -177,14 +204,16 @@ def assign(graph: BondGraph) -> CausalGraph:
     #    conflict in the model is found and reported together.
     conflicts: list[CausalityError] = []
     for name, el in els.items():
-        if el.kind in _FIXED or el.kind == "EJS":   # C2: the EJS is flow-in on every port
+        if el.kind in _FIXED or el.kind in ("EJS", "M0") or one_way(el):
             saved = list(s.effort_in), list(s.forced_by)
             try:
-                for b in graph.ports[name]:
-                    s.set_port(name, b, _FIXED.get(el.kind) == "in")
+                for b, receives in _fixed_ports(graph, name, el):
+                    s.set_port(name, b, receives)
                 s.propagate()
             except _Conflict as c:
-                conflicts.append(_conflict_error(graph, c, f"source '{name}'"))
+                what = (f"source '{name}'" if el.kind in _FIXED else
+                        f"the fixed causality (rule C2) of {el.kind} '{name}'")
+                conflicts.append(_conflict_error(graph, c, what))
                 (s.effort_in, s.forced_by), s.queue = saved, []
     if conflicts:
         first = conflicts[0]

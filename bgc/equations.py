@@ -24,7 +24,7 @@ from sympy.solvers.solveset import NonlinearError
 
 from . import cardan, symbols
 from .causality import CausalGraph
-from .expand import AXES, body_junction
+from .expand import AXES, body_junction, rotation_matrix
 from .errors import EquationError
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
@@ -123,17 +123,31 @@ class _Builder:
         self.guards: list[tuple[str, sp.Expr]] = []
 
     # --- helpers --------------------------------------------------------------------
-    def define(self, var: sp.Symbol, expr, element: str, bond: int | None = None):
+    def define(self, var, expr, element: str, bond: int | None = None):
+        """``var = expr``; both may be matrices (the components of a multibond)."""
+        if isinstance(var, sp.MatrixBase):
+            for v, e in zip(var, sp.Matrix(expr)):
+                self.define(v, e, element, bond)
+            return
+        if isinstance(expr, sp.MatrixBase):     # a 1x1 product (projection onto a row)
+            (expr,) = expr
         if var in self.eqs:   # cannot happen after a correct causality assignment
             raise AssertionError(f"{var} defined twice")
         self.eqs[var] = sp.sympify(expr)
         self.origin[var] = (element, self.g.bonds[bond].name if bond is not None else None)
 
-    def E(self, b: int) -> sp.Symbol:
-        return symbols.effort(self.g.bonds[b].name)
+    def _var(self, b: int, make):
+        bond = self.g.bonds[b]
+        if bond.dim == 1:
+            return make(bond.name)
+        return sp.Matrix([make(bond.name, k) for k in range(bond.dim)])
 
-    def F(self, b: int) -> sp.Symbol:
-        return symbols.flow(self.g.bonds[b].name)
+    def E(self, b: int):
+        """Effort of bond b: a symbol, or a column of symbols on a multibond."""
+        return self._var(b, symbols.effort)
+
+    def F(self, b: int):
+        return self._var(b, symbols.flow)
 
     def law(self, el, key, **local) -> sp.Expr:
         return el.fields[key].xreplace({symbols.LOCAL[k]: v for k, v in local.items()})
@@ -160,8 +174,12 @@ class _Builder:
             self.define(var, sig.expr, name)
             self.display[var] = name
         for b, bond in enumerate(self.g.bonds):
-            self.display[self.E(b)] = f"{bond.name}.e"
-            self.display[self.F(b)] = f"{bond.name}.f"
+            for var, tag in ((self.E(b), "e"), (self.F(b), "f")):
+                if bond.dim == 1:
+                    self.display[var] = f"{bond.name}.{tag}"
+                else:
+                    for k, v in enumerate(var):
+                        self.display[v] = f"{bond.name}.{tag}{AXES[k]}"
         for name, el in self.g.elements.items():
             getattr(self, f"_el_{ {'0': 'zero', '1': 'one'}.get(el.kind, el.kind) }")(name, el)
         self.kinematics()
@@ -185,6 +203,8 @@ class _Builder:
     def _storage(self, name, el, qname):
         """C (qname 'q') and I (qname 'p'): integral or derivative causality."""
         b, s, E, F = self._port(name)
+        if isinstance(E, sp.MatrixBase):
+            return self._storage_vector(name, el, qname, b, s, E, F)
         # For C: e = law(q), dq/dt = f.  For I: f = law(p), dp/dt = e.
         out_var, in_var = (E, s * F) if el.kind == "C" else (s * F, E)
         if self.cg.storage[name] == "integral":
@@ -216,6 +236,34 @@ class _Builder:
             self.define(F if el.kind == "C" else E, (s if el.kind == "C" else 1) * Dt(v),
                         name, b)
 
+    def _storage_vector(self, name, el, qname, b, s, E, F):
+        """A multiport C or I with a matrix law (mass matrix, inertia tensor, stiffness):
+        integral causality only, the law inverted numerically once (it is constant)."""
+        if self.cg.storage[name] != "integral":
+            raise EquationError(f"multiport {el.kind} '{name}' would need derivative "
+                                "causality, which is only supported on scalar bonds",
+                                loc=el.loc, key=f"elements.{name}",
+                                hint="let it integrate (e.g. a stiff C between it and the "
+                                     "element that imposes its flow)")
+        d = len(E)
+        x = sp.Matrix([symbols.state(name, f"{qname}{AXES[k]}") for k in range(d)])
+        dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
+        law = el.fields.get(el.law)
+        M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
+        value = M * x if el.law == "k" else M.inv() * x
+        if el.kind == "C":
+            self.define(E, value, name, b)
+            self.define(dx, s * F, name, b)
+        else:
+            self.define(F, s * value, name, b)
+            self.define(dx, E, name, b)
+        label = name.replace("__", ".")
+        initial = el.initial if isinstance(el.initial, sp.MatrixBase) else sp.zeros(d, 1)
+        for k in range(d):
+            lab = f"{label}.{qname}{AXES[k]}"
+            self.states.append(State(lab, x[k], dx[k], initial[k], name))
+            self.display[x[k]], self.display[dx[k]] = lab, f"d({lab})/dt"
+
     def _el_C(self, name, el):
         self._storage(name, el, "q")
 
@@ -224,6 +272,14 @@ class _Builder:
 
     def _el_R(self, name, el):
         b, s, E, F = self._port(name)
+        if isinstance(E, sp.MatrixBase):
+            R = el.fields["R"]
+            R = R if isinstance(R, sp.MatrixBase) else R * sp.eye(len(E))
+            if self.cg.r_form[name] == "resistance":
+                self.define(E, R * (s * F), name, b)
+            else:
+                self.define(F, s * R.inv() * E, name, b)
+            return
         f = s * F
         if self.cg.r_form[name] == "resistance":
             if el.law == "R":
@@ -263,12 +319,23 @@ class _Builder:
         for b in bonds:
             if b != strong:
                 self.define(common(b), common(strong), name, b)
-        total = sp.Add(*[sign[b] * summed(b) for b in bonds if b != strong])
+        rest = [sign[b] * summed(b) for b in bonds if b != strong]
+        total = sum(rest[1:], rest[0]) if rest else 0 * summed(strong)
         self.define(summed(strong), -sign[strong] * total, name, strong)
 
     def _el_TF(self, name, el):
         a, c = self.g.two_port(name)       # e_a = n e_c, f_c = n f_a
         n = el.fields["ratio"]
+        if isinstance(n, sp.MatrixBase):   # f_c = M f_a, e_a = M^T e_c
+            n = self.hoist(name, n)
+            if not self.cg.receives_effort(a, name):
+                self.define(self.F(c), n * sp.Matrix([self.F(a)]), name, c)
+                self.define(self.E(a), n.T * sp.Matrix([self.E(c)]), name, a)
+            else:                          # a rotation, or a constant invertible matrix
+                inv = n.T if el.orthogonal else n.inv()
+                self.define(self.F(a), inv * self.F(c), name, a)
+                self.define(self.E(c), inv.T * self.E(a), name, c)
+            return
         if self.cg.receives_effort(a, name):
             self.define(self.E(c), self.E(a) / n, name, c)
             self.define(self.F(a), self.F(c) / n, name, a)
@@ -292,46 +359,145 @@ class _Builder:
 
     def _el_EJS(self, name, el):
         """Euler's gyroscopic torque omega x (J omega), omega in the principal body frame."""
-        bonds = self.g.ports[name]
-        w = sp.Matrix([self.g.port_sign(b, name) * self.F(b) for b in bonds])
+        b, s, E, F = self._port(name)
+        w = s * F
         h = sp.Matrix([el.fields["J"][i] * w[i] for i in range(3)])
-        torque = w.cross(h)
-        for i, b in enumerate(bonds):
-            self.define(self.E(b), torque[i], name, b)
+        self.define(E, w.cross(h), name, b)
 
-    def common_flow(self, junction: str) -> sp.Symbol:
+    def hoist(self, name, M: sp.Matrix) -> sp.Matrix:
+        """Give each non-constant entry of a matrix modulus its own assignment, so that
+        whatever is built on the modulus (loops, Jacobians) refers to it by name instead
+        of copying the expression."""
+        def entry(i, j):
+            e = M[i, j]
+            if e.is_Number or e.is_Symbol:
+                return e
+            v = sp.Symbol(f"M_{name}__{i}{j}", real=True)
+            self.define(v, e, name)
+            self.display[v] = f"{name.replace('__', '.')}.M{i}{j}"
+            return v
+        return sp.Matrix(M.rows, M.cols, entry)
+
+    def _el_XTF(self, name, el):
+        """Cross-product TF (rule C2): f_out = f_in x r, e_in = r x e_out."""
+        a, c = self.g.two_port(name)
+        r = el.fields["r"]
+        self.define(self.F(c), self.F(a).cross(r), name, c)
+        self.define(self.E(a), r.cross(self.E(c)), name, a)
+
+    def _el_M0(self, name, el):
+        """A body of negligible mass: its velocity is an unknown U of the algebraic loop
+        closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``)."""
+        b, s, E, F = self._port(name)
+        U = sp.Matrix([symbols.unknown(name, k) for k in range(len(E))])
+        self.define(F, s * U, name, b)
+        self.define(U, U + s * E, name, b)
+        for k, u in enumerate(U):
+            self.display[u] = f"{name.replace('__', '.')}.{AXES[k]}"
+
+    def common_flow(self, junction: str):
         return self.F(self.g.ports[junction][0])
 
     def kinematics(self):
-        """Position of G (R0) and XYZ Cardan angles of every body, integrated from the
-        junction velocities: x' = v, [a b c]' = E(a, b, c)^-1 omega (paper Fig. 11.2)."""
+        """Position of G (R0), XYZ Cardan angles and rotation matrix of every body,
+        integrated from the junction velocities: x' = v, [a b c]' = E(a, b, c)^-1 omega
+        (paper Fig. 11.2). The angles are measured from the body's initial frame F0
+        (R = F0 Rx(a) Ry(b) Rz(c)), so every body starts at zero angles, far from the
+        gimbal lock, whatever its initial orientation. The rotation matrix entries are
+        shared assignments that the MTFs and joints read."""
         for n, body in self.g.bodies.items():
-            v = [self.common_flow(body_junction(n, "v", k)) for k in range(3)]
-            w = [self.common_flow(body_junction(n, "w", k)) for k in range(3)]
+            v = self.common_flow(body_junction(n, "v"))
+            w = self.common_flow(body_junction(n, "w"))
             pos = [symbols.state(n, a) for a in AXES]
             ang = [symbols.state(n, f"a{a}") for a in AXES]
             rates = cardan.angle_rates(*ang, w)
-            init = cardan.angles(body.frame)
             self.guards.append((f"Cardan singularity (gimbal lock, cos {n}.ay -> 0) of body "
                                 f"'{n}'", cardan.gimbal_margin(ang[1])))
+            F0 = sp.Matrix(body.frame).applyfunc(lambda x: sp.Float(float(x)))
+            C = cardan.rotation(*ang)
+            self.define(rotation_matrix(n), C if F0 == sp.eye(3) else F0 * C, n)
             for k in range(3):
                 for x, rate, x0, label in ((pos[k], v[k], body.com[k], AXES[k]),
-                                           (ang[k], rates[k], init[k], f"a{AXES[k]}")):
+                                           (ang[k], rates[k], 0.0, f"a{AXES[k]}")):
                     dx = symbols.dstate(n, label)
                     self.define(dx, rate, n)
                     self.states.append(State(f"{n}.{label}", x, dx, sp.Float(x0), n))
                     self.display[x], self.display[dx] = f"{n}.{label}", f"d({n}.{label})/dt"
 
     # --- references, derivatives --------------------------------------------------------
+    def body_refs(self, n: str, body) -> dict:
+        """body.x ... body.accz, and body.point.x ... body.point.accz (R0)."""
+        out = {}
+        R = rotation_matrix(n)
+        x = sp.Matrix([symbols.state(n, a) for a in AXES])
+        v = self.common_flow(body_junction(n, "v"))
+        w = self.common_flow(body_junction(n, "w"))
+        massive = body.mass > 0
+        if massive:
+            acc = sp.Matrix([symbols.dstate(f"{n}__m", f"p{a}") for a in AXES]) / body.mass
+            wdot = sp.Matrix([symbols.dstate(f"{n}__J", f"p{a}") / body.inertia[k]
+                              for k, a in enumerate(AXES)])
+        for k, a in enumerate(AXES):
+            out[symbols.ref(n, a)] = x[k]
+            out[symbols.ref(n, f"a{a}")] = symbols.state(n, f"a{a}")
+            out[symbols.ref(n, f"v{a}")] = v[k]
+            out[symbols.ref(n, f"w{a}")] = w[k]         # body frame
+            if massive:
+                out[symbols.ref(n, f"acc{a}")] = acc[k]
+        for pt, r in body.points.items():
+            r = sp.Matrix([sp.Float(c) for c in r])
+            target = f"{n}__{pt}"
+            xp, vp = x + R * r, v + R * w.cross(r)
+            if massive:
+                ap = acc + R * (wdot.cross(r) + w.cross(w.cross(r)))
+            for k, a in enumerate(AXES):
+                out[symbols.ref(target, a)] = xp[k]
+                out[symbols.ref(target, f"v{a}")] = vp[k]
+                if massive:
+                    out[symbols.ref(target, f"acc{a}")] = ap[k]
+        return out
+
+    def joint_refs(self, name: str, dirs) -> dict:
+        """Force and moment on body 2 from body 1 at the joint point, in the joint frame
+        (turning with body 1) and in R0: minus the sum over directions of effort * row."""
+        j = self.m.joints[name]
+        F, M = sp.zeros(3, 1), sp.zeros(3, 1)
+        for d in dirs:
+            zero = f"{name}__{d.label}"
+            if zero not in self.g.ports:
+                continue
+            lam = self.E(self.g.ports[zero][0])
+            if j.body2 is not None:
+                F -= lam * d.rows.get("v2", sp.zeros(3, 1))
+                M -= lam * d.rows.get("w2", sp.zeros(3, 1))
+            else:       # reaction of the force on body 1 (the points coincide)
+                F += lam * d.rows.get("v1", sp.zeros(3, 1))
+                M += lam * d.rows.get("w1", sp.zeros(3, 1))
+        frame = sp.Matrix(j.output_frame or j.frame)
+        if j.body1 is not None:
+            b = self.m.bodies[j.body1]
+            frame = rotation_matrix(j.body1) * (sp.Matrix(b.frame).T * frame).applyfunc(
+                lambda x: sp.Float(float(x)))
+        Fj, Mj = frame.T * F, frame.T * M
+        out = {}
+        for k, a in enumerate(AXES):
+            out[symbols.ref(name, f"F{a}")] = Fj[k]
+            out[symbols.ref(name, f"M{a}")] = Mj[k]
+            out[symbols.ref(name, f"F{a}_R0")] = F[k]
+            out[symbols.ref(name, f"M{a}_R0")] = M[k]
+        return out
+
     def ref_map(self) -> dict[sp.Symbol, sp.Expr]:
         out = {}
         bonds = {bd.name: i for i, bd in enumerate(self.g.bonds)}
         for name, el in self.g.elements.items():
             if el.kind in ("0", "1"):
                 first = self.g.ports[name][0]
+                if self.g.bonds[first].dim != 1:
+                    continue
                 common = self.E(first) if el.kind == "0" else self.F(first)
                 out[symbols.ref(name, "e" if el.kind == "0" else "f")] = common
-            elif len(self.g.ports[name]) == 1:
+            elif len(self.g.ports[name]) == 1 and self.g.bonds[self.g.ports[name][0]].dim == 1:
                 b, s, E, F = self._port(name)
                 out[symbols.ref(name, "e")] = E
                 out[symbols.ref(name, "f")] = s * F
@@ -339,15 +505,14 @@ class _Builder:
             out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
         for name, v in self.dependent.items():
             out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
-        for n in self.g.bodies:
-            for k, a in enumerate(AXES):
-                out[symbols.ref(n, a)] = symbols.state(n, a)
-                out[symbols.ref(n, f"a{a}")] = symbols.state(n, f"a{a}")
-                out[symbols.ref(n, f"v{a}")] = self.common_flow(body_junction(n, "v", k))
-                out[symbols.ref(n, f"w{a}")] = self.common_flow(body_junction(n, "w", k))
+        for n, body in self.g.bodies.items():
+            out.update(self.body_refs(n, body))
+        for name, dirs in self.g.joints.items():
+            out.update(self.joint_refs(name, dirs))
         for bname, i in bonds.items():
-            out[symbols.ref(bname, "e")] = self.E(i)
-            out[symbols.ref(bname, "f")] = self.F(i)
+            if self.g.bonds[i].dim == 1:
+                out[symbols.ref(bname, "e")] = self.E(i)
+                out[symbols.ref(bname, "f")] = self.F(i)
         return out
 
     def resolve_refs(self):
@@ -438,6 +603,25 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
     return LinearBlock(index, tuple(comp), entries, tuple(rhs))
 
 
+def _reduced_block(b: _Builder, tears: list, subs: dict, index: int, refuse) -> LinearBlock:
+    """A linear loop solved numerically in its tearing variables only: the other loop
+    variables are substituted into the tearing residuals (which stay small: one pass along
+    the loop) and computed afterwards in causal order from the solved tears."""
+    res = [t - b.eqs[t].xreplace(subs) for t in tears]
+    zero = {t: 0 for t in tears}
+    entries = []
+    for i, r in enumerate(res):
+        for j, t in enumerate(tears):
+            a = r.diff(t)
+            if a.has(*tears):
+                raise refuse("nonlinear algebraic loop",
+                             "break the loop with a small parasitic C or I")
+            if a != 0:
+                entries.append((i, j, a))
+    return LinearBlock(index, tuple(tears), tuple(entries),
+                       tuple(-r.xreplace(zero) for r in res))
+
+
 def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
@@ -448,7 +632,6 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
     subs: dict = {}
     for v in order:
         subs[v] = eqs[v].xreplace(subs)
-    residuals = [sp.expand(t - eqs[t].xreplace(subs)) for t in tears]
     elements = sorted({b.origin[v][0] for v in comp if b.origin[v][0]})
     bonds = sorted({b.origin[v][1] for v in comp if b.origin[v][1]})
     kind = "derivative" if any(v.name.startswith("DX_") for v in comp) else "algebraic"
@@ -462,9 +645,15 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                              loc=where.loc if where else None,
                              key=f"elements.{elements[0]}" if elements else None, hint=hint)
 
+    if any(v.name.startswith("W_") for v in comp):
+        loop.kind = "negligible-mass"
+        loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
+        block = _reduced_block(b, tears, subs, block_index, refuse)
+        return [block] + [(v, eqs[v]) for v in order], loop
     if len(tears) > max_symbolic:
         loop.tearing = ["numeric LU of all " + str(len(comp)) + " loop variables"]
         return [_numeric_block(b, comp, block_index, refuse)], loop
+    residuals = [sp.expand(t - eqs[t].xreplace(subs)) for t in tears]
     try:
         A, rhs = sp.linear_eq_to_matrix(residuals, tears)
     except NonlinearError:

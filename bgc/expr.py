@@ -75,9 +75,16 @@ def parse(text, *, loc: Loc, key: str, names: dict[str, sp.Expr],
             valid = sorted(set(names) | set(CONSTANTS))
             fail(f"unknown name '{node.id}'", hint="valid names here: " + ", ".join(valid))
         if isinstance(node, ast.Attribute):
-            if not isinstance(node.value, ast.Name) or resolve_ref is None:
+            target = node.value       # name.attr, or body.point.attr
+            if (isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name)):
+                target_name = f"{target.value.id}.{target.attr}"
+            elif isinstance(target, ast.Name):
+                target_name = target.id
+            else:
+                target_name = None
+            if target_name is None or resolve_ref is None:
                 fail("references 'name.attr' are not allowed here")
-            return resolve_ref(node.value.id, node.attr)
+            return resolve_ref(target_name, node.attr)
         if isinstance(node, ast.BinOp):
             if isinstance(node.op, ast.BitXor):
                 fail("'^' is not a power", hint="write x**3 for a power")

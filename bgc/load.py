@@ -22,13 +22,17 @@ from . import expr as bexpr
 from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
-from .model import (KINDS, Body, Bond, Element, Model, Output, Parameter, Settings,
-                    Signal, Table)
+from .joints import JOINT_KINDS, NEEDS_AXIS2
+from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Functional, Joint, Model,
+                    Output, Parameter, Parasitic, Settings, Signal, Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "elements",
-            "bonds", "outputs", "simulation")
+TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
+            "parasitic", "elements", "bonds", "outputs", "simulation")
 BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
+JOINT_KEYS = ("type", "between", "at", "axis", "axis2", "frame", "pitch", "spring", "actuator",
+              "directions", "parasitic", "description")
+PARASITIC_KEYS = ("stiffness", "damping", "rot_stiffness", "rot_damping")
 
 
 # ---------------------------------------------------------------- located YAML values
@@ -395,10 +399,26 @@ class _Loader:
                      hint)
 
     def resolve_ref(self, target, attr, kinds, bond_names, key, loc):
+        if "." in target:                      # body.point.attr
+            body, pt = target.split(".", 1)
+            if body not in self.bodies or pt not in self.bodies[body].points:
+                self.err(f"'{target}' names no point of a body", loc, key,
+                         "write body.point.attr with a point from the body's 'points:'")
+            valid = Body.POINT_ATTRS if self.bodies[body].mass > 0 else Body.POINT_ATTRS[:6]
+            if attr not in valid:
+                self.err(f"point '{target}' has no '.{attr}'", loc, key,
+                         "valid: " + ", ".join(f"{target}.{a}" for a in valid))
+            return symbols.ref(f"{body}__{pt}", attr)
+        if target in getattr(self, "joints", {}):
+            if attr not in Joint.ATTRS:
+                self.err(f"joint '{target}' has no '.{attr}'", loc, key,
+                         "valid: " + ", ".join(f"{target}.{a}" for a in Joint.ATTRS))
+            return symbols.ref(target, attr)
         if target in self.bodies:
-            if attr not in Body.ATTRS:
+            valid = Body.ATTRS if self.bodies[target].mass > 0 else Body.ATTRS[:12]
+            if attr not in valid:
                 self.err(f"body '{target}' has no '.{attr}'", loc, key,
-                         "valid: " + ", ".join(f"{target}.{a}" for a in Body.ATTRS))
+                         "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return symbols.ref(target, attr)
         if target in bond_names:
             if attr not in ("e", "f"):
@@ -457,16 +477,20 @@ class _Loader:
             self.declare(name, f"body '{name}'", sec.key_locs[name], key)
             v = self.mapping(v, sec.val_locs[name], key, "a mapping with mass, com, inertia")
             self.check_keys(v, BODY_KEYS, key)
-            for k in ("mass", "com", "inertia"):
+            for k in ("mass", "com"):
                 if k not in v:
                     self.err(f"missing '{k}'", v.loc, key, "a body needs mass, com and inertia")
 
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
-            mass = self.number(v["mass"], *at("mass"), positive=True)
+            mass = self.number(v["mass"], *at("mass"), nonneg=True)
             com = np.array(self.vector(v["com"], *at("com")))
-            inertia = v["inertia"]
-            loc, kk = at("inertia")
+            if "inertia" not in v and mass > 0:
+                self.err("missing 'inertia'", v.loc, key,
+                         "a body needs mass, com and inertia (mass: 0 for a body of "
+                         "negligible mass)")
+            inertia = v.get("inertia", [0, 0, 0])     # negligible mass: no inertia either
+            loc, kk = at("inertia") if "inertia" in v else at("mass")
             frame = np.eye(3)
             if "frame" in v:
                 fr = self.mapping(v["frame"], *at("frame"), "a mapping {x: [..], y: [..], z: [..]}")
@@ -481,7 +505,9 @@ class _Loader:
                         or np.linalg.det(frame) < 0):
                     self.err("the frame axes must be orthogonal and right-handed (x cross y = z)",
                              fr.loc, f"{key}.frame", "give unit axes such as x: [1, 0, 0] ...")
-            if isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
+            if "inertia" not in v:
+                moments = np.zeros(3)
+            elif isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
                 if len(inertia) != 3:
                     self.err("an inertia matrix has 3 rows", loc, kk)
                 M = np.array([self.vector(r, inertia.item_locs[i], f"{kk}[{i}]")
@@ -494,11 +520,15 @@ class _Loader:
                 frame = axes
             else:
                 moments = np.array(self.vector(inertia, loc, kk))
-            if moments.min() <= 0:
+            if mass == 0:
+                if np.abs(moments).max() > 0:
+                    self.err("a body of negligible mass (mass: 0) has no inertia either",
+                             loc, kk, "leave 'inertia' out or give the body its mass")
+            elif moments.min() <= 0:
                 self.err(f"the inertia tensor must be positive definite (principal moments "
                          f"{', '.join(f'{m:g}' for m in moments)})", loc, kk)
             a, b, c = sorted(moments)
-            if a + b < c * (1 - 1e-9):
+            if mass > 0 and a + b < c * (1 - 1e-9):
                 self.err(f"principal moments {a:g}, {b:g}, {c:g} break the triangle "
                          "inequality (no rigid mass distribution has them)", loc, kk)
             points = {}
@@ -518,6 +548,166 @@ class _Loader:
                              tuple(float(x) for x in vel), tuple(float(x) for x in omg))
         self.bodies = out
         return out
+
+    def parasitic(self, v, loc, key, base: Parasitic) -> Parasitic:
+        m = self.mapping(v, loc, key, "a mapping {stiffness, damping, rot_stiffness, "
+                         "rot_damping}")
+        self.check_keys(m, PARASITIC_KEYS, key)
+        kw = {k: self.number(m[k], m.val_locs[k], f"{key}.{k}", nonneg=True)
+              for k in PARASITIC_KEYS if k in m}
+        return Parasitic(**{**base.__dict__, **kw})
+
+    def unit_vector(self, v, loc, key):
+        import numpy as np
+        u = np.array(self.vector(v, loc, key))
+        n = np.linalg.norm(u)
+        if n < 1e-12:
+            self.err("an axis of zero length", loc, key, "give a direction such as [0, 0, 1]")
+        return u / n
+
+    def joint_point(self, v, loc, key):
+        """``at``: [x, y, z] in R0, a point name of one body, or body.point."""
+        import numpy as np
+        if isinstance(v, YList):
+            return np.array(self.vector(v, loc, key))
+        if not isinstance(v, str):
+            self.err(f"expected [x, y, z] or a point name, got {_kind_of(v)}", loc, key)
+        body, _, pt = v.rpartition(".")
+        owners = [b for b in self.bodies.values() if pt in b.points and body in ("", b.name)]
+        if len(owners) != 1:
+            known = sorted(f"{b.name}.{p}" for b in self.bodies.values() for p in b.points)
+            why = "names no point" if not owners else "is a point of several bodies"
+            self.err(f"'{v}' {why}", loc, key, ("write body.point; " if owners else "")
+                     + "known points: " + (", ".join(known) or "none (add 'points:' to a body)"))
+        b = owners[0]
+        return np.array(b.com) + np.array(b.frame) @ np.array(b.points[pt])
+
+    def functional(self, v, loc, key, names) -> Functional:
+        m = self.mapping(v, loc, key, "a mapping {k, c, preload, actuator}")
+        self.check_keys(m, ("k", "c", "preload", "actuator"), key)
+        kw = {}
+        for k in ("k", "c"):
+            if k in m:
+                kw[k] = self.number(m[k], m.val_locs[k], f"{key}.{k}", nonneg=True)
+        if "preload" in m:
+            kw["preload"] = self.number(m["preload"], m.val_locs["preload"], f"{key}.preload")
+        if "actuator" in m:
+            kw["actuator"] = bexpr.parse(m["actuator"], loc=m.val_locs["actuator"],
+                                         key=f"{key}.actuator", names=names)
+        return Functional(loc=loc, **kw)
+
+    def joints_section(self, sec: YMap, params, signals, base: Parasitic) -> dict[str, Joint]:
+        import numpy as np
+        names = self.expr_names(params, signals)
+        out = {}
+        for name, v in sec.items():
+            key = f"joints.{name}"
+            self.declare(name, f"joint '{name}'", sec.key_locs[name], key)
+            v = self.mapping(v, sec.val_locs[name], key, "a mapping with type, between, at")
+            self.check_keys(v, JOINT_KEYS, key)
+            for k in ("type", "between", "at"):
+                if k not in v:
+                    self.err(f"missing '{k}'", v.loc, key,
+                             "a joint needs type, between: [body1, body2] and at")
+
+            def at(k, v=v, key=key):
+                return v.val_locs[k], f"{key}.{k}"
+            kind = v["type"]
+            if kind not in JOINT_KINDS:
+                self.err(f"unknown joint type {kind!r}", *at("type"),
+                         "valid types: " + ", ".join(JOINT_KINDS))
+            spec = JOINT_KINDS[kind]
+            pair = v["between"]
+            if not isinstance(pair, YList) or len(pair) != 2:
+                self.err("'between' is a list of two bodies", *at("between"),
+                         f"write [body1, body2]; '{FIXED_FRAME}' is the fixed frame")
+            bodies = []
+            for i, b in enumerate(pair):
+                if b != FIXED_FRAME and b not in self.bodies:
+                    self.err(f"unknown body {b!r}", pair.item_locs[i], f"{key}.between[{i}]",
+                             "declared bodies: " + ", ".join(list(self.bodies) + [FIXED_FRAME]))
+                bodies.append(None if b == FIXED_FRAME else b)
+            if bodies[0] == bodies[1]:
+                self.err(f"a joint joins two different bodies, got {pair[0]!r} twice",
+                         *at("between"))
+            point = self.joint_point(v["at"], *at("at"))
+            x = self.unit_vector(v["axis"], *at("axis")) if "axis" in v else np.eye(3)[0]
+            if "axis2" in v:
+                y = self.unit_vector(v["axis2"], *at("axis2"))
+                if abs(float(x @ y)) > 1e-6:
+                    self.err("axis2 must be perpendicular to axis", *at("axis2"))
+            elif kind in NEEDS_AXIS2:
+                self.err(f"a {kind} joint needs 'axis2'", v.loc, key,
+                         "the second axis (body 2's), perpendicular to 'axis'")
+            else:
+                e = np.eye(3)[int(np.argmin(np.abs(x)))]
+                y = e - (e @ x) * x
+                y /= np.linalg.norm(y)
+            frame = np.column_stack([x, y, np.cross(x, y)])
+            out_frame = None
+            if "frame" in v:
+                fr = self.mapping(v["frame"], *at("frame"), "a mapping {x: [..], y: [..], z: [..]}")
+                self.check_keys(fr, ("x", "y", "z"), f"{key}.frame")
+                cols = [self.unit_vector(fr[a], fr.val_locs[a], f"{key}.frame.{a}")
+                        for a in "xyz" if a in fr]
+                if len(cols) != 3:
+                    self.err("a frame needs its three axes x, y, z", fr.loc, f"{key}.frame")
+                F = np.column_stack(cols)
+                if np.abs(F.T @ F - np.eye(3)).max() > 1e-6 or np.linalg.det(F) < 0:
+                    self.err("the frame axes must be orthogonal and right-handed", fr.loc,
+                             f"{key}.frame")
+                out_frame = tuple(tuple(float(c) for c in row) for row in F)
+            pitch = 0.0
+            if kind == "screw":
+                if "pitch" not in v:
+                    self.err("a screw joint needs 'pitch' (translation per turn, m)", v.loc, key)
+                pitch = self.number(v["pitch"], *at("pitch"))
+            elif "pitch" in v:
+                self.err("'pitch' belongs to screw joints", *at("pitch"))
+            functional = {}
+            if "spring" in v or "actuator" in v:
+                if not spec.free:
+                    self.err(f"a {kind} joint has no free direction for a spring or actuator",
+                             *at("spring" if "spring" in v else "actuator"))
+                fun = (self.functional(v["spring"], *at("spring"), names) if "spring" in v
+                       else Functional(loc=v.loc))
+                if "actuator" in v:
+                    fun = Functional(fun.k, fun.c, fun.preload,
+                                     bexpr.parse(v["actuator"], loc=at("actuator")[0],
+                                                 key=f"{key}.actuator", names=names), fun.loc)
+                functional[spec.free[0]] = fun
+            if "directions" in v:
+                dm = self.mapping(v["directions"], *at("directions"))
+                for lab, dv in dm.items():
+                    if lab not in spec.free:
+                        self.err(f"'{lab}' is not a free direction of a {kind} joint",
+                                 dm.key_locs[lab], f"{key}.directions",
+                                 "free directions: " + (", ".join(spec.free) or "none"))
+                    if lab in functional:
+                        self.err(f"direction '{lab}' already has the joint's spring/actuator",
+                                 dm.key_locs[lab], f"{key}.directions")
+                    functional[lab] = self.functional(dv, dm.val_locs[lab],
+                                                      f"{key}.directions.{lab}", names)
+            para = (self.parasitic(v["parasitic"], *at("parasitic"), base)
+                    if "parasitic" in v else base)
+            j = Joint(name, v.loc, kind, bodies[0], bodies[1],
+                      tuple(float(c) for c in point),
+                      tuple(tuple(float(c) for c in row) for row in frame), para,
+                      functional, pitch, out_frame)
+            self.joint_params(j, params)
+            out[name] = j
+        self.joints = out
+        return out
+
+    def joint_params(self, j: Joint, params: dict):
+        """A joint's stiffness, damping and preload values become parameters, so they can
+        be changed (and swept) without recompiling."""
+        vals = dict(j.parasitic.__dict__)
+        for lab, f in j.functional.items():
+            vals.update({f"{lab}_k": f.k, f"{lab}_c": f.c, f"{lab}_preload": f.preload})
+        for role, val in vals.items():
+            pname = f"{j.name}__{role}"
+            params[pname] = Parameter(pname, float(val), j.loc)
 
     def settings(self, sec: YMap) -> Settings:
         allowed = ("t_end", "rtol", "atol", "solver", "points")
@@ -581,6 +771,9 @@ def loads(text: str, file: str = "<string>") -> Model:
     sigs = ld.signals(section("signals"), params, tables)
     gravity = ld.gravity(doc)
     bodies = ld.bodies_section(section("bodies"))
+    base = (ld.parasitic(doc["parasitic"], doc.val_locs["parasitic"], "parasitic", Parasitic())
+            if "parasitic" in doc else Parasitic())
+    joints = ld.joints_section(section("joints"), params, sigs, base)
     headers = ld.element_headers(section("elements"))
     bonds = ld.bonds(section("bonds", YList), headers)
     elements = ld.element_fields(headers, params, sigs, bonds)
@@ -591,7 +784,7 @@ def loads(text: str, file: str = "<string>") -> Model:
     return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bonds, outputs=outputs,
                  settings=settings, description=doc.get("description"), bodies=bodies,
-                 gravity=gravity)
+                 gravity=gravity, joints=joints)
 
 
 def load(path: str | Path) -> Model:

@@ -40,18 +40,22 @@ KINDS: dict[str, KindSpec] = {
     "MTF": KindSpec(2, ("ratio",), modulated=True, doc="modulated transformer"),
     "GY": KindSpec(2, ("r",), doc="gyrator: e1 = r*f2, e2 = r*f1"),
     "MGY": KindSpec(2, ("r",), modulated=True, doc="modulated gyrator"),
-    "EJS": KindSpec(3, ("J",), doc="Eulerian junction structure of a body: e = w x (J w)",
-                    user=False),
+    "XTF": KindSpec(2, ("r",), doc="cross-product transformer: f2 = f1 x r, e1 = r x e2 "
+                    "(rule C2: flow in, flow out)"),
+    "EJS": KindSpec(1, ("J",), doc="Eulerian junction structure of a body: e = w x (J w) "
+                    "(rule C2: flow in)", user=False),
+    "M0": KindSpec(1, (), doc="port of a body of negligible mass: its flow is an algebraic "
+                   "unknown, its effort is zero (the forces on it balance)", user=False),
     "0": KindSpec(None, (), doc="common-effort junction"),
     "1": KindSpec(None, (), doc="common-flow junction"),
 }
 
 SOURCES = ("Se", "Sf", "MSe", "MSf")
 STORAGE = ("C", "I")
-TWO_PORTS = ("TF", "MTF", "GY", "MGY")
+TWO_PORTS = ("TF", "MTF", "GY", "MGY", "XTF")
 JUNCTIONS = ("0", "1")
 # Standard power direction of a port: into C, I, R, EJS; out of a source.
-POWER_IN = ("C", "I", "R", "EJS")
+POWER_IN = ("C", "I", "R", "EJS", "M0")
 
 
 @dataclass(frozen=True)
@@ -86,8 +90,9 @@ class Element:
     loc: Loc
     fields: dict[str, sp.Expr] = field(default_factory=dict)
     field_locs: dict[str, Loc] = field(default_factory=dict)
-    initial: sp.Expr | None = None      # in terms of parameters
+    initial: sp.Expr | None = None      # in terms of parameters (a Matrix on a multibond)
     description: str | None = None
+    orthogonal: bool = False            # an MTF whose matrix modulus is a rotation
 
     @property
     def law(self) -> str | None:
@@ -139,7 +144,55 @@ class Body:
     omega: tuple[float, float, float] = (0.0, 0.0, 0.0)      # angular velocity, in R0
 
     # attributes a model expression may read: body.<attr>
-    ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "ax", "ay", "az")
+    ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "ax", "ay", "az",
+             "accx", "accy", "accz")
+    # attributes of a named point: body.point.<attr> (R0)
+    POINT_ATTRS = ("x", "y", "z", "vx", "vy", "vz", "accx", "accy", "accz")
+
+
+@dataclass(frozen=True)
+class Functional:
+    """Functional elements on a joint's free direction: a spring with preload, a damper
+    and an actuator. On the second body: preload - k*q - c*dq/dt + actuator."""
+    k: float = 0.0
+    c: float = 0.0
+    preload: float = 0.0
+    actuator: sp.Expr | None = None     # a function of t, signals and parameters
+    loc: Loc | None = None
+
+
+@dataclass(frozen=True)
+class Parasitic:
+    """The constraint element L of the parasitic method: stiff spring || damper, per
+    blocked translational and rotational direction."""
+    stiffness: float = 1.0e7        # N/m
+    damping: float = 1.0e3          # N s/m
+    rot_stiffness: float = 1.0e5    # N m/rad
+    rot_damping: float = 1.0e1      # N m s/rad
+
+
+FIXED_FRAME = "fixed_frame"
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint between two bodies (``None`` = the fixed frame) at a point, with its joint
+    frame (columns x, y, z in R0 at the initial pose, fixed on body1; x is the axis)."""
+    name: str
+    loc: Loc
+    kind: str
+    body1: str | None
+    body2: str | None
+    at: tuple[float, float, float]
+    frame: tuple[tuple[float, float, float], ...]
+    parasitic: Parasitic
+    functional: dict = field(default_factory=dict)    # direction label -> Functional
+    pitch: float = 0.0                                # screw: translation per turn
+    output_frame: tuple | None = None   # frame of the force outputs (default: joint frame)
+
+    # attributes a model expression may read: joint.<attr>
+    ATTRS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz",
+             "Fx_R0", "Fy_R0", "Fz_R0", "Mx_R0", "My_R0", "Mz_R0")
 
 
 @dataclass
@@ -157,6 +210,7 @@ class Model:
     description: str | None = None
     bodies: dict[str, Body] = field(default_factory=dict)
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joints: dict[str, Joint] = field(default_factory=dict)
 
     def param_values(self) -> dict[sp.Symbol, float]:
         from . import symbols

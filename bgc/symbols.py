@@ -31,12 +31,26 @@ def ref(target: str, attr: str) -> sp.Symbol:
     return _sym(f"REF_{target}__{attr}")
 
 
-def effort(bond: str) -> sp.Symbol:
-    return _sym(f"E_{bond}")
+AXES = "xyz"
 
 
-def flow(bond: str) -> sp.Symbol:
-    return _sym(f"F_{bond}")
+def effort(bond: str, comp: int | None = None) -> sp.Symbol:
+    """Effort of a bond; ``comp`` names one component of a multibond (0, 1, 2 -> x, y, z)."""
+    return _sym(f"E_{bond}" if comp is None else f"E_{bond}__{AXES[comp]}")
+
+
+def flow(bond: str, comp: int | None = None) -> sp.Symbol:
+    return _sym(f"F_{bond}" if comp is None else f"F_{bond}__{AXES[comp]}")
+
+
+def rotation(body: str, i: int, j: int) -> sp.Symbol:
+    """Entry (i, j) of a body's rotation matrix (body frame -> R0), from its Cardan angles."""
+    return _sym(f"ROT_{body}__{i}{j}")
+
+
+def unknown(element: str, comp: int) -> sp.Symbol:
+    """An algebraic unknown (the twist of a body of negligible mass)."""
+    return _sym(f"W_{element}__{AXES[comp]}")
 
 
 def state(element: str, kind: str) -> sp.Symbol:
@@ -61,5 +75,5 @@ def is_ref(s: sp.Symbol) -> bool:
 
 
 def split_ref(s: sp.Symbol) -> tuple[str, str]:
-    target, attr = s.name[4:].split("__")
+    target, attr = s.name[4:].rsplit("__", 1)
     return target, attr

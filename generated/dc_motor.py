@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "71191b212f3b2b7b380b5b1fcb53f7ea"
+MODEL_HASH = "7a9b5c406f927372204fdca71022c9d4"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "28f0db5c196c261d56f35c6a7ef560ad"
+MODEL_HASH = "f19b845f0e2d5ea3236be58c9c32b154"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

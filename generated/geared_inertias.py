@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "d789d8e08a426626c9deb7dd689829bc"
+MODEL_HASH = "929d99903e7735481006e282edcae35e"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

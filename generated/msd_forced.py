@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "a6ce1d0748eae7e4265f8eeaee319a3f"
+MODEL_HASH = "ce2b44b94319d7a4bda44be1dcae2694"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

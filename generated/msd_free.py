@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "28eec51ad9e7d17301393e2290c1f39e"
+MODEL_HASH = "3bfe7011f021c916a7ff86f5ea0b902f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

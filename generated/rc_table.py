@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "cfa54a244e913bdd6595b56410499855"
+MODEL_HASH = "38fd9198712121bb37da448098138952"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "02d4156e3e4dc5caf33dc2bfcd4842d5"
+MODEL_HASH = "b7c12b8b91b9c1d65b5373326102a894"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "ce9e1b58592704fb40b3024adc413286"
+MODEL_HASH = "163b0aa79ef619b24156a8d93354945f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

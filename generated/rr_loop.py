@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "696fe8a0b0f4ed23ac9ab031ec994e71"
+MODEL_HASH = "841ef8b87337f513d1a66066cd342bf1"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

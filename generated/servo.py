@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "963da1ce729c9438ed0fda06ff083b20"
+MODEL_HASH = "06a87892055723020b5186862a7feae8"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -258,7 +258,8 @@ class _Builder:
             self.define(F, s * value, name, b)
             self.define(dx, E, name, b)
         label = name.replace("__", ".")
-        initial = el.initial if isinstance(el.initial, sp.MatrixBase) else sp.zeros(d, 1)
+        initial = (el.initial if isinstance(el.initial, sp.MatrixBase)
+                   else sp.Matrix([el.initial or 0] * d))
         for k in range(d):
             lab = f"{label}.{qname}{AXES[k]}"
             self.states.append(State(lab, x[k], dx[k], initial[k], name))
@@ -462,6 +463,10 @@ class _Builder:
         (turning with body 1) and in R0: minus the sum over directions of effort * row."""
         j = self.m.joints[name]
         F, M = sp.zeros(3, 1), sp.zeros(3, 1)
+        gap = [d.g for d in dirs if d.blocked and d.g is not None and not d.rotational]
+        tilt = [d.g for d in dirs if d.blocked and d.g is not None and d.rotational]
+        out = {symbols.ref(name, "gap"): sp.sqrt(sum(g ** 2 for g in gap)),
+               symbols.ref(name, "tilt"): sp.sqrt(sum(g ** 2 for g in tilt))}
         for d in dirs:
             zero = f"{name}__{d.label}"
             if zero not in self.g.ports:
@@ -479,7 +484,6 @@ class _Builder:
             frame = rotation_matrix(j.body1) * (sp.Matrix(b.frame).T * frame).applyfunc(
                 lambda x: sp.Float(float(x)))
         Fj, Mj = frame.T * F, frame.T * M
-        out = {}
         for k, a in enumerate(AXES):
             out[symbols.ref(name, f"F{a}")] = Fj[k]
             out[symbols.ref(name, f"M{a}")] = Mj[k]
@@ -493,14 +497,12 @@ class _Builder:
         for name, el in self.g.elements.items():
             if el.kind in ("0", "1"):
                 first = self.g.ports[name][0]
-                if self.g.bonds[first].dim != 1:
-                    continue
-                common = self.E(first) if el.kind == "0" else self.F(first)
-                out[symbols.ref(name, "e" if el.kind == "0" else "f")] = common
-            elif len(self.g.ports[name]) == 1 and self.g.bonds[self.g.ports[name][0]].dim == 1:
+                tag = "e" if el.kind == "0" else "f"
+                out.update(self._refs(name, tag, self.E(first) if tag == "e" else self.F(first)))
+            elif len(self.g.ports[name]) == 1:
                 b, s, E, F = self._port(name)
-                out[symbols.ref(name, "e")] = E
-                out[symbols.ref(name, "f")] = s * F
+                out.update(self._refs(name, "e", E))
+                out.update(self._refs(name, "f", s * F))
         for st in self.states:
             out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
         for name, v in self.dependent.items():
@@ -510,10 +512,16 @@ class _Builder:
         for name, dirs in self.g.joints.items():
             out.update(self.joint_refs(name, dirs))
         for bname, i in bonds.items():
-            if self.g.bonds[i].dim == 1:
-                out[symbols.ref(bname, "e")] = self.E(i)
-                out[symbols.ref(bname, "f")] = self.F(i)
+            out.update(self._refs(bname, "e", self.E(i)))
+            out.update(self._refs(bname, "f", self.F(i)))
         return out
+
+    @staticmethod
+    def _refs(target: str, tag: str, value) -> dict:
+        """target.e -> value; on a multibond target.ex, .ey, .ez -> its components."""
+        if isinstance(value, sp.MatrixBase):
+            return {symbols.ref(target, f"{tag}{AXES[k]}"): v for k, v in enumerate(value)}
+        return {symbols.ref(target, tag): value}
 
     def resolve_refs(self):
         self.refs = self.ref_map()

@@ -332,6 +332,11 @@ def _check_shape(graph: BondGraph, name: str, el: Element, dims: list[int]):
     if el.kind in ("0", "1", "M0"):
         return
     d = dims[0]
+    if d > 1 and el.kind in ("C", "I", "R") and el.law not in ("C", "k", "I", "R"):
+        raise ModelError(f"{el.kind} '{name}' is on a multibond of dimension {d}: its law must "
+                         f"be a matrix (or a scalar for every component), not '{el.law}'",
+                         loc=el.field_locs.get(el.law, el.loc), key=f"{key}.{el.law}",
+                         hint="write e.g. k: [[k1, 0, 0], [0, k2, 0], [0, 0, k3]]")
     for field, v in el.fields.items():
         if not isinstance(v, sp.MatrixBase):
             continue

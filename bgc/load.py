@@ -292,9 +292,9 @@ class _Loader:
                     self.declare(name, f"bond '{name}'", v.val_locs["name"], f"{key}.name")
                 if "dim" in v:
                     dim = v["dim"]
-                    if dim != 1:
-                        self.err(f"bond dimension {dim!r} is not supported here", v.val_locs["dim"],
-                                 f"{key}.dim", "scalar bond graphs use dim: 1")
+                    if dim not in (1, 3) or isinstance(dim, bool):
+                        self.err(f"bond dimension {dim!r} is not supported", v.val_locs["dim"],
+                                 f"{key}.dim", "dim: 1 (scalar bond) or dim: 3 (multibond)")
             else:
                 self.err(f"expected [from, to] or {{from:, to:}}, got {_kind_of(v)}", loc, key)
             if "name" not in (v if isinstance(v, YMap) else {}):
@@ -318,6 +318,8 @@ class _Loader:
 
     def element_fields(self, headers, params, signals, bonds) -> dict[str, Element]:
         kinds = {n: k for n, (k, _) in headers.items()}
+        self.multibond = {b.name for b in bonds if b.dim > 1} | {
+            end for b in bonds if b.dim > 1 for end in (b.src, b.dst)}
         bond_names = {b.name for b in bonds}
         base = self.expr_names(params, signals)
         pvals = {symbols.param(p.name): p.value for p in params.values()}
@@ -350,6 +352,12 @@ class _Loader:
                                  if n != ("f" if k == "flow" else "e")}
                 if kind in ("TF", "GY"):    # constant ratio: parameters only
                     names = {n: s for n, s in names.items() if n in params}
+                if isinstance(v[k], YList):     # a vector or matrix (multibond elements)
+                    el.fields[k] = self.matrix(v[k], kloc, kk, names,
+                                               resolver(kk, kloc) if spec.modulated else None)
+                    el.field_locs[k] = kloc
+                    self.check_matrix(el, k, el.fields[k], pvals, kloc, kk)
+                    continue
                 e = bexpr.parse(v[k], loc=kloc, key=kk, names=names,
                                 resolve_ref=resolver(kk, kloc) if spec.modulated else None)
                 if law_is_local:
@@ -367,13 +375,49 @@ class _Loader:
                 k = spec.initial
                 if k in v:
                     kloc = v.val_locs[k]
-                    e = bexpr.parse(v[k], loc=kloc, key=f"{key}.{k}", names={
-                        n: symbols.param(n) for n in params})
-                    el.initial = e
+                    pnames = {n: symbols.param(n) for n in params}
+                    if isinstance(v[k], YList):
+                        el.initial = self.matrix(v[k], kloc, f"{key}.{k}", pnames, None)
+                    else:
+                        el.initial = bexpr.parse(v[k], loc=kloc, key=f"{key}.{k}",
+                                                 names=pnames)
                 else:
                     el.initial = sp.S.Zero
             out[name] = el
         return out
+
+    def matrix(self, v: YList, loc, key, names, resolve) -> sp.Matrix:
+        """[a, b, c] -> a column vector; [[..], [..], [..]] -> a matrix (rows)."""
+        def parse(x, xloc, xkey):
+            return bexpr.parse(x, loc=xloc, key=xkey, names=names, resolve_ref=resolve)
+        if v and all(isinstance(r, YList) for r in v):
+            if len({len(r) for r in v}) != 1:
+                self.err("the rows of a matrix differ in length", loc, key)
+            return sp.Matrix([[parse(x, r.item_locs[j], f"{key}[{i}][{j}]")
+                               for j, x in enumerate(r)] for i, r in enumerate(v)])
+        if not v or any(isinstance(x, (YList, YMap)) for x in v):
+            self.err("expected a vector [a, b, c] or a matrix [[..], [..], [..]]", loc, key)
+        return sp.Matrix([parse(x, v.item_locs[i], f"{key}[{i}]") for i, x in enumerate(v)])
+
+    def check_matrix(self, el, key, M, pvals, loc, kk):
+        """Matrix laws of multiport storage and resistors: symmetric, and positive
+        definite (C, I) or semi-definite (R) where the entries are constant."""
+        import numpy as np
+        if el.kind not in ("C", "I", "R") or key not in ("C", "k", "I", "R"):
+            return
+        if M.shape[0] != M.shape[1]:
+            self.err(f"'{key}' of {el.kind} '{el.name}' must be a square matrix", loc, kk)
+        if not all(e.free_symbols <= set(pvals) for e in M):
+            return
+        A = np.array(M.xreplace(pvals), dtype=float)
+        if np.abs(A - A.T).max() > 1e-9 * max(np.abs(A).max(), 1e-300):
+            self.err(f"'{key}' of {el.kind} '{el.name}' is not symmetric", loc, kk,
+                     "a multiport C, I or R law is a symmetric matrix")
+        low = np.linalg.eigvalsh(A).min()
+        if low < 0 or (low == 0 and el.kind != "R" and key != "k"):
+            self.err(f"'{key}' of {el.kind} '{el.name}' is not positive definite "
+                     f"(smallest eigenvalue {low:g})", loc, kk,
+                     "a stored energy must be positive in every direction")
 
     def check_physical(self, el, key, e, pvals, params, loc, kk):
         """Reject values that cannot be physical where they are constant."""
@@ -420,9 +464,12 @@ class _Loader:
                 self.err(f"body '{target}' has no '.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return symbols.ref(target, attr)
+        vector = target in getattr(self, "multibond", ())
         if target in bond_names:
-            if attr not in ("e", "f"):
-                self.err(f"a bond has .e and .f, not .{attr}", loc, key)
+            valid = ("ex", "ey", "ez", "fx", "fy", "fz") if vector else ("e", "f")
+            if attr not in valid:
+                self.err(f"bond '{target}' has {', '.join('.' + a for a in valid)}, not "
+                         f".{attr}", loc, key)
             return symbols.ref(target, attr)
         if target not in kinds:
             self.err(f"'{target}.{attr}' names no element or bond", loc, key,
@@ -430,6 +477,8 @@ class _Loader:
         kind = kinds[target]
         valid = {"C": ("e", "f", "q"), "I": ("e", "f", "p"), "0": ("e",), "1": ("f",)}.get(
             kind, ("e", "f") if KINDS[kind].ports == 1 else ())
+        if vector:          # components of a multibond element: e -> ex, ey, ez
+            valid = tuple(a + x for a in valid for x in "xyz")
         if attr not in valid:
             if kind in ("0", "1"):
                 self.err(f"a {kind}-junction shares one {'effort' if kind == '0' else 'flow'}"

@@ -191,8 +191,10 @@ class Joint:
     output_frame: tuple | None = None   # frame of the force outputs (default: joint frame)
 
     # attributes a model expression may read: joint.<attr>
+    # F/M: force and moment on body 2 from body 1 (output frame, or _R0); gap/tilt: size
+    # of the blocked translational/rotational deflection (the parasitic modelling error)
     ATTRS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz",
-             "Fx_R0", "Fy_R0", "Fz_R0", "Mx_R0", "My_R0", "Mz_R0")
+             "Fx_R0", "Fy_R0", "Fz_R0", "Mx_R0", "My_R0", "Mz_R0", "gap", "tilt")
 
 
 @dataclass

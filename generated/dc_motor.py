@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "7a9b5c406f927372204fdca71022c9d4"
+MODEL_HASH = "18bad10f0b529815dbe2fbc13628205b"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "f19b845f0e2d5ea3236be58c9c32b154"
+MODEL_HASH = "9c7b1c3d739c1f491ba9256f85aa4db1"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

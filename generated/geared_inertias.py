@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "929d99903e7735481006e282edcae35e"
+MODEL_HASH = "fb012f7f07e25df90c4e70bc58340a45"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

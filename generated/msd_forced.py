@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "ce2b44b94319d7a4bda44be1dcae2694"
+MODEL_HASH = "7210516e16c562756456ff0986c2b110"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

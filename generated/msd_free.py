@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "3bfe7011f021c916a7ff86f5ea0b902f"
+MODEL_HASH = "a8b9e7cf636538f6bda1ef11cf84c13b"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

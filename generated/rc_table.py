@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "38fd9198712121bb37da448098138952"
+MODEL_HASH = "b479b79fc1e336e70b38f4c7c31a5b39"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

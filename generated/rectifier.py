@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "b7c12b8b91b9c1d65b5373326102a894"
+MODEL_HASH = "98027e90a365628e52cbc0dd6128698a"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "163b0aa79ef619b24156a8d93354945f"
+MODEL_HASH = "bd689908f7aa0229a10fdd07cb00f31f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "841ef8b87337f513d1a66066cd342bf1"
+MODEL_HASH = "4bdeae41581c0c7771297f6eb0a2e6b3"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "06a87892055723020b5186862a7feae8"
+MODEL_HASH = "db7f68e99ec6165e5324a82b936b75db"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "6f4754710515439af0c4967e0eb20747"
+MODEL_HASH = "d80b5702592689ef72ec2027914f6fb8"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

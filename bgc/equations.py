@@ -24,7 +24,7 @@ from sympy.solvers.solveset import NonlinearError
 
 from . import cardan, symbols
 from .causality import CausalGraph
-from .expand import AXES, body_junction, rotation_matrix
+from .expand import AXES, body_junction, position, rotation_matrix
 from .errors import EquationError
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
@@ -409,7 +409,7 @@ class _Builder:
         for n, body in self.g.bodies.items():
             v = self.common_flow(body_junction(n, "v"))
             w = self.common_flow(body_junction(n, "w"))
-            pos = [symbols.state(n, a) for a in AXES]
+            pos = position(n)
             ang = [symbols.state(n, f"a{a}") for a in AXES]
             rates = cardan.angle_rates(*ang, w)
             self.guards.append((f"Cardan singularity (gimbal lock, cos {n}.ay -> 0) of body "
@@ -430,7 +430,7 @@ class _Builder:
         """body.x ... body.accz, and body.point.x ... body.point.accz (R0)."""
         out = {}
         R = rotation_matrix(n)
-        x = sp.Matrix([symbols.state(n, a) for a in AXES])
+        x = position(n)
         v = self.common_flow(body_junction(n, "v"))
         w = self.common_flow(body_junction(n, "w"))
         massive = body.mass > 0

@@ -50,6 +50,11 @@ def position(body: str) -> sp.Matrix:
     return sp.Matrix([symbols.state(body, a) for a in AXES])
 
 
+def joint_offset(body: Body, at) -> np.ndarray:
+    """Body-frame offset from G of the body-fixed point that is at ``at`` (R0) initially."""
+    return np.array(body.frame).T @ (np.array(at) - np.array(body.com))
+
+
 def joint_param(joint: str, role: str) -> str:
     """Name of the parameter a joint's value lives in (changeable without recompiling)."""
     return f"{joint}__{role}"
@@ -124,11 +129,9 @@ class _Expander:
                 rot[side], pos[side] = None, sp.Matrix(j.at)
                 continue
             b = self.m.bodies[n]
-            R0 = sp.Matrix(b.frame)
-            r = R0.T * (sp.Matrix(j.at) - sp.Matrix(b.com))
-            rot[side] = (rotation_matrix(n), R0)
-            pos[side] = position(n) + rotation_matrix(n) * r.applyfunc(
-                lambda x: sp.Float(float(x)))
+            r = sp.Matrix([sp.Float(float(c)) for c in joint_offset(b, j.at)])
+            rot[side] = (rotation_matrix(n), sp.Matrix(b.frame))
+            pos[side] = position(n) + rotation_matrix(n) * r
         return jmodels.Geometry(rot[1], rot[2], pos[1], pos[2])
 
     def joint(self, j: Joint) -> list[jmodels.Direction]:
@@ -136,7 +139,7 @@ class _Expander:
         dirs = jmodels.directions(j.kind, geo, j.frame, j.pitch)
         for d in dirs:
             fun = j.functional.get(d.label)
-            if not d.blocked and fun is None:
+            if not d.blocked and (fun is None or fun.empty):
                 continue
             zero = self.add(f"{j.name}__{d.label}", "0", j.loc)
             for key, row in d.rows.items():
@@ -145,9 +148,7 @@ class _Expander:
                 if n is None:
                     continue
                 if key[0] == "v":
-                    b = self.m.bodies[n]
-                    r = np.array(b.frame).T @ (np.array(j.at) - np.array(b.com))
-                    src = self.point(n, j.name, r, j.loc)
+                    src = self.point(n, j.name, joint_offset(self.m.bodies[n], j.at), j.loc)
                 else:
                     src = self.omega_r0(n, j.loc)
                 mtf = self.add(f"{j.name}__{d.label}__{key}", "MTF", j.loc, ratio=row.T)
@@ -179,8 +180,6 @@ class _Expander:
                 if fun.actuator is not None:
                     parts.append(self.add(f"{zero}__actuator", "MSe", j.loc,
                                           effort=-fun.actuator))
-            if not parts:
-                parts.append(self.add(f"{zero}__free", "Se", j.loc, effort=sp.S.Zero))
             if len(parts) == 1:
                 self.bond(zero, parts[0], j.loc, dim=1)
             else:
@@ -218,7 +217,7 @@ def _check_massless(model: Model, joint_dirs: dict):
                     touching[n].append(name)
                 b = model.bodies[n]
                 R = np.array(b.frame)
-                r = R.T @ (np.array(j.at) - np.array(b.com))
+                r = joint_offset(b, j.at)
                 rv = np.array(d.rows.get(f"v{side}", sp.zeros(3, 1)).xreplace(subs),
                               dtype=float).ravel()
                 rw = np.array(d.rows.get(f"w{side}", sp.zeros(3, 1)).xreplace(subs),

@@ -126,10 +126,8 @@ def directions(kind: str, geo: Geometry, frame, pitch: float = 0.0) -> list[Dire
     for label in spec.blocked:
         if label in trans:
             out.append(_dist(geo, label, trans[label]))
-        elif kind == "line" and label == "rz":      # body 2's line stays in the plane
-            out.append(_perp(geo, "rz", y, x, -1))
-        elif kind == "universal" and label == "rz":  # the two axes stay perpendicular
-            out.append(_perp(geo, "rz", y, x, -1))
+        elif kind in NEEDS_AXIS2 and label == "rz":  # body 2's axis2 stays perpendicular
+            out.append(_perp(geo, "rz", y, x, -1))  # to the axis (line: in the plane)
         elif label == "screw":                       # tx - pitch/(2 pi) * rx, integrated
             t, r = _dist(geo, "tx", x, blocked=False), _turn(geo, "rx", 1, x)
             k = sp.Float(pitch) / (2 * sp.pi)

@@ -130,6 +130,8 @@ class _Loader:
         self.file = file
         self.names: dict[str, tuple[str, Loc]] = {}   # global namespace: name -> (what, loc)
         self.bodies: dict[str, Body] = {}
+        self.joints: dict[str, Joint] = {}
+        self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
 
     # helpers -------------------------------------------------------------
     def err(self, msg, loc, key, hint=None):
@@ -453,7 +455,7 @@ class _Loader:
                 self.err(f"point '{target}' has no '.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return symbols.ref(f"{body}__{pt}", attr)
-        if target in getattr(self, "joints", {}):
+        if target in self.joints:
             if attr not in Joint.ATTRS:
                 self.err(f"joint '{target}' has no '.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in Joint.ATTRS))
@@ -464,7 +466,7 @@ class _Loader:
                 self.err(f"body '{target}' has no '.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return symbols.ref(target, attr)
-        vector = target in getattr(self, "multibond", ())
+        vector = target in self.multibond
         if target in bond_names:
             valid = ("ex", "ey", "ez", "fx", "fy", "fz") if vector else ("e", "f")
             if attr not in valid:
@@ -540,20 +542,7 @@ class _Loader:
                          "negligible mass)")
             inertia = v.get("inertia", [0, 0, 0])     # negligible mass: no inertia either
             loc, kk = at("inertia") if "inertia" in v else at("mass")
-            frame = np.eye(3)
-            if "frame" in v:
-                fr = self.mapping(v["frame"], *at("frame"), "a mapping {x: [..], y: [..], z: [..]}")
-                self.check_keys(fr, ("x", "y", "z"), f"{key}.frame")
-                if set(fr) != {"x", "y", "z"}:
-                    self.err("a frame needs its three axes x, y, z", fr.loc, f"{key}.frame")
-                cols = [np.array(self.vector(fr[a], fr.val_locs[a], f"{key}.frame.{a}"))
-                        for a in "xyz"]
-                frame = np.column_stack([c / np.linalg.norm(c) if np.linalg.norm(c) > 0
-                                         else c for c in cols])
-                if (np.abs(frame.T @ frame - np.eye(3)).max() > 1e-6
-                        or np.linalg.det(frame) < 0):
-                    self.err("the frame axes must be orthogonal and right-handed (x cross y = z)",
-                             fr.loc, f"{key}.frame", "give unit axes such as x: [1, 0, 0] ...")
+            frame = self.frame(v["frame"], *at("frame")) if "frame" in v else np.eye(3)
             if "inertia" not in v:
                 moments = np.zeros(3)
             elif isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
@@ -605,6 +594,22 @@ class _Loader:
         kw = {k: self.number(m[k], m.val_locs[k], f"{key}.{k}", nonneg=True)
               for k in PARASITIC_KEYS if k in m}
         return Parasitic(**{**base.__dict__, **kw})
+
+    def frame(self, v, loc, key):
+        """``{x: [..], y: [..], z: [..]}`` (R0) -> 3x3 matrix whose columns are the unit
+        axes; they must be orthogonal and right-handed."""
+        import numpy as np
+        fr = self.mapping(v, loc, key, "a mapping {x: [..], y: [..], z: [..]}")
+        self.check_keys(fr, ("x", "y", "z"), key)
+        if set(fr) != {"x", "y", "z"}:
+            self.err("a frame needs its three axes x, y, z", fr.loc, key)
+        cols = [np.array(self.vector(fr[a], fr.val_locs[a], f"{key}.{a}")) for a in "xyz"]
+        F = np.column_stack([c / np.linalg.norm(c) if np.linalg.norm(c) > 0 else c
+                             for c in cols])
+        if np.abs(F.T @ F - np.eye(3)).max() > 1e-6 or np.linalg.det(F) < 0:
+            self.err("the frame axes must be orthogonal and right-handed (x cross y = z)",
+                     fr.loc, key, "give unit axes such as x: [1, 0, 0] ...")
+        return F
 
     def unit_vector(self, v, loc, key):
         import numpy as np
@@ -695,16 +700,7 @@ class _Loader:
             frame = np.column_stack([x, y, np.cross(x, y)])
             out_frame = None
             if "frame" in v:
-                fr = self.mapping(v["frame"], *at("frame"), "a mapping {x: [..], y: [..], z: [..]}")
-                self.check_keys(fr, ("x", "y", "z"), f"{key}.frame")
-                cols = [self.unit_vector(fr[a], fr.val_locs[a], f"{key}.frame.{a}")
-                        for a in "xyz" if a in fr]
-                if len(cols) != 3:
-                    self.err("a frame needs its three axes x, y, z", fr.loc, f"{key}.frame")
-                F = np.column_stack(cols)
-                if np.abs(F.T @ F - np.eye(3)).max() > 1e-6 or np.linalg.det(F) < 0:
-                    self.err("the frame axes must be orthogonal and right-handed", fr.loc,
-                             f"{key}.frame")
+                F = self.frame(v["frame"], *at("frame"))
                 out_frame = tuple(tuple(float(c) for c in row) for row in F)
             pitch = 0.0
             if kind == "screw":

@@ -160,6 +160,11 @@ class Functional:
     actuator: sp.Expr | None = None     # a function of t, signals and parameters
     loc: Loc | None = None
 
+    @property
+    def empty(self) -> bool:
+        """Nothing acts: the direction needs no elements."""
+        return self.k == 0 and self.c == 0 and self.preload == 0 and self.actuator is None
+
 
 @dataclass(frozen=True)
 class Parasitic:

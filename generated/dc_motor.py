@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "18bad10f0b529815dbe2fbc13628205b"
+MODEL_HASH = "d03fe42719abc8c1f264489a926646e8"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

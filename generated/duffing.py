@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "9c7b1c3d739c1f491ba9256f85aa4db1"
+MODEL_HASH = "b9bb0888e34c5ba84c1ba7a25d0e295f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "fb012f7f07e25df90c4e70bc58340a45"
+MODEL_HASH = "ba9f43d280c827a41fa9f3bb5a77c9bd"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "d8ad0dec1f122879eb09ca9ed9d906ba"
+MODEL_HASH = "3a0194db0a38ca13126eaefd8080d202"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -55,7 +55,7 @@ def rhs(t, x, p):
     F_b__top__v__top__m__z = 1.0*X_top__m__pz
     ROT_top__00 = 0.4999999999932617*np.sin(X_top__ax)*np.sin(X_top__az) - 0.4999999999932617*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) + 0.866025403788329*np.cos(X_top__ay)*np.cos(X_top__az)
     ROT_top__02 = 0.866025403788329*np.sin(X_top__ay) + 0.4999999999932617*np.cos(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + 1.0*X_top__x)
+    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__00 - 0.10000000001866817*ROT_top__02 + 1.0*X_top__x)
     F_b__top__w__top__J__y = 50.0*X_top__J__py
     F_b__top__pivot__x__top__pivot__R__x = -0.10000000001866817*F_b__top__w__top__J__y
     F_b__top__w__top__J__x = 50.0*X_top__J__px
@@ -71,7 +71,7 @@ def rhs(t, x, p):
     E_b__top__pivot__pivot__tx__v2__x = 1.0*E_b__pivot__tx__pivot__tx__1
     ROT_top__10 = 1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.cos(X_top__az) + 1.0*np.sin(X_top__az)*np.cos(X_top__ax)
     ROT_top__12 = -1.0*np.sin(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + 1.0*X_top__y)
+    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__10 - 0.10000000001866817*ROT_top__12 + 1.0*X_top__y)
     ROT_top__11 = -1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.sin(X_top__az) + 1.0*np.cos(X_top__ax)*np.cos(X_top__az)
     F_b__top__pivot__R__top__pivot__0__y = F_b__top__pivot__x__top__pivot__R__x*ROT_top__10 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__11 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__12
     F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + F_b__top__v__top__m__y
@@ -81,7 +81,7 @@ def rhs(t, x, p):
     E_b__top__pivot__pivot__ty__v2__y = 1.0*E_b__pivot__ty__pivot__ty__1
     ROT_top__20 = 0.866025403788329*np.sin(X_top__ax)*np.sin(X_top__az) - 0.866025403788329*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) - 0.4999999999932617*np.cos(X_top__ay)*np.cos(X_top__az)
     ROT_top__22 = -0.4999999999932617*np.sin(X_top__ay) + 0.866025403788329*np.cos(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + 1.0*X_top__z)
+    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__20 - 0.10000000001866817*ROT_top__22 + 1.0*X_top__z)
     ROT_top__21 = 0.866025403788329*np.sin(X_top__ax)*np.cos(X_top__az) + 0.866025403788329*np.sin(X_top__ay)*np.sin(X_top__az)*np.cos(X_top__ax) + 0.4999999999932617*np.sin(X_top__az)*np.cos(X_top__ay)
     F_b__top__pivot__R__top__pivot__0__z = F_b__top__pivot__x__top__pivot__R__x*ROT_top__20 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__21 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__22
     F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + F_b__top__v__top__m__z
@@ -150,7 +150,7 @@ def jac(t, x, p):
     F_b__top__v__top__m__z = 1.0*X_top__m__pz
     ROT_top__00 = 0.4999999999932617*np.sin(X_top__ax)*np.sin(X_top__az) - 0.4999999999932617*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) + 0.866025403788329*np.cos(X_top__ay)*np.cos(X_top__az)
     ROT_top__02 = 0.866025403788329*np.sin(X_top__ay) + 0.4999999999932617*np.cos(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + 1.0*X_top__x)
+    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__00 - 0.10000000001866817*ROT_top__02 + 1.0*X_top__x)
     F_b__top__w__top__J__y = 50.0*X_top__J__py
     F_b__top__pivot__x__top__pivot__R__x = -0.10000000001866817*F_b__top__w__top__J__y
     F_b__top__w__top__J__x = 50.0*X_top__J__px
@@ -166,7 +166,7 @@ def jac(t, x, p):
     E_b__top__pivot__pivot__tx__v2__x = 1.0*E_b__pivot__tx__pivot__tx__1
     ROT_top__10 = 1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.cos(X_top__az) + 1.0*np.sin(X_top__az)*np.cos(X_top__ax)
     ROT_top__12 = -1.0*np.sin(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + 1.0*X_top__y)
+    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__10 - 0.10000000001866817*ROT_top__12 + 1.0*X_top__y)
     ROT_top__11 = -1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.sin(X_top__az) + 1.0*np.cos(X_top__ax)*np.cos(X_top__az)
     F_b__top__pivot__R__top__pivot__0__y = F_b__top__pivot__x__top__pivot__R__x*ROT_top__10 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__11 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__12
     F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + F_b__top__v__top__m__y
@@ -176,7 +176,7 @@ def jac(t, x, p):
     E_b__top__pivot__pivot__ty__v2__y = 1.0*E_b__pivot__ty__pivot__ty__1
     ROT_top__20 = 0.866025403788329*np.sin(X_top__ax)*np.sin(X_top__az) - 0.866025403788329*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) - 0.4999999999932617*np.cos(X_top__ay)*np.cos(X_top__az)
     ROT_top__22 = -0.4999999999932617*np.sin(X_top__ay) + 0.866025403788329*np.cos(X_top__ax)*np.cos(X_top__ay)
-    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + 1.0*X_top__z)
+    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999989116271957e-12*ROT_top__20 - 0.10000000001866817*ROT_top__22 + 1.0*X_top__z)
     ROT_top__21 = 0.866025403788329*np.sin(X_top__ax)*np.cos(X_top__az) + 0.866025403788329*np.sin(X_top__ay)*np.sin(X_top__az)*np.cos(X_top__ax) + 0.4999999999932617*np.sin(X_top__az)*np.cos(X_top__ay)
     F_b__top__pivot__R__top__pivot__0__z = F_b__top__pivot__x__top__pivot__R__x*ROT_top__20 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__21 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__22
     F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + F_b__top__v__top__m__z
@@ -190,9 +190,9 @@ def jac(t, x, p):
     J_ROT_top__02__7 = -0.4999999999932617*np.sin(X_top__ax)*np.cos(X_top__ay)
     J_ROT_top__02__9 = -0.4999999999932617*np.sin(X_top__ay)*np.cos(X_top__ax) + 0.866025403788329*np.cos(X_top__ay)
     J_E_b__pivot__tx__1__pivot__tx__L__6 = 1.0*P_pivot__stiffness
-    J_E_b__pivot__tx__1__pivot__tx__L__7 = 9.999986949615902e-12*J_ROT_top__00__7*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__02__7*P_pivot__stiffness
-    J_E_b__pivot__tx__1__pivot__tx__L__9 = 9.999986949615902e-12*J_ROT_top__00__9*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__02__9*P_pivot__stiffness
-    J_E_b__pivot__tx__1__pivot__tx__L__11 = 9.999986949615902e-12*J_ROT_top__00__11*P_pivot__stiffness
+    J_E_b__pivot__tx__1__pivot__tx__L__7 = 9.999989116271957e-12*J_ROT_top__00__7*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__02__7*P_pivot__stiffness
+    J_E_b__pivot__tx__1__pivot__tx__L__9 = 9.999989116271957e-12*J_ROT_top__00__9*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__02__9*P_pivot__stiffness
+    J_E_b__pivot__tx__1__pivot__tx__L__11 = 9.999989116271957e-12*J_ROT_top__00__11*P_pivot__stiffness
     J_ROT_top__01__7 = -0.4999999999932617*np.sin(X_top__ax)*np.sin(X_top__ay)*np.sin(X_top__az) + 0.4999999999932617*np.cos(X_top__ax)*np.cos(X_top__az)
     J_ROT_top__01__9 = 0.866025403788329*np.sin(X_top__ay)*np.sin(X_top__az) + 0.4999999999932617*np.sin(X_top__az)*np.cos(X_top__ax)*np.cos(X_top__ay)
     J_ROT_top__01__11 = -0.4999999999932617*np.sin(X_top__ax)*np.sin(X_top__az) + 0.4999999999932617*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) - 0.866025403788329*np.cos(X_top__ay)*np.cos(X_top__az)
@@ -231,10 +231,10 @@ def jac(t, x, p):
     J_ROT_top__10__11 = -1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.sin(X_top__az) + 1.0*np.cos(X_top__ax)*np.cos(X_top__az)
     J_ROT_top__12__7 = -1.0*np.cos(X_top__ax)*np.cos(X_top__ay)
     J_ROT_top__12__9 = 1.0*np.sin(X_top__ax)*np.sin(X_top__ay)
-    J_E_b__pivot__ty__1__pivot__ty__L__7 = 9.999986949615902e-12*J_ROT_top__10__7*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__12__7*P_pivot__stiffness
+    J_E_b__pivot__ty__1__pivot__ty__L__7 = 9.999989116271957e-12*J_ROT_top__10__7*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__12__7*P_pivot__stiffness
     J_E_b__pivot__ty__1__pivot__ty__L__8 = 1.0*P_pivot__stiffness
-    J_E_b__pivot__ty__1__pivot__ty__L__9 = 9.999986949615902e-12*J_ROT_top__10__9*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__12__9*P_pivot__stiffness
-    J_E_b__pivot__ty__1__pivot__ty__L__11 = 9.999986949615902e-12*J_ROT_top__10__11*P_pivot__stiffness
+    J_E_b__pivot__ty__1__pivot__ty__L__9 = 9.999989116271957e-12*J_ROT_top__10__9*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__12__9*P_pivot__stiffness
+    J_E_b__pivot__ty__1__pivot__ty__L__11 = 9.999989116271957e-12*J_ROT_top__10__11*P_pivot__stiffness
     J_ROT_top__11__7 = -1.0*np.sin(X_top__ax)*np.cos(X_top__az) - 1.0*np.sin(X_top__ay)*np.sin(X_top__az)*np.cos(X_top__ax)
     J_ROT_top__11__9 = -1.0*np.sin(X_top__ax)*np.sin(X_top__az)*np.cos(X_top__ay)
     J_ROT_top__11__11 = -1.0*np.sin(X_top__ax)*np.sin(X_top__ay)*np.cos(X_top__az) - 1.0*np.sin(X_top__az)*np.cos(X_top__ax)
@@ -273,10 +273,10 @@ def jac(t, x, p):
     J_ROT_top__20__11 = 0.866025403788329*np.sin(X_top__ax)*np.cos(X_top__az) + 0.866025403788329*np.sin(X_top__ay)*np.sin(X_top__az)*np.cos(X_top__ax) + 0.4999999999932617*np.sin(X_top__az)*np.cos(X_top__ay)
     J_ROT_top__22__7 = -0.866025403788329*np.sin(X_top__ax)*np.cos(X_top__ay)
     J_ROT_top__22__9 = -0.866025403788329*np.sin(X_top__ay)*np.cos(X_top__ax) - 0.4999999999932617*np.cos(X_top__ay)
-    J_E_b__pivot__tz__1__pivot__tz__L__7 = 9.999986949615902e-12*J_ROT_top__20__7*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__22__7*P_pivot__stiffness
-    J_E_b__pivot__tz__1__pivot__tz__L__9 = 9.999986949615902e-12*J_ROT_top__20__9*P_pivot__stiffness - 0.10000000001866816*J_ROT_top__22__9*P_pivot__stiffness
+    J_E_b__pivot__tz__1__pivot__tz__L__7 = 9.999989116271957e-12*J_ROT_top__20__7*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__22__7*P_pivot__stiffness
+    J_E_b__pivot__tz__1__pivot__tz__L__9 = 9.999989116271957e-12*J_ROT_top__20__9*P_pivot__stiffness - 0.10000000001866817*J_ROT_top__22__9*P_pivot__stiffness
     J_E_b__pivot__tz__1__pivot__tz__L__10 = 1.0*P_pivot__stiffness
-    J_E_b__pivot__tz__1__pivot__tz__L__11 = 9.999986949615902e-12*J_ROT_top__20__11*P_pivot__stiffness
+    J_E_b__pivot__tz__1__pivot__tz__L__11 = 9.999989116271957e-12*J_ROT_top__20__11*P_pivot__stiffness
     J_ROT_top__21__7 = -0.866025403788329*np.sin(X_top__ax)*np.sin(X_top__ay)*np.sin(X_top__az) + 0.866025403788329*np.cos(X_top__ax)*np.cos(X_top__az)
     J_ROT_top__21__9 = -0.4999999999932617*np.sin(X_top__ay)*np.sin(X_top__az) + 0.866025403788329*np.sin(X_top__az)*np.cos(X_top__ax)*np.cos(X_top__ay)
     J_ROT_top__21__11 = -0.866025403788329*np.sin(X_top__ax)*np.sin(X_top__az) + 0.866025403788329*np.sin(X_top__ay)*np.cos(X_top__ax)*np.cos(X_top__az) + 0.4999999999932617*np.cos(X_top__ay)*np.cos(X_top__az)
@@ -499,7 +499,7 @@ def outputs(t, x, p):
     y[0] = X_top__x
     y[1] = X_top__y
     y[2] = X_top__z
-    y[3] = np.sqrt((9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + 1.0*X_top__x)**2 + (9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + 1.0*X_top__y)**2 + (9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + 1.0*X_top__z)**2)
+    y[3] = np.sqrt((9.999989116271957e-12*ROT_top__00 - 0.10000000001866817*ROT_top__02 + 1.0*X_top__x)**2 + (9.999989116271957e-12*ROT_top__10 - 0.10000000001866817*ROT_top__12 + 1.0*X_top__y)**2 + (9.999989116271957e-12*ROT_top__20 - 0.10000000001866817*ROT_top__22 + 1.0*X_top__z)**2)
     return y
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "7210516e16c562756456ff0986c2b110"
+MODEL_HASH = "8d674254526bbe2192b19931206d54b0"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

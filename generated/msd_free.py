@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "a8b9e7cf636538f6bda1ef11cf84c13b"
+MODEL_HASH = "c5fd1610e421705dc197e8610796ef2d"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

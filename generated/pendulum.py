@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "fcedd34c4f012b251de0a262063e248e"
+MODEL_HASH = "f57ee5508a5f03a1165e095b62a7e36c"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

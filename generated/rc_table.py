@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "b479b79fc1e336e70b38f4c7c31a5b39"
+MODEL_HASH = "1d94d910164be86eca6d78d0f43252d0"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

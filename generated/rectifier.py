@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "98027e90a365628e52cbc0dd6128698a"
+MODEL_HASH = "5aa315d76dcb5048e2ab38ada6a13d2c"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "bd689908f7aa0229a10fdd07cb00f31f"
+MODEL_HASH = "84bbe3341447e05f351120edba80d386"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

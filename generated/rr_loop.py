@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "4bdeae41581c0c7771297f6eb0a2e6b3"
+MODEL_HASH = "ca9ad750a482763600c95ded95b0914b"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "db7f68e99ec6165e5324a82b936b75db"
+MODEL_HASH = "3e25aa49218c4030e487af473bdd85a2"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "d80b5702592689ef72ec2027914f6fb8"
+MODEL_HASH = "301b26fae2507769f963ea7b53662494"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

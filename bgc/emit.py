@@ -20,7 +20,7 @@ import jinja2
 
 from . import __version__
 from .equations import EquationSystem, LinearBlock
-from .jacobian import BlockSensitivity, chain_rule
+from .jacobian import tape
 from .printer import code
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("bgc", "templates"),
@@ -52,15 +52,12 @@ def model_hash(model_digest: str, method: str) -> str:
 
 def _defines(item) -> list:
     if isinstance(item, LinearBlock):
-        return list(item.unknowns)
-    if isinstance(item, BlockSensitivity):
-        return item.defines
+        return list(item.unknowns) + [v for v, _ in item.pre]
     return [item[0]]
 
 
 def _free(item) -> set:
-    return item.free_symbols if isinstance(item, (LinearBlock, BlockSensitivity)) \
-        else item[1].free_symbols
+    return item.free_symbols if isinstance(item, LinearBlock) else item[1].free_symbols
 
 
 def _cone(assignments, targets):
@@ -81,17 +78,13 @@ def _body(assignments):
     for item in assignments:
         if isinstance(item, LinearBlock):
             k, n = item.index, len(item.unknowns)
+            lines += [f"{v.name} = {code(e)}" for v, e in item.pre]
             lines.append(f"_A{k} = np.zeros(({n}, {n}))")
             lines += [f"_A{k}[{i}, {j}] = {code(e)}" for i, j, e in item.A]
             lines.append(f"_b{k} = np.empty({n})")
             lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
             lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
             lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
-        elif isinstance(item, BlockSensitivity):
-            k, n, m = item.index, len(item.unknowns), len(item.cols)
-            lines.append(f"_R{k} = np.zeros(({n}, {m}))")
-            lines += [f"_R{k}[{i}, {c}] = {code(e)}" for i, c, e in item.R]
-            lines.append(f"_D{k} = np.linalg.solve(_A{k}, _R{k})")
         else:
             v, e = item
             lines.append(f"{v.name} = {code(e)}")
@@ -105,21 +98,40 @@ def _prologue(system, used):
     return params, unpack
 
 
+def _jac_lines(jt) -> list[str]:
+    """The jac tail: run-time partials, the tape segments with block solves between."""
+    lines = [f"_pv = np.empty({len(jt.partials) + 1})", "_pv[0] = 1.0"]
+    lines += [f"_pv[{k}] = {code(d)}" for k, d in jt.partials]
+    lines.append(f"_d = np.zeros(({jt.n_rows}, {jt.n_colours}))")
+    for seg in jt.segments:
+        if seg[0] == "tape":
+            lines.append(f"_tape(_d, _pv, {seg[1]}, {seg[2]})")
+        else:
+            b = seg[1]
+            r, n = b.start, b.n
+            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = np.linalg.solve(_A{b.index}, "
+                         f"_d[{r}:{r + n}, :])")
+    return lines
+
+
 def render(system: EquationSystem) -> str:
     """The module source for an equation system."""
     m = system.model
     dx = [st.dsym for st in system.states]
     rhs_asg, rhs_used = _cone(system.assignments, dx)
-    extra, entries = chain_rule(rhs_asg, system.states)
-    jac_targets = list(entries.values())
-    jac_all, jac_used = _cone(rhs_asg + extra, jac_targets)
+    jt = tape(rhs_asg, system.states)
+    solved = {b.index for b in jt.blocks}
+    jac_targets = [d for _, d in jt.partials] + [
+        u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
+        for u in it.unknowns]
+    jac_all, jac_used = _cone(system.assignments, jac_targets)
     out_exprs = [e for _, e in system.outputs]
     out_asg, out_used = _cone(system.assignments, out_exprs)
     guard_exprs = [e for _, e in system.guards]
     guard_asg, guard_used = _cone(system.assignments, guard_exprs)
     funcs = {}
     for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
-                           ("jac", jac_all, jac_used | set(jac_targets)),
+                           ("jac", jac_all, jac_used),
                            ("out", out_asg, out_used),
                            ("guard", guard_asg, guard_used)):
         params, unpack = _prologue(system, used)
@@ -140,7 +152,12 @@ def render(system: EquationSystem) -> str:
                 for tb in system.tables],
         n=len(system.states),
         rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
-        jac_out=[f"J[{i}, {j}] = {code(e)}" for (i, j), e in sorted(entries.items())],
+        jac_out=_jac_lines(jt),
+        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[repr(c) for c in jt.scale],
+                  i=[i for i, _, _ in jt.pattern],
+                  row=[r for _, _, r in jt.pattern],
+                  j=[j for _, j, _ in jt.pattern],
+                  colour=[jt.colours[j] for _, j, _ in jt.pattern]),
         out_out=[f"y[{k}] = {code(e)}" for k, e in enumerate(out_exprs)],
         guard_names=[what for what, _ in system.guards],
         guard_out=[f"g[{k}] = {code(e)}" for k, e in enumerate(guard_exprs)],

@@ -19,13 +19,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import sympy as sp
-
 from sympy.solvers.solveset import NonlinearError
 
 from . import cardan, symbols
 from .causality import CausalGraph
-from .expand import AXES, body_junction, position, rotation_matrix
 from .errors import EquationError
+from .expand import AXES, body_junction, position, rotation_matrix
+from .forward_mode import directional, propagate
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
 
@@ -61,25 +61,34 @@ class Loop:
 class LinearBlock:
     """A linear loop solved numerically at run time: ``A(w) u = b(w)`` by LU, for loops
     too large to solve symbolically without expression swell. ``A`` holds the non-zero
-    entries only."""
+    entries only; ``pre`` are assignments that ``A`` reads (the loop's sensitivities to
+    ``u``). For the Jacobian: ``u = tear_eqs(u, chain)``, where ``chain`` are the loop's
+    other variables in causal order (computed after the block), both unsubstituted."""
     index: int
     unknowns: tuple[sp.Symbol, ...]
     A: tuple[tuple[int, int, sp.Expr], ...]
     b: tuple[sp.Expr, ...]
+    tear_eqs: tuple[sp.Expr, ...]
+    chain: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    pre: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
 
     @property
     def free_symbols(self) -> set:
         out = set()
-        for _, _, e in self.A:
+        for e in [e for _, _, e in self.A] + list(self.b) + [e for _, e in self.pre]:
             out |= e.free_symbols
-        for e in self.b:
-            out |= e.free_symbols
-        return out
+        return out - {v for v, _ in self.pre}
 
     def xreplace(self, mapping) -> "LinearBlock":
+        """Apply ``mapping`` (aliases: symbol -> symbol or number) everywhere; chain
+        variables that are aliases themselves are dropped from the chain."""
+        def pairs(items):
+            return tuple((v, e.xreplace(mapping)) for v, e in items if v not in mapping)
         return LinearBlock(self.index, self.unknowns,
                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.A),
-                           tuple(e.xreplace(mapping) for e in self.b))
+                           tuple(e.xreplace(mapping) for e in self.b),
+                           tuple(e.xreplace(mapping) for e in self.tear_eqs),
+                           pairs(self.chain), pairs(self.pre))
 
 
 @dataclass
@@ -443,6 +452,7 @@ class _Builder:
             out[symbols.ref(n, f"a{a}")] = symbols.state(n, f"a{a}")
             out[symbols.ref(n, f"v{a}")] = v[k]
             out[symbols.ref(n, f"w{a}")] = w[k]         # body frame
+            out[symbols.ref(n, f"w{a}_R0")] = (R * w)[k]
             if massive:
                 out[symbols.ref(n, f"acc{a}")] = acc[k]
         for pt, r in body.points.items():
@@ -608,26 +618,34 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
         raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
     entries = tuple((i, j, A[i, j]) for i in range(A.rows) for j in range(A.cols)
                     if A[i, j] != 0)
-    return LinearBlock(index, tuple(comp), entries, tuple(rhs))
+    return LinearBlock(index, tuple(comp), entries, tuple(rhs),
+                       tuple(b.eqs[v] for v in comp))
 
 
-def _reduced_block(b: _Builder, tears: list, subs: dict, index: int, refuse) -> LinearBlock:
-    """A linear loop solved numerically in its tearing variables only: the other loop
-    variables are substituted into the tearing residuals (which stay small: one pass along
-    the loop) and computed afterwards in causal order from the solved tears."""
-    res = [t - b.eqs[t].xreplace(subs) for t in tears]
-    zero = {t: 0 for t in tears}
+def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int,
+                   refuse) -> LinearBlock:
+    """A linear loop solved numerically in its tearing variables only. ``A = I - d
+    tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
+    loop's assignments (small, hoisted; never the substituted residual, which swells with
+    every modulated transformer along the loop); ``b`` is the substituted residual at
+    ``u = 0``. The other loop variables are computed afterwards in causal order."""
+    chain = tuple((v, b.eqs[v]) for v in order)
+    loop_vars = set(tears) | set(order)
+    sens = {t: {k: sp.S.One} for k, t in enumerate(tears)}
+    pre = propagate(chain, sens, lambda v, k: f"S{index}_{v.name}__{k}")
     entries = []
-    for i, r in enumerate(res):
-        for j, t in enumerate(tears):
-            a = r.diff(t)
-            if a.has(*tears):
-                raise refuse("nonlinear algebraic loop",
-                             "break the loop with a small parasitic C or I")
+    for i, t in enumerate(tears):
+        row = directional(b.eqs[t], sens)
+        for k in range(len(tears)):
+            a = (sp.S.One if i == k else sp.S.Zero) - row.get(k, sp.S.Zero)
             if a != 0:
-                entries.append((i, j, a))
-    return LinearBlock(index, tuple(tears), tuple(entries),
-                       tuple(-r.xreplace(zero) for r in res))
+                entries.append((i, k, a))
+    if any(e.has(*loop_vars) for e in [e for _, e in pre] + [a for _, _, a in entries]):
+        raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
+    zero = {t: 0 for t in tears}
+    rhs = tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears)
+    return LinearBlock(index, tuple(tears), tuple(entries), rhs,
+                       tuple(b.eqs[t] for t in tears), chain, tuple(pre))
 
 
 def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
@@ -656,7 +674,7 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
     if any(v.name.startswith("W_") for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
-        block = _reduced_block(b, tears, subs, block_index, refuse)
+        block = _reduced_block(b, tears, order, subs, block_index, refuse)
         return [block] + [(v, eqs[v]) for v in order], loop
     if len(tears) > max_symbolic:
         loop.tearing = ["numeric LU of all " + str(len(comp)) + " loop variables"]
@@ -713,12 +731,13 @@ def derive(cg: CausalGraph, method: str = "scalar",
 
 def _drop_aliases(assignments):
     """Inline assignments that only copy a variable (``e2 = e1``, ``f3 = -f1``) or a number;
-    state derivatives stay, since the right-hand side returns them."""
+    state derivatives stay, since the right-hand side returns them. Blocks get the final
+    alias map (their chains name loop variables assigned after them)."""
     aliases: dict = {}
     kept = []
     for item in assignments:
         if isinstance(item, LinearBlock):
-            kept.append(item.xreplace(aliases))
+            kept.append(item)
             continue
         v, e = item
         e = e.xreplace(aliases)
@@ -728,4 +747,5 @@ def _drop_aliases(assignments):
             aliases[v] = e
         else:
             kept.append((v, e))
+    kept = [it.xreplace(aliases) if isinstance(it, LinearBlock) else it for it in kept]
     return kept, aliases

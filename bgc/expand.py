@@ -190,6 +190,72 @@ class _Expander:
         return dirs
 
 
+def _initial_pose(model: Model) -> dict:
+    """Body positions and rotation-matrix entries at the initial pose."""
+    subs = {}
+    for n, b in model.bodies.items():
+        for i in range(3):
+            subs[symbols.state(n, AXES[i])] = b.com[i]
+            for k in range(3):
+                subs[symbols.rotation(n, i, k)] = b.frame[i][k]
+    return subs
+
+
+def _twist_row(model: Model, j, d, col: dict, subs: dict, width: int) -> np.ndarray:
+    """Direction ``d`` of joint ``j`` as a row acting on the twists (v_G in R0, omega in
+    the body frame) of the bodies in ``col`` (body -> first column), at the initial pose."""
+    row = np.zeros(width)
+    for side, n in ((1, j.body1), (2, j.body2)):
+        if n not in col:
+            continue
+        b = model.bodies[n]
+        R = np.array(b.frame)
+        r = joint_offset(b, j.at)
+        rv = np.array(d.rows.get(f"v{side}", sp.zeros(3, 1)).xreplace(subs),
+                      dtype=float).ravel()
+        rw = np.array(d.rows.get(f"w{side}", sp.zeros(3, 1)).xreplace(subs),
+                      dtype=float).ravel()
+        row[col[n]:col[n] + 3] += rv
+        row[col[n] + 3:col[n] + 6] += np.cross(r, R.T @ rv) + R.T @ rw
+    return row
+
+
+def _check_functional_not_blocked(model: Model, joint_dirs: dict):
+    """Two joints between the same bodies where one's spring, damper or actuator acts on
+    a motion the other blocks: the parasitic spring would absorb it, silently."""
+    subs = _initial_pose(model)
+    pairs: dict[frozenset, list] = {}
+    for name, (j, dirs) in joint_dirs.items():
+        pairs.setdefault(frozenset((j.body1, j.body2)), []).append((name, j, dirs))
+    for pair, joints in pairs.items():
+        if len(joints) < 2:
+            continue
+        col = {n: 6 * i for i, n in enumerate(sorted(n for n in pair if n is not None))}
+        width = 6 * len(col)
+        for name, j, dirs in joints:
+            blocked = [(other, _twist_row(model, oj, d, col, subs, width))
+                       for other, oj, odirs in joints if other != name
+                       for d in odirs if d.blocked]
+            if not blocked:
+                continue
+            B = np.array([r for _, r in blocked])
+            rank = np.linalg.matrix_rank(B, tol=1e-9)
+            for d in dirs:
+                fun = j.functional.get(d.label)
+                if d.blocked or fun is None or fun.empty:
+                    continue
+                f = _twist_row(model, j, d, col, subs, width)
+                if np.linalg.matrix_rank(np.vstack([B, f]), tol=1e-9) == rank:
+                    others = sorted({o for o, _ in blocked})
+                    raise ModelError(
+                        f"the spring/damper/actuator on direction {d.label} of joint "
+                        f"'{name}' acts on a motion that joint {', '.join(others)} blocks "
+                        "between the same bodies; its parasitic spring would take the load",
+                        loc=j.loc, key=f"joints.{name}",
+                        hint="remove the blocking joint, or move the functional element "
+                             "to a direction that is free in both")
+
+
 def _check_massless(model: Model, joint_dirs: dict):
     """A body of negligible mass must have its twist fixed by its joints (blocked or damped
     directions), or the balance of forces on it cannot be solved."""
@@ -197,34 +263,17 @@ def _check_massless(model: Model, joint_dirs: dict):
     if not massless:
         return
     col = {n: 6 * i for i, n in enumerate(massless)}
-    subs = {}
-    for n, b in model.bodies.items():
-        for i in range(3):
-            subs[symbols.state(n, AXES[i])] = b.com[i]
-            for k in range(3):
-                subs[symbols.rotation(n, i, k)] = b.frame[i][k]
+    subs = _initial_pose(model)
     rows, touching = [], {n: [] for n in massless}
     for name, (j, dirs) in joint_dirs.items():
         for d in dirs:
             fun = j.functional.get(d.label)
             if not (d.blocked or (fun is not None and fun.c != 0)):
                 continue
-            row = np.zeros(6 * len(massless))
-            for side, n in ((1, j.body1), (2, j.body2)):
-                if n not in col:
-                    continue
-                if name not in touching[n]:
+            for n in (j.body1, j.body2):
+                if n in col and name not in touching[n]:
                     touching[n].append(name)
-                b = model.bodies[n]
-                R = np.array(b.frame)
-                r = joint_offset(b, j.at)
-                rv = np.array(d.rows.get(f"v{side}", sp.zeros(3, 1)).xreplace(subs),
-                              dtype=float).ravel()
-                rw = np.array(d.rows.get(f"w{side}", sp.zeros(3, 1)).xreplace(subs),
-                              dtype=float).ravel()
-                row[col[n]:col[n] + 3] += rv
-                row[col[n] + 3:col[n] + 6] += np.cross(r, R.T @ rv) + R.T @ rw
-            rows.append(row)
+            rows.append(_twist_row(model, j, d, col, subs, 6 * len(massless)))
     A = np.array(rows) if rows else np.zeros((0, 6 * len(massless)))
     for n in massless:
         sub = A[:, col[n]:col[n] + 6]
@@ -251,6 +300,7 @@ def expand(model: Model) -> BondGraph:
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
+    _check_functional_not_blocked(model, joint_dirs)
     _check_massless(model, joint_dirs)
     elements, bonds = ex.elements, ex.bonds
     ports: dict[str, list[int]] = {name: [] for name in elements}

@@ -1,11 +1,17 @@
-"""The analytic Jacobian by the chain rule through the sorted assignments.
+"""The analytic Jacobian as a compressed forward-mode tape through the sorted assignments.
 
-Forward mode over the assignment list: for ``v = expr(w1, w2, ...)`` the sensitivity of
-``v`` to state ``x_j`` is ``sum_k d expr/d w_k * dw_k/dx_j``. Only non-zero entries are
-carried (the sparsity the graph gives), trivial ones (a number, a symbol) are inlined,
-and nothing is ever substituted into one large expression. Through a numeric linear
-block ``A u = b`` the sensitivities are ``du/dx_j = A^-1 (db/dx_j - dA/dx_j u)``, solved
-with the block's own matrix in the generated code.
+Every assigned variable that depends on the states gets a row of sensitivities; the
+columns are compressed by a colouring of the Jacobian's sparsity pattern (Curtis-Powell-
+Reid: columns that share no row share a colour), so a row holds one number per colour.
+For ``v = expr(w1, w2, ...)`` the generated code evaluates each partial ``d expr/d w_k``
+as a numeric coefficient (kept in a table) times a run-time factor that is computed once
+however many edges share it, and a short loop accumulates ``row(v) += partial * row(w_k)``. The emitted code grows with the number of
+edges in the graph, not with edges x columns, and nothing is ever substituted into one
+large expression. The result is exact (no differencing).
+
+Through a numeric linear block ``A u = b`` the rows of ``u`` are ``A^-1 R`` with
+``R = d(b - A u)/dx`` at fixed ``u``: the loop's own equations differentiated through
+its chain with the tears held fixed, then one LU solve with the block's matrix.
 """
 
 from __future__ import annotations
@@ -17,84 +23,132 @@ import sympy as sp
 from .equations import LinearBlock
 
 
-@dataclass(frozen=True)
-class BlockSensitivity:
-    """``D = A^-1 R`` for linear block ``index``: column c of R is d(b - A u)/dx_cols[c]."""
+@dataclass
+class Block:
+    """Rows ``start .. start+n`` hold R of linear block ``index``; the next n rows, u."""
     index: int
-    unknowns: tuple[sp.Symbol, ...]
-    cols: tuple[int, ...]
-    R: tuple[tuple[int, int, sp.Expr], ...]
+    start: int
+    n: int
+
+
+@dataclass
+class JacobianTape:
+    """The compressed Jacobian: ``J[i, j] = d[row_of_dx_i, colour[j]]`` on the pattern."""
+    colours: list[int]                       # per state column
+    n_colours: int
+    n_rows: int
+    ptr: list[int]                           # entries of row r: ptr[r] .. ptr[r+1]
+    src: list[int]                           # >= 0: a row; < 0: state colour -src-1
+    slot: list[int]                          # the entry's partial: slot (0 is 1.0) ...
+    scale: list[float]                       # ... times a numeric coefficient
+    partials: list[tuple[int, sp.Expr]]      # slots 1.. computed at run time
+    blocks: list[Block]
+    pattern: list[tuple[int, int, int]]      # (i, j, row of dx_i)
 
     @property
-    def free_symbols(self) -> set:
-        out = set(self.unknowns)
-        for _, _, e in self.R:
-            out |= e.free_symbols
-        return out
-
-    @property
-    def defines(self) -> list[sp.Symbol]:
-        return [entry(self.index, i, c) for i in range(len(self.unknowns))
-                for c in range(len(self.cols))]
-
-
-def entry(index: int, i: int, c: int) -> sp.Symbol:
-    """The generated-code name of D[i, c] of block ``index`` (printed verbatim)."""
-    return sp.Symbol(f"_D{index}[{i}, {c}]", real=True)
+    def segments(self) -> list:
+        """``("tape", start, stop)`` and ``("solve", Block)`` steps in evaluation order."""
+        out, at = [], 0
+        for blk in self.blocks:
+            out.append(("tape", at, blk.start + blk.n))
+            out.append(("solve", blk))
+            at = blk.start + 2 * blk.n
+        out.append(("tape", at, self.n_rows))
+        return [s for s in out if s[0] == "solve" or s[2] > s[1]]
 
 
-def _trivial(d) -> bool:
-    return d.is_Number or d.is_Symbol or (d.could_extract_minus_sign() and (-d).is_Symbol)
+class _Recorder:
+    def __init__(self, states):
+        self.cols: dict[sp.Symbol, frozenset] = {st.sym: frozenset([j])
+                                                 for j, st in enumerate(states)}
+        self.state_index = {st.sym: j for j, st in enumerate(states)}
+        self.rows: dict[sp.Symbol, int] = {}
+        self.entries: list[list[tuple[int, sp.Expr]]] = []   # (row, or -1-state, partial)
+        self.row_cols: list[frozenset] = []
+        self.blocks: list[Block] = []
 
+    def new_row(self, edges, cols) -> int:
+        self.entries.append(edges)
+        self.row_cols.append(cols)
+        return len(self.entries) - 1
 
-def chain_rule(assignments, states):
-    """Return (extra items, {(i, j): expr}) for J[i, j] = d(dx_i/dt)/dx_j."""
-    index = {st.sym: j for j, st in enumerate(states)}
-    sens: dict[sp.Symbol, dict[int, sp.Expr]] = {x: {j: sp.S.One} for x, j in index.items()}
-    extra = []
-
-    def directional(e) -> dict[int, sp.Expr]:
-        acc: dict[int, sp.Expr] = {}
-        for s in sorted((s for s in e.free_symbols if s in sens), key=lambda s: s.name):
-            partial = sp.diff(e, s)
-            if partial == 0:
+    def record(self, e, rows: dict) -> tuple[list, frozenset] | None:
+        """The edges of ``e`` to symbols with sensitivities (states or rows in ``rows``)."""
+        edges, cols = [], frozenset()
+        for s in sorted(e.free_symbols, key=lambda s: s.name):
+            if s not in rows and s not in self.state_index:
                 continue
-            for j, ds in sens[s].items():
-                acc[j] = acc.get(j, sp.S.Zero) + partial * ds
-        return {j: d for j, d in sorted(acc.items()) if d != 0}
+            d = sp.diff(e, s)
+            if d != 0:
+                edges.append((rows[s] if s in rows else -1 - self.state_index[s], d))
+                cols |= self.cols[s]
+        return (edges, cols) if edges else None
 
+    def assign(self, v, e, rows: dict):
+        got = self.record(e, rows)
+        if got:
+            rows[v] = self.new_row(got[0], got[1])
+            self.cols[v] = got[1]
+
+
+def tape(assignments, states) -> JacobianTape:
+    """Record the Jacobian tape of ``assignments`` (in causal order) w.r.t. ``states``."""
+    rec = _Recorder(states)
     for item in assignments:
         if isinstance(item, LinearBlock):
-            u = item.unknowns
-            cols: dict[int, dict[int, sp.Expr]] = {}
-            for i, bi in enumerate(item.b):
-                for j, d in directional(bi).items():
-                    cols.setdefault(j, {})[i] = cols.get(j, {}).get(i, 0) + d
-            for i, k, a in item.A:
-                for j, d in directional(a).items():
-                    cols.setdefault(j, {})[i] = cols.get(j, {}).get(i, 0) - d * u[k]
-            order = sorted(cols)
-            R = tuple((i, c, cols[j][i]) for c, j in enumerate(order) for i in sorted(cols[j])
-                      if cols[j][i] != 0)
-            if not R:
+            fixed = dict(rec.rows)          # the tears have no rows yet: held fixed
+            for v, e in item.chain:         # (their columns are reset when assigned after)
+                rec.assign(v, e, fixed)
+            got = [rec.record(e, fixed) for e in item.tear_eqs]
+            if not any(got):
                 continue
-            extra.append(BlockSensitivity(item.index, u, tuple(order), R))
-            for i, v in enumerate(u):
-                sens[v] = {j: entry(item.index, i, c) for c, j in enumerate(order)}
+            cols = frozenset().union(*(g[1] for g in got if g))
+            start = len(rec.entries)
+            for g in got:
+                rec.new_row(g[0] if g else [], g[1] if g else frozenset())
+            for u in item.unknowns:
+                rec.rows[u] = rec.new_row([], cols)
+                rec.cols[u] = cols
+            rec.blocks.append(Block(item.index, start, len(item.unknowns)))
             continue
-        v, e = item
-        row = {}
-        for j, d in directional(e).items():
-            if _trivial(d):
-                row[j] = d
-            else:
-                sym = sp.Symbol(f"J_{v.name}__{j}", real=True)
-                extra.append((sym, d))
-                row[j] = sym
-        if row:
-            sens[v] = row
-    entries = {}
+        rec.assign(item[0], item[1], rec.rows)
+    # the pattern: rows of dx_i; then colour the columns
+    pattern = []
     for i, st in enumerate(states):
-        for j, d in sens.get(st.dsym, {}).items():
-            entries[(i, j)] = d
-    return extra, entries
+        if st.dsym in rec.rows:
+            r = rec.rows[st.dsym]
+            pattern += [(i, j, r) for j in sorted(rec.row_cols[r])]
+    colours, n_colours = _colour(len(states), pattern)
+    # flatten the tape: a partial is (numeric coefficient) x (shared run-time slot)
+    ptr, src, slot, scale = [0], [], [], []
+    slots: dict[sp.Expr, int] = {sp.S.One: 0}
+    for edges in rec.entries:
+        for r, d in edges:
+            src.append(r if r >= 0 else -1 - colours[-1 - r])
+            c, rest = d.as_coeff_Mul()
+            slot.append(slots.setdefault(rest, len(slots)))
+            scale.append(float(c))
+        ptr.append(len(src))
+    partials = [(k, d) for d, k in slots.items() if k > 0]
+    return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, slot, scale,
+                        partials, rec.blocks, pattern)
+
+
+def _colour(n: int, pattern) -> tuple[list[int], int]:
+    """Greedy distance-2 colouring: columns sharing a row of the pattern get different
+    colours (largest columns first, which keeps the count near the densest row)."""
+    rows_of: dict[int, set] = {}
+    cols_of: dict[int, set] = {}
+    for i, j, _ in pattern:
+        rows_of.setdefault(j, set()).add(i)
+        cols_of.setdefault(i, set()).add(j)
+    colour = [0] * n
+    done: set = set()
+    for j in sorted(range(n), key=lambda j: (-len(rows_of.get(j, ())), j)):
+        taken = {colour[k] for i in rows_of.get(j, ()) for k in cols_of[i] if k in done}
+        c = 0
+        while c in taken:
+            c += 1
+        colour[j] = c
+        done.add(j)
+    return colour, max(colour, default=0) + 1

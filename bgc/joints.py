@@ -17,7 +17,8 @@ Every direction it acts in is a scalar *direction* with
   (spring with preload, damper, actuator) sit.
 
 Two kinds of deflection measure everything:
-``dist(u1)``: ``g = (x_P2 - x_P1).u1`` with ``u1`` fixed on body 1; and
+``dist(u1)``: ``g = (x_P2 - x_P1).u1`` with ``u1`` fixed on body 1 (where all three
+translations are blocked, ``u1`` is simply an R0 axis: same span, constant rows); and
 ``perp(u2, w1)``: ``g = u2.w1`` with ``u2`` on body 2, ``w1`` on body 1 (perpendicular at
 assembly). Labels: ``tx ty tz`` translations along, ``rx ry rz`` rotations about the
 joint-frame axes (``ry`` of a universal joint is about its second axis).
@@ -100,6 +101,14 @@ def _dist(geo, label, u, blocked=True):
     return Direction(label, blocked, False, rows, u1.dot(d) if blocked else None)
 
 
+def _coincide(geo, label, k):
+    """Component k (R0) of the joint points' separation, for joints that block all three
+    translations: the span is all of R^3, so a fixed basis serves, with constant rows."""
+    e = sp.Matrix([1 if i == k else 0 for i in range(3)])
+    d = geo.pos[2] - geo.pos[1]
+    return Direction(label, True, False, {"v1": -e, "v2": e}, d[k])
+
+
 def _perp(geo, label, u2, w1, sign=1):
     a, b = geo.vec(2, u2), geo.vec(1, w1)
     rows = {"w1": sign * b.cross(a), "w2": sign * a.cross(b)}
@@ -123,8 +132,11 @@ def directions(kind: str, geo: Geometry, frame, pitch: float = 0.0) -> list[Dire
         "ry": lambda: _perp(geo, "ry", x, z, -1),
         "rz": lambda: _perp(geo, "rz", x, y),
     }
+    point = all(t in spec.blocked for t in trans)
     for label in spec.blocked:
-        if label in trans:
+        if label in trans and point:
+            out.append(_coincide(geo, label, "xyz".index(label[1])))
+        elif label in trans:
             out.append(_dist(geo, label, trans[label]))
         elif kind in NEEDS_AXIS2 and label == "rz":  # body 2's axis2 stays perpendicular
             out.append(_perp(geo, "rz", y, x, -1))  # to the axis (line: in the plane)

@@ -144,8 +144,8 @@ class Body:
     omega: tuple[float, float, float] = (0.0, 0.0, 0.0)      # angular velocity, in R0
 
     # attributes a model expression may read: body.<attr>
-    ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "ax", "ay", "az",
-             "accx", "accy", "accz")
+    ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "wx_R0", "wy_R0", "wz_R0",
+             "ax", "ay", "az", "accx", "accy", "accz")
     # attributes of a named point: body.point.<attr> (R0)
     POINT_ATTRS = ("x", "y", "z", "vx", "vy", "vz", "accx", "accy", "accz")
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "d03fe42719abc8c1f264489a926646e8"
+MODEL_HASH = "36d1e4a4f10f82d0f61f43bf331b87a9"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -68,9 +68,37 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 12, 13, 14, 16, 17], dtype=np.int64)
+TAPE_SRC = np.array([-1, 0, -2, 2, 3, 1, 4, 5, 0, 3, 8, 7, 9, 2, 11, 10, 12], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 4, 5, 0, 0, 0, 5, 6, 0, 0, 4, 7, 0, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 0, 1, 1], dtype=np.int64)
+JAC_J = np.array([0, 1, 0, 1], dtype=np.int64)
+JAC_ROW = np.array([6, 6, 13, 13], dtype=np.int64)
+JAC_COLOUR = np.array([0, 1, 0, 1], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_Ra = p[0]
     P_La = p[1]
     P_km = p[2]
@@ -78,22 +106,20 @@ def jac(t, x, p):
     P_ratio = p[4]
     P_J_load = p[5]
     P_b_load = p[6]
-    J_F_b3__0 = (1.0/P_La)
-    J_E_b2__0 = J_F_b3__0*P_Ra
-    J_F_b9__1 = (1.0/P_J_load)
-    J_F_b7__1 = J_F_b9__1/P_ratio
-    J_E_b4__1 = J_F_b7__1*P_km
-    J_E_b_motor__0 = J_F_b3__0*P_km
-    J_E_b6__1 = J_F_b7__1*P_b_m
-    J_E_b8__0 = J_E_b_motor__0/P_ratio
-    J_E_b8__1 = -J_E_b6__1/P_ratio
-    J_E_b10__1 = J_F_b9__1*P_b_load
-    J_E_b9__1 = -J_E_b10__1 + J_E_b8__1
+    _pv = np.empty(8)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_La)
+    _pv[2] = P_Ra
+    _pv[3] = (1.0/P_J_load)
+    _pv[4] = (1.0/P_ratio)
+    _pv[5] = P_km
+    _pv[6] = P_b_m
+    _pv[7] = P_b_load
+    _d = np.zeros((14, 2))
+    _tape(_d, _pv, 0, 14)
     J = np.zeros((2, 2))
-    J[0, 0] = -J_E_b2__0
-    J[0, 1] = -J_E_b4__1
-    J[1, 0] = J_E_b8__0
-    J[1, 1] = J_E_b9__1
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "b9bb0888e34c5ba84c1ba7a25d0e295f"
+MODEL_HASH = "8769c1a4bf1715d3f4a64f57bd45d952"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -52,18 +52,50 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 4], dtype=np.int64)
+TAPE_SRC = np.array([-1, -1, 1, 0], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, -1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 1], dtype=np.int64)
+JAC_J = np.array([1, 0], dtype=np.int64)
+JAC_ROW = np.array([2, 3], dtype=np.int64)
+JAC_COLOUR = np.array([0, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_m = p[0]
     P_k = p[1]
     P_k3 = p[2]
     X_spring__q = x[1]
-    J_F_b1__0 = (1.0/P_m)
-    J_E_b2__1 = P_k + 3.0*P_k3*X_spring__q**2
+    _pv = np.empty(3)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_m)
+    _pv[2] = P_k + 3.0*P_k3*X_spring__q**2
+    _d = np.zeros((4, 1))
+    _tape(_d, _pv, 0, 4)
     J = np.zeros((2, 2))
-    J[0, 1] = -J_E_b2__1
-    J[1, 0] = J_F_b1__0
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

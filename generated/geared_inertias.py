@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "ba9f43d280c827a41fa9f3bb5a77c9bd"
+MODEL_HASH = "f2fd3e41cd5735cc63615925be0377da"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -58,23 +58,54 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 4, 6, 7, 8], dtype=np.int64)
+TAPE_SRC = np.array([-1, -2, 0, 2, 1, 3, 4, 2], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 4, 5, 5, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 0, 1], dtype=np.int64)
+JAC_J = np.array([0, 1, 0], dtype=np.int64)
+JAC_ROW = np.array([5, 5, 6], dtype=np.int64)
+JAC_COLOUR = np.array([0, 1, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_J_rotor = p[1]
     P_J_load = p[2]
     P_n = p[3]
     P_k = p[4]
     P_b = p[5]
-    J_F_b2__0 = (1.0/P_J_rotor)
-    J_F_b4__0 = J_F_b2__0*P_n
-    J_E_b7__0 = J_F_b4__0*P_b
-    J_E_b2__0 = -J_E_b7__0*P_n/(P_J_load*P_n**2/P_J_rotor + 1.0)
-    J_E_b2__1 = -P_k*P_n/(P_J_load*P_n**2/P_J_rotor + 1.0)
+    _pv = np.empty(6)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_J_rotor)
+    _pv[2] = P_k
+    _pv[3] = P_n
+    _pv[4] = P_b
+    _pv[5] = P_n/(P_J_load*P_n**2/P_J_rotor + 1.0)
+    _d = np.zeros((7, 2))
+    _tape(_d, _pv, 0, 7)
     J = np.zeros((2, 2))
-    J[0, 0] = J_E_b2__0
-    J[0, 1] = J_E_b2__1
-    J[1, 0] = J_F_b4__0
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "c5fd1610e421705dc197e8610796ef2d"
+MODEL_HASH = "4daa1fd01879acaf3b337b59f373a5af"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -54,18 +54,50 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 5, 6, 7], dtype=np.int64)
+TAPE_SRC = np.array([-1, -2, 0, 1, 2, 3, 0], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 0, 0, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 0, 1], dtype=np.int64)
+JAC_J = np.array([0, 1, 0], dtype=np.int64)
+JAC_ROW = np.array([4, 4, 5], dtype=np.int64)
+JAC_COLOUR = np.array([0, 1, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_m = p[0]
     P_k = p[1]
     P_c = p[2]
-    J_F_b1__0 = (1.0/P_m)
-    J_E_b3__0 = J_F_b1__0*P_c
+    _pv = np.empty(4)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_m)
+    _pv[2] = P_k
+    _pv[3] = P_c
+    _d = np.zeros((6, 2))
+    _tape(_d, _pv, 0, 6)
     J = np.zeros((2, 2))
-    J[0, 0] = -J_E_b3__0
-    J[0, 1] = -P_k
-    J[1, 0] = J_F_b1__0
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "84bbe3341447e05f351120edba80d386"
+MODEL_HASH = "09816c1d73d1ea0e98125b1c81e01030"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -55,19 +55,50 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 5, 6, 7], dtype=np.int64)
+TAPE_SRC = np.array([-1, 0, -2, 1, 2, 3, 0], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 0, 0, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 0, 1], dtype=np.int64)
+JAC_J = np.array([0, 1, 0], dtype=np.int64)
+JAC_ROW = np.array([4, 4, 5], dtype=np.int64)
+JAC_COLOUR = np.array([0, 1, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_R = p[1]
     P_L = p[2]
     P_C = p[3]
-    J_F_b3__0 = (1.0/P_L)
-    J_E_b2__0 = J_F_b3__0*P_R
-    J_E_b4__1 = (1.0/P_C)
+    _pv = np.empty(4)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_L)
+    _pv[2] = P_R
+    _pv[3] = (1.0/P_C)
+    _d = np.zeros((6, 2))
+    _tape(_d, _pv, 0, 6)
     J = np.zeros((2, 2))
-    J[0, 0] = -J_E_b2__0
-    J[0, 1] = -J_E_b4__1
-    J[1, 0] = J_F_b3__0
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

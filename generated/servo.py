@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "3e25aa49218c4030e487af473bdd85a2"
+MODEL_HASH = "b924d1819ed9bd9e6efa52aee4d3fd9f"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -70,9 +70,37 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 4, 5, 6, 7, 10, 11, 12, 13, 15, 16, 17], dtype=np.int64)
+TAPE_SRC = np.array([-1, 0, 1, -3, -2, 3, 0, 2, 4, 5, 6, 3, 1, 9, 8, 10, 1], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 7, 0, 0, 0, 0, 7, 8, 9, 10, 0, 0], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0], dtype=np.float64)
+JAC_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
+JAC_J = np.array([0, 1, 2, 0, 1, 1], dtype=np.int64)
+JAC_ROW = np.array([7, 7, 7, 11, 11, 12], dtype=np.int64)
+JAC_COLOUR = np.array([1, 0, 2, 1, 0, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_Ra = p[0]
     P_La = p[1]
     P_km = p[2]
@@ -82,24 +110,23 @@ def jac(t, x, p):
     P_b_load = p[6]
     P_Kp = p[7]
     P_Kd = p[8]
-    J_F_b6__1 = (1.0/P_J_m)
-    J_F_b8__1 = J_F_b6__1*P_ratio
-    J_E_b1__1 = -J_F_b8__1*P_Kd
-    J_F_b3__0 = (1.0/P_La)
-    J_E_b2__0 = J_F_b3__0*P_Ra
-    J_E_b4__1 = J_F_b6__1*P_km
-    J_E_b3__1 = J_E_b1__1 - J_E_b4__1
-    J_E_b5__0 = J_F_b3__0*P_km
-    J_E_b10__1 = J_F_b8__1*P_b_load
-    J_E_b6__0 = J_E_b5__0/(P_J_load*P_ratio**2/P_J_m + 1.0)
-    J_E_b6__1 = -J_E_b10__1*P_ratio/(P_J_load*P_ratio**2/P_J_m + 1.0)
+    _pv = np.empty(11)
+    _pv[0] = 1.0
+    _pv[1] = (1.0/P_J_m)
+    _pv[2] = P_ratio
+    _pv[3] = P_Kd
+    _pv[4] = P_Kp
+    _pv[5] = (1.0/P_La)
+    _pv[6] = P_Ra
+    _pv[7] = P_km
+    _pv[8] = P_b_load
+    _pv[9] = P_ratio/(P_J_load*P_ratio**2/P_J_m + 1.0)
+    _pv[10] = (1.0/(P_J_load*P_ratio**2/P_J_m + 1.0))
+    _d = np.zeros((13, 3))
+    _tape(_d, _pv, 0, 13)
     J = np.zeros((3, 3))
-    J[0, 0] = -J_E_b2__0
-    J[0, 1] = J_E_b3__1
-    J[0, 2] = -P_Kp
-    J[1, 0] = J_E_b6__0
-    J[1, 1] = J_E_b6__1
-    J[2, 1] = J_F_b8__1
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

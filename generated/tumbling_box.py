@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "301b26fae2507769f963ea7b53662494"
+MODEL_HASH = "ca18082c2657561bb487cd2a39fca3a8"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 
@@ -81,9 +81,37 @@ def rhs(t, x, p):
     return dx
 
 
+# The Jacobian tape (see bgc.jacobian): row r of the compressed sensitivities is the sum
+# over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
+# (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
+# from row JAC_ROW, column JAC_COLOUR.
+TAPE_PTR = np.array([0, 1, 2, 3, 5, 7, 9, 10, 11, 12, 13, 14, 15, 16, 20, 21, 24, 25, 30], dtype=np.int64)
+TAPE_SRC = np.array([-1, -2, -3, 1, 2, 0, 2, 0, 1, -1, -1, -1, 3, 4, 5, 6, 0, 1, -5, -4, 7, 0, 1, -4, 8, 0, 1, 2, -5, -4], dtype=np.int64)
+TAPE_SLOT = np.array([0, 0, 0, 1, 2, 1, 3, 2, 3, 0, 0, 0, 0, 0, 0, 0, 4, 5, 6, 7, 0, 8, 9, 10, 0, 11, 12, 0, 13, 14], dtype=np.int64)
+TAPE_SCALE = np.array([10.0, 5.0, 3.3333333333333335, 0.09999999999999998, 0.09999999999999998, -0.19999999999999998, -0.19999999999999998, 0.1, 0.1, 0.5, 0.5, 0.5, -1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, -1.0], dtype=np.float64)
+JAC_I = np.array([3, 3, 4, 4, 5, 5, 6, 7, 7, 7, 7, 8, 9, 9, 9, 10, 11, 11, 11, 11, 11], dtype=np.int64)
+JAC_J = np.array([4, 5, 3, 5, 3, 4, 0, 3, 4, 9, 11, 1, 3, 4, 11, 2, 3, 4, 5, 9, 11], dtype=np.int64)
+JAC_ROW = np.array([9, 9, 10, 10, 11, 11, 12, 13, 13, 13, 13, 14, 15, 15, 15, 16, 17, 17, 17, 17, 17], dtype=np.int64)
+JAC_COLOUR = np.array([1, 2, 0, 2, 0, 1, 0, 0, 1, 4, 3, 0, 0, 1, 3, 0, 0, 1, 2, 4, 3], dtype=np.int64)
+
+
+@njit(cache=True)
+def _tape(d, pv, start, stop):
+    """Accumulate rows start..stop of the compressed sensitivities, in order."""
+    for r in range(start, stop):
+        for m in range(TAPE_PTR[r], TAPE_PTR[r + 1]):
+            s = TAPE_SRC[m]
+            w = TAPE_SCALE[m] * pv[TAPE_SLOT[m]]
+            if s < 0:
+                d[r, -s - 1] += w
+            else:
+                for c in range(d.shape[1]):
+                    d[r, c] += w * d[s, c]
+
+
 @njit(cache=True)
 def jac(t, x, p):
-    """J[i, j] = d f_i / d x_j, by the chain rule through the assignments."""
+    """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     X_box__J__px = x[3]
     X_box__J__py = x[4]
     X_box__J__pz = x[5]
@@ -92,45 +120,27 @@ def jac(t, x, p):
     F_b__box__w__box__J__x = 10.0*X_box__J__px
     F_b__box__w__box__J__y = 5.0*X_box__J__py
     F_b__box__w__box__J__z = 3.3333333333333335*X_box__J__pz
-    J_E_b__box__w__box__EJS__x__4 = 0.4999999999999999*F_b__box__w__box__J__z
-    J_E_b__box__w__box__EJS__x__5 = 0.33333333333333326*F_b__box__w__box__J__y
-    J_E_b__box__w__box__EJS__y__3 = -1.9999999999999998*F_b__box__w__box__J__z
-    J_E_b__box__w__box__EJS__y__5 = -0.6666666666666666*F_b__box__w__box__J__x
-    J_E_b__box__w__box__EJS__z__3 = 1.0*F_b__box__w__box__J__y
-    J_E_b__box__w__box__EJS__z__4 = 0.5*F_b__box__w__box__J__x
-    J_DX_box__ax__3 = 10.0*np.cos(X_box__az)/np.cos(X_box__ay)
-    J_DX_box__ax__4 = -5.0*np.sin(X_box__az)/np.cos(X_box__ay)
-    J_DX_box__ax__9 = (F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az))*np.sin(X_box__ay)/np.cos(X_box__ay)**2
-    J_DX_box__ax__11 = (-F_b__box__w__box__J__x*np.sin(X_box__az) - F_b__box__w__box__J__y*np.cos(X_box__az))/np.cos(X_box__ay)
-    J_DX_box__ay__3 = 10.0*np.sin(X_box__az)
-    J_DX_box__ay__4 = 5.0*np.cos(X_box__az)
-    J_DX_box__ay__11 = F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az)
-    J_DX_box__az__3 = -10.0*np.sin(X_box__ay)*np.cos(X_box__az)/np.cos(X_box__ay)
-    J_DX_box__az__4 = 5.0*np.sin(X_box__ay)*np.sin(X_box__az)/np.cos(X_box__ay)
-    J_DX_box__az__9 = -F_b__box__w__box__J__x*np.cos(X_box__az) + F_b__box__w__box__J__y*np.sin(X_box__az) - (F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az))*np.sin(X_box__ay)**2/np.cos(X_box__ay)**2
-    J_DX_box__az__11 = -(-F_b__box__w__box__J__x*np.sin(X_box__az) - F_b__box__w__box__J__y*np.cos(X_box__az))*np.sin(X_box__ay)/np.cos(X_box__ay)
+    _pv = np.empty(15)
+    _pv[0] = 1.0
+    _pv[1] = F_b__box__w__box__J__z
+    _pv[2] = F_b__box__w__box__J__y
+    _pv[3] = F_b__box__w__box__J__x
+    _pv[4] = np.cos(X_box__az)/np.cos(X_box__ay)
+    _pv[5] = np.sin(X_box__az)/np.cos(X_box__ay)
+    _pv[6] = (F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az))*np.sin(X_box__ay)/np.cos(X_box__ay)**2
+    _pv[7] = (-F_b__box__w__box__J__x*np.sin(X_box__az) - F_b__box__w__box__J__y*np.cos(X_box__az))/np.cos(X_box__ay)
+    _pv[8] = np.sin(X_box__az)
+    _pv[9] = np.cos(X_box__az)
+    _pv[10] = F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az)
+    _pv[11] = np.sin(X_box__ay)*np.cos(X_box__az)/np.cos(X_box__ay)
+    _pv[12] = np.sin(X_box__ay)*np.sin(X_box__az)/np.cos(X_box__ay)
+    _pv[13] = -F_b__box__w__box__J__x*np.cos(X_box__az) + F_b__box__w__box__J__y*np.sin(X_box__az) - (F_b__box__w__box__J__x*np.cos(X_box__az) - F_b__box__w__box__J__y*np.sin(X_box__az))*np.sin(X_box__ay)**2/np.cos(X_box__ay)**2
+    _pv[14] = (-F_b__box__w__box__J__x*np.sin(X_box__az) - F_b__box__w__box__J__y*np.cos(X_box__az))*np.sin(X_box__ay)/np.cos(X_box__ay)
+    _d = np.zeros((18, 5))
+    _tape(_d, _pv, 0, 18)
     J = np.zeros((12, 12))
-    J[3, 4] = -J_E_b__box__w__box__EJS__x__4
-    J[3, 5] = -J_E_b__box__w__box__EJS__x__5
-    J[4, 3] = -J_E_b__box__w__box__EJS__y__3
-    J[4, 5] = -J_E_b__box__w__box__EJS__y__5
-    J[5, 3] = -J_E_b__box__w__box__EJS__z__3
-    J[5, 4] = -J_E_b__box__w__box__EJS__z__4
-    J[6, 0] = 0.5
-    J[7, 3] = J_DX_box__ax__3
-    J[7, 4] = J_DX_box__ax__4
-    J[7, 9] = J_DX_box__ax__9
-    J[7, 11] = J_DX_box__ax__11
-    J[8, 1] = 0.5
-    J[9, 3] = J_DX_box__ay__3
-    J[9, 4] = J_DX_box__ay__4
-    J[9, 11] = J_DX_box__ay__11
-    J[10, 2] = 0.5
-    J[11, 3] = J_DX_box__az__3
-    J[11, 4] = J_DX_box__az__4
-    J[11, 5] = 3.3333333333333335
-    J[11, 9] = J_DX_box__az__9
-    J[11, 11] = J_DX_box__az__11
+    for k in range(JAC_I.shape[0]):
+        J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
     return J
 
 

@@ -12,6 +12,14 @@ from bgc.emit import import_module
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
+# models whose numba compilation and runs take minutes: their tests are marked slow
+SLOW_MODELS = {"sarib"}
+
+
+def model_params(names=None):
+    """pytest parameters for the shipped models (all by default), slow ones marked."""
+    names = names or sorted(p.stem for p in MODELS.glob("*.yaml"))
+    return [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_MODELS else n for n in names]
 
 
 @pytest.fixture(scope="session")

@@ -72,6 +72,44 @@ def test_3d_double_pendulum_conserves_energy(compiled):
     assert r.column("gap").max() < 1e-5
 
 
+SPHERICAL_PENDULUM = """
+name: spherical_pendulum
+gravity: 9.81
+bodies:
+  bob:        # a small ball (isotropic inertia) 0.6 m from the pivot, 40 deg out, moving sideways
+    mass: 1.5
+    com: [0.3856725658, 0.0, -0.4596266659]
+    inertia: [0.01, 0.01, 0.01]
+    velocity: [0.0, 1.2, 0.0]
+    omega: [1.5320888862, 0.0, 1.2855752194]      # v_G = omega x r_G: the pivot stays put
+joints:
+  pivot: {type: spherical, between: [fixed_frame, bob], at: [0, 0, 0]}
+outputs:
+  z: bob.z
+  gap: pivot.gap
+  energy: "0.5 * 1.5 * (bob.vx**2 + bob.vy**2 + bob.vz**2) + 0.5 * 0.01 * (bob.wx**2 + bob.wy**2 + bob.wz**2) + 1.5 * 9.81 * bob.z"
+  Lz: "1.5 * (bob.x * bob.vy - bob.y * bob.vx) + 0.01 * bob.wz_R0"
+"""
+
+
+def test_spherical_pendulum_conserves_energy_and_vertical_angular_momentum(tmp_path):
+    """Gravity and the pivot force have no moment about the vertical through the pivot, so
+    L_z is conserved; with no functional damping, so is the energy (up to what the
+    parasitic dampers dissipate)."""
+    f = tmp_path / "spherical_pendulum.yaml"
+    f.write_text(SPHERICAL_PENDULUM)
+    _, path = compile_model(f, tmp_path / "gen")
+    r = simulate(import_module(path), t_end=3.0, rtol=1e-9, atol=1e-11, solver="radau")
+    E, Lz = r.column("energy"), r.column("Lz")
+    assert abs(Lz[0] - 1.5 * 0.3856725658 * 1.2 - 0.01 * 1.2855752194) < 1e-9
+    # the pivot load (~15 N) deflects the parasitic spring by F/k: F^2/(2k) ~ 1e-5 J
+    assert np.abs(E - E[0]).max() < 1e-5 * abs(E[0]), np.abs(E - E[0]).max() / abs(E[0])
+    assert np.abs(Lz - Lz[0]).max() < 1e-6 * abs(Lz[0]), np.abs(Lz - Lz[0]).max() / Lz[0]
+    z = r.column("z")
+    assert z.max() - z.min() > 0.05                          # it nutates, not a cone
+    assert r.column("gap").max() < 1e-5
+
+
 CHAIN = """
 name: {name}
 gravity: 9.81
@@ -200,6 +238,25 @@ def test_bad_joints_are_refused_with_their_line(joint, key, words):
         loads(JOINT_BASE.replace("JOINT", joint), "bad.yaml")
     msg = str(exc.value)
     assert msg.startswith("bad.yaml:") and key in msg and words in msg, msg
+
+
+def test_functional_element_on_a_direction_another_joint_blocks_is_refused():
+    """A revolute's spring about z in parallel with a weld of the same bodies: the weld's
+    parasitic spring would take the load, so the spring means nothing. A redundant but
+    consistent pair (two spherical joints on one axis = a revolute) is accepted."""
+    from bgc.pipeline import build
+    welded = JOINT_BASE.replace("JOINT", "{type: revolute, between: [a, b], at: [0, 0, 1], "
+                                "axis: [0, 0, 1], spring: {k: 50, c: 1}}\n"
+                                "  w: {type: fixed, between: [a, b], at: [0, 0, 1]}")
+    with pytest.raises(ModelError) as exc:
+        build(loads(welded, "bad.yaml"))
+    msg = str(exc.value)
+    assert msg.startswith("bad.yaml:") and "joints.j" in msg and "'w'" not in msg, msg
+    assert "rx of joint 'j'" in msg and "joint w blocks" in msg, msg
+    fine = JOINT_BASE.replace("JOINT", "{type: revolute, between: [a, b], at: [0, 0, 1], "
+                              "axis: [0, 0, 1], spring: {k: 50}}\n"
+                              "  s: {type: spherical, between: [a, b], at: [0, 0, 1]}")
+    build(loads(fine, "ok.yaml"))
 
 
 def test_massless_body_left_free_is_refused():

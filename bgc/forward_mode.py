@@ -1,0 +1,51 @@
+"""Symbolic forward-mode differentiation through sorted assignments.
+
+Used where a few seeds meet a short chain: a numeric loop block's matrix, as the loop's
+sensitivities to its tearing variables (the model Jacobian, with many seeds, is a run-time
+tape instead: ``jacobian``). For ``v = expr(w1, w2, ...)`` the sensitivity of ``v`` to seed
+``j`` is ``sum_k d expr/d w_k * dw_k/dj``. Only non-zero entries are carried; a
+sensitivity that is not a number or a (negated) symbol gets its own assignment, so no
+expression is ever substituted into another and the emitted code grows with the number
+of assignments, not with the depth of the graph.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import sympy as sp
+
+
+def trivial(d) -> bool:
+    """A number or a (negated) symbol: printed inline, never hoisted."""
+    return d.is_Number or d.is_Symbol or (d.could_extract_minus_sign() and (-d).is_Symbol)
+
+
+def directional(e, sens: dict) -> dict[int, sp.Expr]:
+    """{seed: d e / d seed} through the symbols of ``e`` that have sensitivities."""
+    acc: dict[int, sp.Expr] = {}
+    for s in sorted((s for s in e.free_symbols if s in sens), key=lambda s: s.name):
+        partial = sp.diff(e, s)
+        if partial == 0:
+            continue
+        for j, ds in sens[s].items():
+            acc[j] = acc.get(j, sp.S.Zero) + partial * ds
+    return {j: d for j, d in sorted(acc.items()) if d != 0}
+
+
+def propagate(assignments, sens: dict, name: Callable[[sp.Symbol, int], str]) -> list:
+    """Carry ``sens`` through ``(v, expr)`` assignments in order (``sens`` is extended in
+    place); return the hoisted ``(symbol, expr)`` assignments, named ``name(v, seed)``."""
+    hoisted = []
+    for v, e in assignments:
+        row = {}
+        for j, d in directional(e, sens).items():
+            if trivial(d):
+                row[j] = d
+            else:
+                sym = sp.Symbol(name(v, j), real=True)
+                hoisted.append((sym, d))
+                row[j] = sym
+        if row:
+            sens[v] = row
+    return hoisted

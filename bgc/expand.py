@@ -220,10 +220,9 @@ def _twist_row(model: Model, j, d, col: dict, subs: dict, width: int) -> np.ndar
     return row
 
 
-def _check_functional_not_blocked(model: Model, joint_dirs: dict):
+def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
     """Two joints between the same bodies where one's spring, damper or actuator acts on
     a motion the other blocks: the parasitic spring would absorb it, silently."""
-    subs = _initial_pose(model)
     pairs: dict[frozenset, list] = {}
     for name, (j, dirs) in joint_dirs.items():
         pairs.setdefault(frozenset((j.body1, j.body2)), []).append((name, j, dirs))
@@ -256,14 +255,13 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict):
                              "to a direction that is free in both")
 
 
-def _check_massless(model: Model, joint_dirs: dict):
+def _check_massless(model: Model, joint_dirs: dict, subs: dict):
     """A body of negligible mass must have its twist fixed by its joints (blocked or damped
     directions), or the balance of forces on it cannot be solved."""
     massless = [n for n, b in model.bodies.items() if b.mass == 0]
     if not massless:
         return
     col = {n: 6 * i for i, n in enumerate(massless)}
-    subs = _initial_pose(model)
     rows, touching = [], {n: [] for n in massless}
     for name, (j, dirs) in joint_dirs.items():
         for d in dirs:
@@ -300,8 +298,9 @@ def expand(model: Model) -> BondGraph:
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
-    _check_functional_not_blocked(model, joint_dirs)
-    _check_massless(model, joint_dirs)
+    pose = _initial_pose(model)
+    _check_functional_not_blocked(model, joint_dirs, pose)
+    _check_massless(model, joint_dirs, pose)
     elements, bonds = ex.elements, ex.bonds
     ports: dict[str, list[int]] = {name: [] for name in elements}
     for i, b in enumerate(bonds):

@@ -4,10 +4,11 @@ Every assigned variable that depends on the states gets a row of sensitivities; 
 columns are compressed by a colouring of the Jacobian's sparsity pattern (Curtis-Powell-
 Reid: columns that share no row share a colour), so a row holds one number per colour.
 For ``v = expr(w1, w2, ...)`` the generated code evaluates each partial ``d expr/d w_k``
-as a numeric coefficient (kept in a table) times a run-time factor that is computed once
-however many edges share it, and a short loop accumulates ``row(v) += partial * row(w_k)``. The emitted code grows with the number of
-edges in the graph, not with edges x columns, and nothing is ever substituted into one
-large expression. The result is exact (no differencing).
+as a numeric coefficient (kept in a table) times a run-time factor computed once however
+many edges share it, and a short loop accumulates ``row(v) += partial * row(w_k)``. The
+emitted code grows with the number of edges in the graph, not with edges x columns, and
+nothing is ever substituted into one large expression. The result is exact (no
+differencing).
 
 Through a numeric linear block ``A u = b`` the rows of ``u`` are ``A^-1 R`` with
 ``R = d(b - A u)/dx`` at fixed ``u``: the loop's own equations differentiated through

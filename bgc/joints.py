@@ -94,19 +94,13 @@ class Geometry:
         return R * (R0.T * u).applyfunc(lambda x: sp.Float(float(x)))
 
 
-def _dist(geo, label, u, blocked=True):
-    u1 = geo.vec(1, u)
+def _dist(geo, label, u, blocked=True, in_r0=False):
+    """Separation of the joint points along ``u``: fixed on body 1, or (``in_r0``, for
+    joints that block all three translations: same span) an R0 axis with constant rows."""
+    u1 = sp.Matrix(u) if in_r0 else geo.vec(1, u)
     d = geo.pos[2] - geo.pos[1]
-    rows = {"v1": -u1, "v2": u1, "w1": u1.cross(d)}
+    rows = {"v1": -u1, "v2": u1} if in_r0 else {"v1": -u1, "v2": u1, "w1": u1.cross(d)}
     return Direction(label, blocked, False, rows, u1.dot(d) if blocked else None)
-
-
-def _coincide(geo, label, k):
-    """Component k (R0) of the joint points' separation, for joints that block all three
-    translations: the span is all of R^3, so a fixed basis serves, with constant rows."""
-    e = sp.Matrix([1 if i == k else 0 for i in range(3)])
-    d = geo.pos[2] - geo.pos[1]
-    return Direction(label, True, False, {"v1": -e, "v2": e}, d[k])
 
 
 def _perp(geo, label, u2, w1, sign=1):
@@ -135,7 +129,8 @@ def directions(kind: str, geo: Geometry, frame, pitch: float = 0.0) -> list[Dire
     point = all(t in spec.blocked for t in trans)
     for label in spec.blocked:
         if label in trans and point:
-            out.append(_coincide(geo, label, "xyz".index(label[1])))
+            k = "xyz".index(label[1])
+            out.append(_dist(geo, label, [int(i == k) for i in range(3)], in_r0=True))
         elif label in trans:
             out.append(_dist(geo, label, trans[label]))
         elif kind in NEEDS_AXIS2 and label == "rz":  # body 2's axis2 stays perpendicular

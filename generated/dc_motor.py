@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "36d1e4a4f10f82d0f61f43bf331b87a9"
+MODEL_HASH = "a2c50bc7a334283f877ec7c2860fcfe0"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

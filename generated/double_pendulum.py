@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "1cf06d3303d4c5716e5f0a7eba72b5d9"
+MODEL_HASH = "247fcfb9992dfccdc8209dac18fb2650"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "8769c1a4bf1715d3f4a64f57bd45d952"
+MODEL_HASH = "0bdb40a1446a8b233982dfebe374f48e"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

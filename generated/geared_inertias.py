@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "f2fd3e41cd5735cc63615925be0377da"
+MODEL_HASH = "4ad59f3bd707eacf0116a9c8485e8e1c"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

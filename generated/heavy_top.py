@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "06e8a6e0a12ab8c3a797372c66b3acd6"
+MODEL_HASH = "f07beb26119250dc605687cadca73097"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

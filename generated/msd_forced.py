@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "c304db010cf13028dcd396dc0446b177"
+MODEL_HASH = "4276aca29c74646c7ccebd02c06c760b"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "4daa1fd01879acaf3b337b59f373a5af"
+MODEL_HASH = "e0f04b0fadc13c011d52a12cc242e1bd"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "1b9f996581d87c0aa13748484781249b"
+MODEL_HASH = "63e05adba40c59b201824765c0c4d8b9"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

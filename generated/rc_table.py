@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "24c8bbc1c4e4df8d787326bfe3fa1b39"
+MODEL_HASH = "d88fffda0da375710f0c85ec9d1a0576"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "d96629fedf8039ff9231b7fe123c06b6"
+MODEL_HASH = "3b234ac2a89991c00e962843f422d034"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "09816c1d73d1ea0e98125b1c81e01030"
+MODEL_HASH = "22d89e5918fc49555ddc0887e9f51507"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "4d04e9dba1f94a41f2b6db975c8b3bbf"
+MODEL_HASH = "04d17c948b621ee43bad99dc4a3443bf"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

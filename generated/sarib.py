@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "045ac46864c113a21bee93d33f18b37a"
+MODEL_HASH = "04335c415b10c0c0879bfe8fa57f2ce0"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "b924d1819ed9bd9e6efa52aee4d3fd9f"
+MODEL_HASH = "443686c00f228cd1642b5a3066109b23"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "1a0d0e36be63d53b43e6de1d42094adb"
+MODEL_HASH = "296c5aec26049246de3c05d0f74e8508"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

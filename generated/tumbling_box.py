@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "ca18082c2657561bb487cd2a39fca3a8"
+MODEL_HASH = "d804f5025536e0d8094deb79adf4a5f1"
 BGC_VERSION = "0.1.0"
 METHOD = "scalar"
 

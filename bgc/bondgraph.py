@@ -11,6 +11,21 @@ from dataclasses import dataclass, field
 from .model import POWER_IN, Body, Bond, Element, Model
 
 
+@dataclass(frozen=True)
+class Constraint:
+    """A blocked joint direction whose element L is a constraint effort source (method
+    ``lagrange``): its effort is the multiplier, its flow the rate dg/dt."""
+    joint: str
+    label: str
+    element: str          # the L element (an MSe with the multiplier as effort)
+    g: object             # geometric deflection (sympy, in the states), None: none
+    rotational: bool
+
+    @property
+    def name(self) -> str:
+        return f"{self.joint}.{self.label}"
+
+
 @dataclass
 class BondGraph:
     model: Model
@@ -19,6 +34,8 @@ class BondGraph:
     ports: dict[str, list[int]]     # element name -> indices of its bonds, in file order
     bodies: dict[str, Body] = field(default_factory=dict)
     joints: dict[str, list] = field(default_factory=dict)   # joint -> its Directions
+    method: str = "parasitic"
+    constraints: list = field(default_factory=list)          # lagrange: [Constraint]
 
     def other(self, b: int, node: str) -> str:
         bond = self.bonds[b]

@@ -18,7 +18,7 @@ from .errors import BgcError, SimulationError
 from .pipeline import METHODS, build, compile_model, ensure_module
 
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
-_method_opt = click.option("--method", type=click.Choice(METHODS), default="scalar",
+_method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
                            show_default=True, help="how constraint elements are handled")
 
 
@@ -73,6 +73,7 @@ def check(model, method, as_json):
         "algebraic_loops": [lp.__dict__ for lp in s.loops],
         "free_choices": rep["free_choices"], "strokes": rep["bonds"],
         "notes": s.notes, "conflicts": [],
+        "constraints": [name for name, _, _ in s.constraints],
     }
     if as_json:
         click.echo(json.dumps(report, indent=2))
@@ -91,6 +92,9 @@ def check(model, method, as_json):
     click.echo(f"algebraic loops: {len(loops) or 'none'}")
     for lp in loops:
         click.echo(f"  {lp.describe()}")
+    if s.constraints:
+        click.echo(f"constraints (method {method}): {len(s.constraints)} multipliers, "
+                   f"solved at the acceleration level with Baumgarte stabilisation")
     for note in rep["free_choices"] + s.notes:
         click.echo(f"note: {note}")
 
@@ -168,16 +172,23 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
     if plot:
         files["png"] = str(plot_png(result, plot, title=f"{m.name} ({result.solver})"))
     stats = result.stats.to_dict()
+    proj = result.projection
     if as_json:
-        click.echo(json.dumps({"model": m.name, "solver": result.solver,
+        click.echo(json.dumps({"model": m.name, "method": method, "solver": result.solver,
                                "t_end": float(result.t[-1]), "stats": stats,
+                               "projection": proj.to_dict() if proj else None,
                                "compiled": compiled is not None, "files": files}, indent=2))
         return
+    if proj is not None:
+        click.echo(proj.describe())
     click.echo(f"{m.name}: {result.solver} to t = {result.t[-1]:g} s: {stats['steps']} steps, "
                f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
                f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "
                f"(+{stats['compile_time']:.2f} s JIT/cache load"
                f"{', recompiled' if compiled else ''})")
+    if stats["drift_position"] is not None:
+        click.echo(f"  constraint drift: position {stats['drift_position']:.3g}, velocity "
+                   f"{stats['drift_velocity']:.3g}")
     for kind, f in files.items():
         click.echo(f"  {kind}: {f}")
 

@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import jinja2
+import sympy as sp
 
 from . import __version__
 from .equations import EquationSystem, LinearBlock
@@ -79,11 +80,28 @@ def _body(assignments):
         if isinstance(item, LinearBlock):
             k, n = item.index, len(item.unknowns)
             lines += [f"{v.name} = {code(e)}" for v, e in item.pre]
-            lines.append(f"_A{k} = np.zeros(({n}, {n}))")
-            lines += [f"_A{k}[{i}, {j}] = {code(e)}" for i, j, e in item.A]
+            if item.factors is not None:        # A = -K B
+                d, K, B = item.factors
+                lines.append(f"_K{k} = np.zeros(({n}, {d}))")
+                lines += [f"_K{k}[{i}, {j}] = {code(e)}" for i, j, e in K]
+                lines.append(f"_B{k} = np.zeros(({d}, {n}))")
+                lines += [f"_B{k}[{i}, {j}] = {code(e)}" for i, j, e in B]
+                lines.append(f"_A{k} = -(_K{k} @ _B{k})")
+            else:
+                lines.append(f"_A{k} = np.zeros(({n}, {n}))")
+                lines += [f"_A{k}[{i}, {j}] = {code(e)}" for i, j, e in item.A]
             lines.append(f"_b{k} = np.empty({n})")
-            lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
-            lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
+            if item.b is None:      # the right-hand side at u = 0, through the chain
+                lines += [f"{v.name} = 0.0" for v in item.unknowns]
+                lines += [f"{v.name} = {code(e)}" for v, e in item.chain]
+                lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.tear_eqs)]
+            else:
+                lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
+            if item.rank is None:
+                lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
+            else:
+                lines.append(f"_P{k} = _kkt_pinv(_A{k}, {item.rank.name})")
+                lines.append(f"_u{k} = _P{k} @ _b{k}")
             lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
         else:
             v, e = item
@@ -98,8 +116,9 @@ def _prologue(system, used):
     return params, unpack
 
 
-def _jac_lines(jt) -> list[str]:
-    """The jac tail: run-time partials, the tape segments with block solves between."""
+def _jac_lines(jt, kkt: set) -> list[str]:
+    """The jac tail: run-time partials, the tape segments with block solves between
+    (``kkt``: the indices of constraint blocks, solved with their pseudo-inverse)."""
     lines = [f"_pv = np.empty({len(jt.partials) + 1})", "_pv[0] = 1.0"]
     lines += [f"_pv[{k}] = {code(d)}" for k, d in jt.partials]
     lines.append(f"_d = np.zeros(({jt.n_rows}, {jt.n_colours}))")
@@ -109,8 +128,10 @@ def _jac_lines(jt) -> list[str]:
         else:
             b = seg[1]
             r, n = b.start, b.n
-            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = np.linalg.solve(_A{b.index}, "
-                         f"_d[{r}:{r + n}, :])")
+            solve = (f"_P{b.index} @ np.ascontiguousarray(" if b.index in kkt
+                     else f"np.linalg.solve(_A{b.index}, ")
+            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = {solve}_d[{r}:{r + n}, :]"
+                         + ")")
     return lines
 
 
@@ -129,11 +150,18 @@ def render(system: EquationSystem) -> str:
     out_asg, out_used = _cone(system.assignments, out_exprs)
     guard_exprs = [e for _, e in system.guards]
     guard_asg, guard_used = _cone(system.assignments, guard_exprs)
+    con_exprs = ([g if g is not None else 0 * r for _, g, r in system.constraints]
+                 + [r for _, _, r in system.constraints])
+    con_exprs = [sp.sympify(e) for e in con_exprs]
+    con_asg, con_used = _cone(system.assignments, con_exprs)
+    kkt = {it.index for it in system.assignments
+           if isinstance(it, LinearBlock) and it.rank is not None}
     funcs = {}
     for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
                            ("jac", jac_all, jac_used),
                            ("out", out_asg, out_used),
-                           ("guard", guard_asg, guard_used)):
+                           ("guard", guard_asg, guard_used),
+                           ("con", con_asg, con_used)):
         params, unpack = _prologue(system, used)
         funcs[key] = (params, unpack, _body(asg))
     ctx = dict(
@@ -152,7 +180,12 @@ def render(system: EquationSystem) -> str:
                 for tb in system.tables],
         n=len(system.states),
         rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
-        jac_out=_jac_lines(jt),
+        jac_out=_jac_lines(jt, kkt),
+        kkt=bool(kkt),
+        constraint_names=[n for n, _, _ in system.constraints],
+        has_position=[int(g is not None) for _, g, _ in system.constraints],
+        pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
+        con_out=[f"c[{k}] = {code(e)}" for k, e in enumerate(con_exprs)],
         tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[repr(c) for c in jt.scale],
                   i=[i for i, _, _ in jt.pattern],
                   row=[r for _, _, r in jt.pattern],
@@ -167,8 +200,11 @@ def render(system: EquationSystem) -> str:
     return _ENV.get_template("module.py.j2").render(**ctx)
 
 
-def module_path(name: str, out_dir: str | Path = "generated") -> Path:
-    return Path(out_dir) / f"{name}.py"
+def module_path(name: str, out_dir: str | Path = "generated",
+                method: str = "parasitic") -> Path:
+    """``<name>.py`` for the default method, ``<name>_<method>.py`` for the others (so
+    the methods of one model live side by side)."""
+    return Path(out_dir) / (f"{name}.py" if method == "parasitic" else f"{name}_{method}.py")
 
 
 def write(system: EquationSystem, out_dir: str | Path = "generated") -> Path:
@@ -179,7 +215,7 @@ def write(system: EquationSystem, out_dir: str | Path = "generated") -> Path:
     init = out_dir / "__init__.py"
     if not init.exists():
         _atomic_write(init, '"""Modules generated by `bgc compile`."""\n')
-    path = module_path(system.model.name, out_dir)
+    path = module_path(system.model.name, out_dir, system.method)
     _atomic_write(path, source)
     return path
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
-from . import cardan, symbols
+from . import cardan, lagrange, symbols
 from .causality import CausalGraph
 from .errors import EquationError
 from .expand import AXES, body_junction, position, rotation_matrix
@@ -61,23 +61,37 @@ class Loop:
 class LinearBlock:
     """A linear loop solved numerically at run time: ``A(w) u = b(w)`` by LU, for loops
     too large to solve symbolically without expression swell. ``A`` holds the non-zero
-    entries only; ``pre`` are assignments that ``A`` reads (the loop's sensitivities to
+    entries only; ``b`` is None where it is evaluated numerically, as ``tear_eqs`` with
+    ``u = 0`` and the chain run once at that point (no substituted expression); ``pre`` are assignments that ``A`` reads (the loop's sensitivities to
     ``u``). For the Jacobian: ``u = tear_eqs(u, chain)``, where ``chain`` are the loop's
     other variables in causal order (computed after the block), both unsubstituted."""
     index: int
     unknowns: tuple[sp.Symbol, ...]
     A: tuple[tuple[int, int, sp.Expr], ...]
-    b: tuple[sp.Expr, ...]
+    b: tuple[sp.Expr, ...] | None
     tear_eqs: tuple[sp.Expr, ...]
     chain: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
     pre: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    # None: LU. A symbol: the constraint block of method lagrange, solved by SVD keeping
+    # that many singular values (the rank of the constraints at the initial state)
+    rank: sp.Symbol | None = None
+    # constraint blocks: A = -K B with K (n x d) and B (d x n) sparse, d dynamic states
+    factors: tuple | None = None
 
     @property
     def free_symbols(self) -> set:
-        out = set()
-        for e in [e for _, _, e in self.A] + list(self.b) + [e for _, e in self.pre]:
+        out = {self.rank} if self.rank is not None else set()
+        exprs = [e for _, _, e in self.A] + [e for _, e in self.pre]
+        if self.factors is not None:
+            exprs += [e for _, _, e in self.factors[1] + self.factors[2]]
+        if self.b is None:      # b = tear_eqs at u = 0, the chain evaluated in the block
+            exprs += list(self.tear_eqs) + [e for _, e in self.chain]
+        else:
+            exprs += list(self.b)
+        for e in exprs:
             out |= e.free_symbols
-        return out - {v for v, _ in self.pre}
+        inner = set(self.unknowns) | {v for v, _ in self.chain} if self.b is None else set()
+        return out - {v for v, _ in self.pre} - inner
 
     def xreplace(self, mapping) -> "LinearBlock":
         """Apply ``mapping`` (aliases: symbol -> symbol or number) everywhere; chain
@@ -86,9 +100,14 @@ class LinearBlock:
             return tuple((v, e.xreplace(mapping)) for v, e in items if v not in mapping)
         return LinearBlock(self.index, self.unknowns,
                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.A),
+                           None if self.b is None else
                            tuple(e.xreplace(mapping) for e in self.b),
                            tuple(e.xreplace(mapping) for e in self.tear_eqs),
-                           pairs(self.chain), pairs(self.pre))
+                           pairs(self.chain), pairs(self.pre), self.rank,
+                           None if self.factors is None else
+                           (self.factors[0],
+                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[1]),
+                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[2])))
 
 
 @dataclass
@@ -105,6 +124,8 @@ class EquationSystem:
     notes: list[str] = field(default_factory=list)
     # (what, margin expression): the run stops where a margin reaches GUARD_TOLERANCE
     guards: list[tuple[str, sp.Expr]] = field(default_factory=list)
+    # lagrange: (joint.direction, deflection g or None, rate dg/dt) per multiplier
+    constraints: list[tuple[str, sp.Expr | None, sp.Expr]] = field(default_factory=list)
 
     @property
     def tables(self) -> list[Table]:
@@ -130,6 +151,7 @@ class _Builder:
         self.dependent: dict[str, sp.Symbol] = {}
         self.refs: dict[sp.Symbol, sp.Expr] = {}
         self.guards: list[tuple[str, sp.Expr]] = []
+        self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):
@@ -586,9 +608,11 @@ def _deps(eqs: dict) -> dict:
             for v, e in eqs.items()}
 
 
-def _tear(comp: list, deps: dict) -> list:
-    """Greedy tearing: drop the variable with most loop in*out edges until acyclic."""
-    rest, tears = list(comp), []
+def _tear(comp: list, deps: dict, first=()) -> list:
+    """Greedy tearing: drop the variable with most loop in*out edges until acyclic
+    (after the variables ``first``, torn by choice)."""
+    tears = [v for v in comp if v in set(first)]
+    rest = [v for v in comp if v not in set(first)]
     while True:
         sub = {v: [d for d in deps[v] if d in rest] for v in rest}
         cyclic = [c for c in strongly_connected(rest, sub) if is_cyclic(c, sub)]
@@ -623,7 +647,7 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
 
 
 def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int,
-                   refuse) -> LinearBlock:
+                   refuse, rank=None) -> LinearBlock:
     """A linear loop solved numerically in its tearing variables only. ``A = I - d
     tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
     loop's assignments (small, hoisted; never the substituted residual, which swells with
@@ -643,15 +667,38 @@ def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int
     if any(e.has(*loop_vars) for e in [e for _, e in pre] + [a for _, _, a in entries]):
         raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
     zero = {t: 0 for t in tears}
-    rhs = tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears)
+    rhs = (None if rank is not None else
+           tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears))
     return LinearBlock(index, tuple(tears), tuple(entries), rhs,
-                       tuple(b.eqs[t] for t in tears), chain, tuple(pre))
+                       tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
+
+
+def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock:
+    """The constraint block of method lagrange: the acceleration-level equations are
+    linear in the multipliers u, ``resid = K (dp/dt) + ...`` with ``dp/dt = dp/dt|u=0 +
+    B u``; K (the rates' rows on the dynamic states, from ``lagrange``) and B (the
+    multipliers' rows on the dynamic states' rates, forward mode along the loop, which
+    is the force path) are sparse, their product ``J M^-1 J^T`` is formed numerically at run time."""
+    chain = tuple((v, b.eqs[v]) for v in order)
+    dynamic = sorted({x for rows in b.kkt_rows.values() for x in rows},
+                     key=lambda x: x.name)
+    col = {x: j for j, x in enumerate(dynamic)}
+    dstate = {st.dsym: st.sym for st in b.states}
+    sens = {t: {k: sp.S.One} for k, t in enumerate(tears)}
+    pre = propagate(chain, sens, lambda v, k: f"S{index}_{v.name}__{k}")
+    B = tuple((col[dstate[dx]], k, d) for dx in sorted(sens, key=lambda s: s.name)
+              if dx in dstate and dstate[dx] in col for k, d in sens[dx].items())
+    K = tuple((i, col[x], d) for i, t in enumerate(tears)
+              for x, d in sorted(b.kkt_rows[t].items(), key=lambda kv: kv[0].name))
+    return LinearBlock(index, tuple(tears), (), None, tuple(b.eqs[t] for t in tears), chain,
+                       tuple(pre), symbols.param(lagrange.RANK), (len(dynamic), K, B))
 
 
 def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
-    tears = _tear(comp, deps)
+    multipliers = [v for v in comp if v.name.startswith("LAM_")]
+    tears = _tear(comp, deps, multipliers)
     rest = [v for v in comp if v not in tears]
     sub_deps = {v: [d for d in deps[v] if d in rest] for v in rest}
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
@@ -671,6 +718,17 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                              loc=where.loc if where else None,
                              key=f"elements.{elements[0]}" if elements else None, hint=hint)
 
+    if multipliers and set(tears) == set(multipliers):
+        loop.kind = "constraint"
+        loop.tearing = [f"numeric SVD of the {len(tears)} Lagrange multipliers"]
+        return [_kkt_block(b, tears, order, block_index)] + [(v, eqs[v]) for v in order], loop
+    if multipliers:
+        loop.kind = "constraint"
+        loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
+                        f"({len(multipliers)} Lagrange multipliers)"]
+        block = _reduced_block(b, tears, order, subs, block_index, refuse,
+                               rank=symbols.param(lagrange.RANK))
+        return [block] + [(v, eqs[v]) for v in order], loop
     if any(v.name.startswith("W_") for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
@@ -696,14 +754,17 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
     return out, loop
 
 
-def derive(cg: CausalGraph, method: str = "scalar",
-           max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
+def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
     """Build, sort and solve the causal equations of a causal graph. Loops with more
-    than ``max_symbolic_loop`` tearing variables are solved numerically at run time."""
+    than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
+    The method (what L became) was chosen by ``expand``; ``lagrange`` adds the
+    multipliers' acceleration-level equations."""
     b = _Builder(cg)
+    method = cg.graph.method
     b.build()
     b.resolve_refs()
     b.resolve_derivatives()
+    constraints = lagrange.acceleration_constraints(b)
     deps = _deps(b.eqs)
     assignments, loops, blocks = [], [], 0
     for comp in strongly_connected(list(b.eqs), deps):
@@ -717,9 +778,15 @@ def derive(cg: CausalGraph, method: str = "scalar",
     assignments, aliases = _drop_aliases(assignments)
     outputs = [(o.name, o.expr.xreplace(b.refs).xreplace(aliases)) for o in b.m.outputs]
     params = [(symbols.param(p.name), p.name, p.value) for p in b.m.parameters.values()]
+    if constraints:
+        params += [(symbols.param(lagrange.ALPHA), lagrange.ALPHA,
+                    lagrange.default_alpha(b.m.settings.t_end)),
+                   (symbols.param(lagrange.RANK), lagrange.RANK, float(len(constraints)))]
+        constraints = [(n, g if g is None else g.xreplace(aliases), r.xreplace(aliases))
+                       for n, g, r in constraints]
     system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
                             {n: b.display[v] for n, v in b.dependent.items()}, b.display,
-                            guards=b.guards)
+                            guards=b.guards, constraints=constraints)
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

@@ -28,7 +28,7 @@ import sympy as sp
 
 from . import joints as jmodels
 from . import symbols
-from .bondgraph import BondGraph
+from .bondgraph import BondGraph, Constraint
 from .errors import ModelError
 from .model import KINDS, TWO_PORTS, Body, Bond, Element, Joint, Model
 
@@ -61,8 +61,9 @@ def joint_param(joint: str, role: str) -> str:
 
 
 class _Expander:
-    def __init__(self, model: Model):
-        self.m = model
+    def __init__(self, model: Model, method: str):
+        self.m, self.method = model, method
+        self.constraints: list[Constraint] = []
         self.elements: dict[str, Element] = dict(model.elements)
         self.bonds: list[Bond] = list(model.bonds)
 
@@ -155,7 +156,12 @@ class _Expander:
                 self.bond(src, mtf, j.loc)
                 self.bond(mtf, zero, j.loc, dim=1)
             parts = []
-            if d.blocked:
+            if d.blocked and self.method == "lagrange":
+                L = self.add(f"{zero}__L", "MSe", j.loc,
+                             effort=symbols.multiplier(j.name, d.label))
+                self.constraints.append(Constraint(j.name, d.label, L, d.g, d.rotational))
+                parts.append(L)
+            elif d.blocked:
                 kind = "rot_" if d.rotational else ""
                 k = symbols.param(joint_param(j.name, kind + "stiffness"))
                 c = symbols.param(joint_param(j.name, kind + "damping"))
@@ -293,8 +299,10 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict):
                          hint="give one of them a mass or block the chain's free direction")
 
 
-def expand(model: Model) -> BondGraph:
-    ex = _Expander(model)
+def expand(model: Model, method: str = "parasitic") -> BondGraph:
+    """``method`` decides what the constraint element L of a blocked joint direction is:
+    ``parasitic`` a stiff spring || damper, ``lagrange`` an effort source (the multiplier)."""
+    ex = _Expander(model, method)
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
@@ -306,7 +314,8 @@ def expand(model: Model) -> BondGraph:
     for i, b in enumerate(bonds):
         ports[b.src].append(i)
         ports[b.dst].append(i)
-    graph = BondGraph(model, elements, bonds, ports, dict(model.bodies))
+    graph = BondGraph(model, elements, bonds, ports, dict(model.bodies), method=method,
+                      constraints=ex.constraints)
     graph.joints = {name: dirs for name, (j, dirs) in joint_dirs.items()}
     for name, el in elements.items():
         _check_element(graph, name, el)

@@ -646,9 +646,28 @@ class _Loader:
         if "preload" in m:
             kw["preload"] = self.number(m["preload"], m.val_locs["preload"], f"{key}.preload")
         if "actuator" in m:
-            kw["actuator"] = bexpr.parse(m["actuator"], loc=m.val_locs["actuator"],
-                                         key=f"{key}.actuator", names=names)
+            kw["actuator"] = self.actuator(m["actuator"], m.val_locs["actuator"],
+                                           f"{key}.actuator", names)
         return Functional(loc=loc, **kw)
+
+    def actuator(self, v, loc, key, names) -> sp.Expr:
+        """A joint actuator's force or torque: parameters, signals, t, and the bodies'
+        positions, angles and velocities (a spring or controller law; not accelerations,
+        which would close an algebraic loop through the actuator)."""
+        def ref(target, attr):
+            body = target.split(".")[0]
+            if body not in self.bodies:
+                self.err(f"'{target}.{attr}' names no body; a joint actuator may read "
+                         "bodies only", loc, key, "write body.x, body.az, body.point.vx, ...")
+            if "." in target:
+                valid = Body.POINT_ATTRS[:6]
+            else:
+                valid = Body.ATTRS[:15]
+            if attr not in valid:
+                self.err(f"a joint actuator cannot read '{target}.{attr}'", loc, key,
+                         "valid: " + ", ".join(f"{target}.{a}" for a in valid))
+            return self.resolve_ref(target, attr, {}, set(), key, loc)
+        return bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
 
     def joints_section(self, sec: YMap, params, signals, base: Parasitic) -> dict[str, Joint]:
         import numpy as np
@@ -718,8 +737,8 @@ class _Loader:
                        else Functional(loc=v.loc))
                 if "actuator" in v:
                     fun = Functional(fun.k, fun.c, fun.preload,
-                                     bexpr.parse(v["actuator"], loc=at("actuator")[0],
-                                                 key=f"{key}.actuator", names=names), fun.loc)
+                                     self.actuator(v["actuator"], at("actuator")[0],
+                                                   f"{key}.actuator", names), fun.loc)
                 functional[spec.free[0]] = fun
             if "directions" in v:
                 dm = self.mapping(v["directions"], *at("directions"))

@@ -11,7 +11,8 @@ from .causality import CausalGraph
 from .equations import EquationSystem
 from .model import Model
 
-METHODS = ("scalar",)
+# what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
+METHODS = ("parasitic", "lagrange")
 
 
 @dataclass
@@ -22,7 +23,7 @@ class Compiled:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def build(model: str | Path | Model, method: str = "scalar", **derive_options) -> Compiled:
+def build(model: str | Path | Model, method: str = "parasitic", **derive_options) -> Compiled:
     """Run load (unless given a Model) -> expand -> causality -> equations, timing each
     stage. ``derive_options`` go to ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     timings = {}
@@ -31,17 +32,17 @@ def build(model: str | Path | Model, method: str = "scalar", **derive_options) -
         model = load.load(model)
     timings["load"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    graph = expand.expand(model)
+    graph = expand.expand(model, method)
     cg = causality.assign(graph)
     timings["causality"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    system = equations.derive(cg, method, **derive_options)
+    system = equations.derive(cg, **derive_options)
     timings["equations"] = time.perf_counter() - t0
     return Compiled(model, cg, system, timings)
 
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
-                  method: str = "scalar", **derive_options) -> tuple[Compiled, Path]:
+                  method: str = "parasitic", **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
     c = build(model, method, **derive_options)
     t0 = time.perf_counter()
@@ -51,10 +52,10 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
 
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
-                  method: str = "scalar"):
+                  method: str = "parasitic"):
     """The generated module for a model, recompiled only if missing or stale."""
     model = load.load(model_path)
-    path = emit.module_path(model.name, out_dir)
+    path = emit.module_path(model.name, out_dir, method)
     compiled = None
     if emit.is_stale(path, model.digest, method):
         compiled, path = compile_model(model, out_dir, method)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from . import consistent
 from .errors import SimulationError
 
 
@@ -27,6 +28,9 @@ class Stats:
     rejected_steps: int | None = None     # scipy's solve_ivp does not report them
     wall_time: float = 0.0                # integration only
     compile_time: float = 0.0             # numba JIT / cache load of the module's functions
+    # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
+    drift_position: float | None = None
+    drift_velocity: float | None = None
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -43,6 +47,7 @@ class Result:
     stats: Stats = field(default_factory=Stats)
     success: bool = True
     message: str = ""
+    projection: object = None     # method lagrange: consistent.Projection of the start
 
     def column(self, name: str) -> np.ndarray:
         if name in self.output_names:
@@ -161,6 +166,11 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
 
     t0 = time.perf_counter()
+    projection = None
+    names = list(getattr(module, "PARAM_NAMES", ()))
+    if len(getattr(module, "CONSTRAINT_NAMES", ())):
+        x, projection = consistent.project(module, x, p)
+        p[names.index("lagrange__rank")] = projection.rank
     module.rhs(0.0, x, p)
     module.jac(0.0, x, p)
     module.outputs(0.0, x, p)
@@ -210,8 +220,18 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     x_all = np.vstack(xs) if xs else np.empty((0, len(module.STATE_NAMES)))
     y_all = np.array([module.outputs(t, xi, p) for t, xi in zip(t_all, x_all)]).reshape(
         len(t_all), len(module.OUTPUT_NAMES))
+    if projection is not None and len(x_all):
+        stats.drift_position, stats.drift_velocity = consistent.drift(module, x_all, p)
+        if not ok:
+            lost = consistent.singular_configuration(module, seg.x_end, p, projection.rank)
+            if lost:
+                message = (f"singular configuration at t = {seg.t_reached:.6g}: the "
+                           f"constraints lost rank, joint directions {lost} became "
+                           f"dependent ({message})")
+                hint = ("the mechanism reached a dead point; change its geometry or "
+                        "initial state, or use --method parasitic to pass through it")
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
-                    tuple(module.OUTPUT_NAMES), solver, stats, ok, message)
+                    tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection)
     if not ok:
         raise SimulationError(message, result=result, hint=hint)
     if not np.all(np.isfinite(x_all)):

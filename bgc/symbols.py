@@ -53,6 +53,12 @@ def unknown(element: str, comp: int) -> sp.Symbol:
     return _sym(f"W_{element}__{AXES[comp]}")
 
 
+def multiplier(joint: str, label: str) -> sp.Symbol:
+    """The Lagrange multiplier of a joint's blocked direction (method ``lagrange``): the
+    effort of its constraint element L."""
+    return _sym(f"LAM_{joint}__{label}")
+
+
 def state(element: str, kind: str) -> sp.Symbol:
     return _sym(f"X_{element}__{kind}")
 

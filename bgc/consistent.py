@@ -1,0 +1,155 @@
+"""Consistent initial conditions and constraint diagnostics for method ``lagrange``.
+
+A generated module's ``constraints(t, x, p)`` gives every blocked direction's deflection
+g (position level) and rate dg/dt (velocity level). Before a run the user's approximate
+initial state is projected onto both (Gauss-Newton with the minimum-norm step, which also
+serves redundant constraints), the rank of the constraints is found and the redundant
+ones are named; after a run the drift is measured; when a run fails, a rank lost on the
+way is named as a singular configuration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SimulationError
+
+RANK_TOL = 1e-9          # singular values below this fraction of the largest are zero
+
+
+@dataclass
+class Projection:
+    position_correction: float      # max |dx| over the pose states
+    velocity_correction: float      # max |dx| over the other states
+    iterations: int
+    rank: int
+    n_constraints: int
+    redundant: list[str] = field(default_factory=list)   # constraints in a dependent set
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+    def describe(self) -> str:
+        out = (f"initial state projected onto {self.n_constraints} constraints: position "
+               f"correction {self.position_correction:.3g}, velocity correction "
+               f"{self.velocity_correction:.3g} ({self.iterations} Newton iterations)")
+        if self.rank < self.n_constraints:
+            out += (f"; {self.n_constraints - self.rank} redundant constraint(s) among "
+                     f"{', '.join(self.redundant)} (consistent, load shared by least squares)")
+        return out
+
+
+def _split(module, x, p):
+    c = module.constraints(0.0, x, p)
+    m = len(module.CONSTRAINT_NAMES)
+    return c[:m], c[m:]
+
+
+def _jacobian(fun, x, cols) -> np.ndarray:
+    """Central differences of ``fun`` w.r.t. ``x[cols]``."""
+    f0 = fun(x)
+    J = np.zeros((len(f0), len(cols)))
+    for k, j in enumerate(cols):
+        h = 1e-7 * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        J[:, k] = (fun(xp) - fun(xm)) / (2 * h)
+    return J
+
+
+def _dependent(J: np.ndarray, names, rank: int) -> list[str]:
+    """The constraints that take part in the left null space of ``J`` (its rows beyond
+    ``rank``)."""
+    U, s, _ = np.linalg.svd(J)
+    null = U[:, rank:]
+    if null.size == 0:
+        return []
+    weight = np.abs(null).max(axis=1)
+    return [n for n, w in zip(names, weight) if w > 1e-6]
+
+
+def _rank(J: np.ndarray) -> int:
+    if J.size == 0:
+        return 0
+    s = np.linalg.svd(J, compute_uv=False)
+    return int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+
+
+def velocity_jacobian(module, x, p) -> np.ndarray:
+    """d(dg/dt)/d(non-pose states): the constraint rows acting on the momenta."""
+    other = [j for j in range(len(x)) if j not in set(module.POSE_STATES)]
+    return _jacobian(lambda y: _split(module, y, p)[1], x, other), other
+
+
+def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
+    """The consistent state nearest ``x`` (minimum-norm corrections) and a Projection.
+
+    Positions first (g = 0 over the pose states, Gauss-Newton), then velocities (dg/dt is
+    linear in the momenta: one least-squares step, repeated once for round-off)."""
+    x = np.array(x, dtype=np.float64)
+    x_user = x.copy()
+    names = list(module.CONSTRAINT_NAMES)
+    pos = [i for i in range(len(names)) if module.HAS_POSITION[i]]
+    pose = list(module.POSE_STATES)
+    it = 0
+    scale = max(1.0, float(np.abs(x[pose]).max())) if pose else 1.0
+    for it in range(1, max_iter + 1):
+        g = _split(module, x, p)[0][pos]
+        if not len(g) or np.abs(g).max() <= tol * scale:
+            it -= 1
+            break
+        G = _jacobian(lambda y: _split(module, y, p)[0][pos], x, pose)
+        dx = np.linalg.lstsq(G, -g, rcond=RANK_TOL)[0]
+        x[pose] += dx
+    else:
+        g = _split(module, x, p)[0][pos]
+        worst = pos[int(np.argmax(np.abs(g)))]
+        raise SimulationError(
+            f"the initial positions cannot be made consistent with the joints: after "
+            f"{max_iter} Newton iterations joint direction {names[worst]} is still open by "
+            f"{abs(g).max():.3g}", hint="the bodies' initial poses are too far from an "
+                                        "assembly of the joints (or none exists): check the "
+                                        "joint points and the bodies' com/frame")
+    K, other = velocity_jacobian(module, x, p)
+    for _ in range(2):
+        r = _split(module, x, p)[1]
+        x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
+    r = _split(module, x, p)[1]
+    rank = _rank(K)
+    if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
+        worst = int(np.argmax(np.abs(r)))
+        raise SimulationError(
+            f"the initial velocities cannot be made consistent: joint direction "
+            f"{names[worst]} still moves at {abs(r[worst]):.3g} after projection",
+            hint="the constraints are singular at the initial pose; move the mechanism "
+                 "away from the dead point")
+    dx = x - x_user
+    nonpose = [j for j in range(len(x)) if j not in set(pose)]
+    proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
+                      float(np.abs(dx[nonpose]).max(initial=0.0)), it, rank, len(names),
+                      _dependent(K, names, rank) if rank < len(names) else [])
+    return x, proj
+
+
+def drift(module, xs, p) -> tuple[float, float]:
+    """Largest |g| and |dg/dt| over the states ``xs`` (rows)."""
+    gmax = vmax = 0.0
+    for x in xs:
+        g, r = _split(module, x, p)
+        g = g[np.asarray(module.HAS_POSITION, dtype=bool)]
+        gmax = max(gmax, float(np.abs(g).max(initial=0.0)))
+        vmax = max(vmax, float(np.abs(r).max(initial=0.0)))
+    return gmax, vmax
+
+
+def singular_configuration(module, x, p, rank: int) -> str | None:
+    """If the constraints at ``x`` have lost rank (or nearly: condition beyond 1e8), which
+    joint directions have become dependent."""
+    K, _ = velocity_jacobian(module, x, p)
+    s = np.linalg.svd(K, compute_uv=False)
+    if rank < 1 or rank > len(s) or s[rank - 1] > 1e-8 * s[0]:
+        return None
+    return ", ".join(_dependent(K, list(module.CONSTRAINT_NAMES), rank - 1))

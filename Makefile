@@ -13,10 +13,10 @@ run: install
 
 # Fast suite (slow SARIB runs are marked `slow` and left to test-all).
 test:
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q -n 2
 
 test-all:
-	$(PYTHON) -m pytest -q -m ""
+	$(PYTHON) -m pytest -q -n 2 -m ""
 
 # Regenerate the committed modules in generated/ (a test checks they are fresh).
 generated:

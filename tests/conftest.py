@@ -3,12 +3,15 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
 from pathlib import Path
 
 import pytest
 
-from bgc.pipeline import compile_model
+from bgc import emit, load
 from bgc.emit import import_module
+from bgc.pipeline import compile_model
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -24,19 +27,38 @@ def model_params(names=None):
 
 @pytest.fixture(scope="session")
 def gen_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("bgcgen")
+    """One directory for the whole run, shared by pytest-xdist workers (their base temp
+    directories are siblings), so each model is compiled and JIT-compiled once."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path = root / "bgcgen"
+    path.mkdir(exist_ok=True)
+    return path
 
 
 @pytest.fixture(scope="session")
 def compiled(gen_dir):
-    """compiled(name) -> generated module of models/<name>.yaml (cached per session)."""
+    """compiled(name, method) -> generated module of models/<name>.yaml (cached per
+    session)."""
     cache = {}
 
-    def get(name: str):
-        if name not in cache:
-            _, path = compile_model(MODELS / f"{name}.yaml", gen_dir)
-            cache[name] = import_module(path)
-        return cache[name]
+    def get(name: str, method: str = "parasitic"):
+        if (name, method) not in cache:
+            # one worker compiles (source and machine code, cached on disk) while the
+            # others wait, then load it
+            with open(gen_dir / f"{name}_{method}.lock", "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                model = load.load(MODELS / f"{name}.yaml")
+                path = emit.module_path(model.name, gen_dir, method)
+                if emit.is_stale(path, model.digest, method):
+                    compile_model(model, gen_dir, method)
+                mod = import_module(path)
+                for f in (mod.rhs, mod.jac, mod.outputs):
+                    f(0.0, mod.X0, mod.PARAMS)
+                fcntl.flock(lock, fcntl.LOCK_UN)
+            cache[name, method] = mod
+        return cache[name, method]
     return get
 
 

@@ -53,7 +53,7 @@ def test_committed_generated_module_is_fresh(name, tmp_path):
     assert path.read_bytes() == committed.read_bytes(), (
         f"{committed} is stale: run `make generated`")
     model = load.load(MODELS / f"{name}.yaml")
-    assert not emit.is_stale(committed, model.digest, "scalar")
+    assert not emit.is_stale(committed, model.digest, "parasitic")
 
 
 def test_compiling_twice_is_byte_identical_across_hash_seeds(tmp_path):
@@ -75,19 +75,19 @@ def test_stale_module_is_detected_and_rebuilt(tmp_path):
     out = tmp_path / "gen"
     _, path = compile_model(model_file, out)
     m1 = load.load(model_file)
-    assert not emit.is_stale(path, m1.digest, "scalar")
+    assert not emit.is_stale(path, m1.digest, "parasitic")
     # a comment does not change the model ...
     model_file.write_text(src + "\n# a comment\n")
-    assert not emit.is_stale(path, load.load(model_file).digest, "scalar")
+    assert not emit.is_stale(path, load.load(model_file).digest, "parasitic")
     # ... a value does
     model_file.write_text(src.replace("value: 800.0", "value: 900.0"))
     m2 = load.load(model_file)
-    assert emit.is_stale(path, m2.digest, "scalar")
+    assert emit.is_stale(path, m2.digest, "parasitic")
     from bgc.pipeline import ensure_module
     mod, _, recompiled = ensure_module(model_file, out)
     assert recompiled is not None
     assert mod.PARAMS[mod.PARAM_NAMES.index("k")] == 900.0
-    assert not emit.is_stale(path, m2.digest, "scalar")
+    assert not emit.is_stale(path, m2.digest, "parasitic")
 
 
 def test_write_is_atomic_and_leaves_no_temp_files(tmp_path):

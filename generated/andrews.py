@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "1b0c18e4e3ce80f6f9e823674378e269"
+MODEL_HASH = "0a782d8987471de1a0454e177eafc28b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

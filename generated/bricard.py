@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "6b5679b1274f1bf147c32fd00a4bd2df"
+MODEL_HASH = "5a3b14a301fea67b095a4ac7dbbfd1f8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

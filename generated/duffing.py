@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "59f1b8352195e7882d56e01cc0611dc3"
+MODEL_HASH = "8dc59790a2561a81c588cbd5e00a7dcb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

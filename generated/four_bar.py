@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "dd9f60e93188243943d35213d4c27585"
+MODEL_HASH = "e3a9ad6a0dd72a422c50e401e5b14ed6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "cbe98e8f729d7d8f756860dc475b8e87"
+MODEL_HASH = "675a08de0a4bb5a874e4198a58fe09df"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "b686ea2aa704f2df85a65c776b104c0f"
+MODEL_HASH = "449bc7a692a0ba42a4c3010d539f2f48"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

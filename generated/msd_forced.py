@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "54a8676af82a792724c36b00d2d59efe"
+MODEL_HASH = "2265657a46bcb40d6260ae0375cc53ce"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

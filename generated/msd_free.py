@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "b0862fb19ee300fda611539b71d4e478"
+MODEL_HASH = "9852189c3b153000dccf4bf36086cada"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

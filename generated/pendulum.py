@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "3fa2951096c1a64dfdc454db8bb510f5"
+MODEL_HASH = "ea08933f17bd52e75bb17d332c46fb3a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "299d92d10955cd2385c1bc42820021d3"
+MODEL_HASH = "7d54e3dbc88f6fe47eb5bd92fd9da122"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

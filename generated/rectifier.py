@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "b69d6d2ab97b2d4dada8c3874d6a6920"
+MODEL_HASH = "f6e7a0a0df0b3da1f5d70b6b6fa1986c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

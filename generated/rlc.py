@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "4ca46453d775bb95549a870fc0f32934"
+MODEL_HASH = "430c9517178712d1a9690db68577f603"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

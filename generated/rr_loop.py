@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "9c9783768aea424211d3f455de4d36c9"
+MODEL_HASH = "b1f6696406de4ef664ab713e3a280d77"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

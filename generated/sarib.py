@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "e47790f6e9bd6b08f9ba935ca67a138a"
+MODEL_HASH = "9d279678938f3e82e9f28649e6dcc28e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "92ee0fa9ff34cfeabb8bced92c3cd277"
+MODEL_HASH = "6d47ca45f53b6da543f3cd2efdc658b8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

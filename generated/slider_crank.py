@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "a7bf706fc46a4e4024ff99ca2d821d9a"
+MODEL_HASH = "d642c6e86aa07b8c5297cf430501f739"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "c9d2ddf6a0a9f504b5d34f618d1c20d7"
+MODEL_HASH = "80c97e0859389934223d3585cba5e8f8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

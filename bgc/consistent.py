@@ -17,6 +17,8 @@ import numpy as np
 from .errors import SimulationError
 
 RANK_TOL = 1e-9          # singular values below this fraction of the largest are zero
+# the generated module's parameter holding the rank its constraint block keeps
+RANK_PARAM = "lagrange__rank"
 
 
 @dataclass
@@ -78,9 +80,16 @@ def _rank(J: np.ndarray) -> int:
     return int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
 
 
-def velocity_jacobian(module, x, p) -> np.ndarray:
-    """d(dg/dt)/d(non-pose states): the constraint rows acting on the momenta."""
-    other = [j for j in range(len(x)) if j not in set(module.POSE_STATES)]
+def _other_states(module, n: int) -> list[int]:
+    """The states that are not body poses (momenta, functional springs)."""
+    pose = set(module.POSE_STATES)
+    return [j for j in range(n) if j not in pose]
+
+
+def velocity_jacobian(module, x, p) -> tuple[np.ndarray, list[int]]:
+    """d(dg/dt)/d(other states) (the constraint rows acting on the momenta), and those
+    states' indices."""
+    other = _other_states(module, len(x))
     return _jacobian(lambda y: _split(module, y, p)[1], x, other), other
 
 
@@ -127,9 +136,8 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
             hint="the constraints are singular at the initial pose; move the mechanism "
                  "away from the dead point")
     dx = x - x_user
-    nonpose = [j for j in range(len(x)) if j not in set(pose)]
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
-                      float(np.abs(dx[nonpose]).max(initial=0.0)), it, rank, len(names),
+                      float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
                       _dependent(K, names, rank) if rank < len(names) else [])
     return x, proj
 

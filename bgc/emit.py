@@ -128,10 +128,10 @@ def _jac_lines(jt, kkt: set) -> list[str]:
         else:
             b = seg[1]
             r, n = b.start, b.n
-            solve = (f"_P{b.index} @ np.ascontiguousarray(" if b.index in kkt
-                     else f"np.linalg.solve(_A{b.index}, ")
-            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = {solve}_d[{r}:{r + n}, :]"
-                         + ")")
+            R = f"_d[{r}:{r + n}, :]"
+            solve = (f"_P{b.index} @ np.ascontiguousarray({R})" if b.index in kkt
+                     else f"np.linalg.solve(_A{b.index}, {R})")
+            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = {solve}")
     return lines
 
 
@@ -150,9 +150,8 @@ def render(system: EquationSystem) -> str:
     out_asg, out_used = _cone(system.assignments, out_exprs)
     guard_exprs = [e for _, e in system.guards]
     guard_asg, guard_used = _cone(system.assignments, guard_exprs)
-    con_exprs = ([g if g is not None else 0 * r for _, g, r in system.constraints]
+    con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
-    con_exprs = [sp.sympify(e) for e in con_exprs]
     con_asg, con_used = _cone(system.assignments, con_exprs)
     kkt = {it.index for it in system.assignments
            if isinstance(it, LinearBlock) and it.rank is not None}

@@ -62,8 +62,8 @@ class LinearBlock:
     """A linear loop solved numerically at run time: ``A(w) u = b(w)`` by LU, for loops
     too large to solve symbolically without expression swell. ``A`` holds the non-zero
     entries only; ``b`` is None where it is evaluated numerically, as ``tear_eqs`` with
-    ``u = 0`` and the chain run once at that point (no substituted expression); ``pre`` are assignments that ``A`` reads (the loop's sensitivities to
-    ``u``). For the Jacobian: ``u = tear_eqs(u, chain)``, where ``chain`` are the loop's
+    ``u = 0`` and the chain run once at that point (no substituted expression); ``pre``
+    are assignments that ``A`` reads (the loop's sensitivities to ``u``). For the Jacobian: ``u = tear_eqs(u, chain)``, where ``chain`` are the loop's
     other variables in causal order (computed after the block), both unsubstituted."""
     index: int
     unknowns: tuple[sp.Symbol, ...]
@@ -611,8 +611,9 @@ def _deps(eqs: dict) -> dict:
 def _tear(comp: list, deps: dict, first=()) -> list:
     """Greedy tearing: drop the variable with most loop in*out edges until acyclic
     (after the variables ``first``, torn by choice)."""
-    tears = [v for v in comp if v in set(first)]
-    rest = [v for v in comp if v not in set(first)]
+    first = set(first)
+    tears = [v for v in comp if v in first]
+    rest = [v for v in comp if v not in first]
     while True:
         sub = {v: [d for d in deps[v] if d in rest] for v in rest}
         cyclic = [c for c in strongly_connected(rest, sub) if is_cyclic(c, sub)]
@@ -678,7 +679,8 @@ def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock
     linear in the multipliers u, ``resid = K (dp/dt) + ...`` with ``dp/dt = dp/dt|u=0 +
     B u``; K (the rates' rows on the dynamic states, from ``lagrange``) and B (the
     multipliers' rows on the dynamic states' rates, forward mode along the loop, which
-    is the force path) are sparse, their product ``J M^-1 J^T`` is formed numerically at run time."""
+    is the force path) are sparse; their product ``J M^-1 J^T`` is formed numerically at
+    run time."""
     chain = tuple((v, b.eqs[v]) for v in order)
     dynamic = sorted({x for rows in b.kkt_rows.values() for x in rows},
                      key=lambda x: x.name)

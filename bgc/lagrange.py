@@ -9,11 +9,13 @@ acceleration level with Baumgarte stabilisation, one equation per blocked direct
 
 where ``dg/dt`` is the flow of L (the rate the joint's rows give) and ``d2g/dt2`` is its
 total time derivative, carried through the sorted kinematic assignments by forward mode
-with the state derivatives as seeds (never a substituted expression). The equations are
-linear in the multipliers, which form one numeric block: the KKT matrix ``J M^-1 J^T`` is
-never written down; its entries come out of the loop's sensitivities to the multipliers
-and it is solved at run time by SVD, keeping the rank found at the initial state, so
-redundant constraints (hyperstatic mechanisms) share their load by least squares.
+with the pose states' rates as seeds (never a substituted expression), plus the rates'
+rows on the momenta, K = J M^-1, times the momenta's rates. The equations are linear in
+the multipliers, which form one numeric block: the KKT matrix ``J M^-1 J^T`` is never
+written down symbolically; the generated code forms it as K B (B: the multipliers' rows
+on the momenta's rates, ``equations._kkt_block``) and solves it by SVD, keeping the rank
+found at the initial state, so redundant constraints (hyperstatic mechanisms) share their
+load by least squares.
 
 Why Baumgarte rather than projection or GGL: the result is one explicit ODE, so every
 integrator (scipy's BDF/Radau/LSODA, the native one) runs it unchanged with the analytic
@@ -27,12 +29,13 @@ from __future__ import annotations
 import sympy as sp
 
 from . import symbols
+from .consistent import RANK_PARAM
 from .errors import EquationError
 from .forward_mode import directional, propagate
 from .graphs import is_cyclic, strongly_connected
 
 ALPHA = "lagrange__alpha"
-RANK = "lagrange__rank"
+RANK = RANK_PARAM            # set by the simulator from the rank at the start
 
 
 def default_alpha(t_end: float | None) -> float:

@@ -167,10 +167,9 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
 
     t0 = time.perf_counter()
     projection = None
-    names = list(getattr(module, "PARAM_NAMES", ()))
     if len(getattr(module, "CONSTRAINT_NAMES", ())):
         x, projection = consistent.project(module, x, p)
-        p[names.index("lagrange__rank")] = projection.rank
+        p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
     module.rhs(0.0, x, p)
     module.jac(0.0, x, p)
     module.outputs(0.0, x, p)

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "0a782d8987471de1a0454e177eafc28b"
+MODEL_HASH = "b8b04e0d99527c846afa0188f056f9f7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "5a3b14a301fea67b095a4ac7dbbfd1f8"
+MODEL_HASH = "c33a027e136c05a9838abfd3f011b471"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

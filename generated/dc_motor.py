@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "3715729ce3065c149a0f5473bd998dd3"
+MODEL_HASH = "a1ee4129c69dac42cc154dfb550e1db6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "82a12ca0718ce1780d763e87a6082746"
+MODEL_HASH = "9abd817fb3b120fadfbcb34dd6688874"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

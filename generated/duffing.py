@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "8dc59790a2561a81c588cbd5e00a7dcb"
+MODEL_HASH = "a425a377aa379a3a4f77ce01a11e6f51"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

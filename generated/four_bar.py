@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "e3a9ad6a0dd72a422c50e401e5b14ed6"
+MODEL_HASH = "88c776da9ed79f847d383eefbc4058d6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "675a08de0a4bb5a874e4198a58fe09df"
+MODEL_HASH = "8498829d80e6e14cfaf27c47018d2ed5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

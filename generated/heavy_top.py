@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "449bc7a692a0ba42a4c3010d539f2f48"
+MODEL_HASH = "8e5d6af3330119a318b41a239ca8f573"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

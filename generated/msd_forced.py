@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "2265657a46bcb40d6260ae0375cc53ce"
+MODEL_HASH = "09a7046dce23eaa9a4d7214a2bcedfbb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

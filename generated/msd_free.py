@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "9852189c3b153000dccf4bf36086cada"
+MODEL_HASH = "11e8038d2fff90b4db5bd34561bc7312"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "ea08933f17bd52e75bb17d332c46fb3a"
+MODEL_HASH = "8393f38549f672e1dc12285111e99bd3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

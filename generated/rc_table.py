@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "7d54e3dbc88f6fe47eb5bd92fd9da122"
+MODEL_HASH = "a3e373e76f614aec3c80f41f84472b0e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "f6e7a0a0df0b3da1f5d70b6b6fa1986c"
+MODEL_HASH = "db0f3ed553cb037b3410b3a58aabd6ae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "430c9517178712d1a9690db68577f603"
+MODEL_HASH = "84a14b1e93482101b8513c4857a43683"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

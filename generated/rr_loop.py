@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "b1f6696406de4ef664ab713e3a280d77"
+MODEL_HASH = "20f3b353d42bc8df9cc7cf15dbdee670"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "9d279678938f3e82e9f28649e6dcc28e"
+MODEL_HASH = "f769603e4751a2a9a9e5b037d1b3db6d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

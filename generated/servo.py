@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "6d47ca45f53b6da543f3cd2efdc658b8"
+MODEL_HASH = "281944ae7bb4913d9fabcf9c30bd0ece"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "d642c6e86aa07b8c5297cf430501f739"
+MODEL_HASH = "d96a32190a254fa2d5bc573c0b3e4b02"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "80c97e0859389934223d3585cba5e8f8"
+MODEL_HASH = "094ad0d045495915df0149e3edda1aed"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

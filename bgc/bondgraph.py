@@ -20,6 +20,7 @@ class Constraint:
     element: str          # the L element (an MSe with the multiplier as effort)
     g: object             # geometric deflection (sympy, in the states), None: none
     rotational: bool
+    imposed: bool = False  # method zcp: L is a flow source (tree joint), not a break variable
 
     @property
     def name(self) -> str:
@@ -35,7 +36,8 @@ class BondGraph:
     bodies: dict[str, Body] = field(default_factory=dict)
     joints: dict[str, list] = field(default_factory=dict)   # joint -> its Directions
     method: str = "parasitic"
-    constraints: list = field(default_factory=list)          # lagrange: [Constraint]
+    constraints: list = field(default_factory=list)          # lagrange, zcp: [Constraint]
+    zcp: object = None      # method zcp: the zcp.Plan (spanning tree, loops, dependents)
 
     def other(self, b: int, node: str) -> str:
         bond = self.bonds[b]

@@ -20,6 +20,9 @@ from .pipeline import METHODS, build, compile_model, ensure_module
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 _method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
                            show_default=True, help="how constraint elements are handled")
+_loops_opt = click.option("--keep-loops", is_flag=True,
+                          help="method zcp: leave kinematic loops (class-4 ZCPs) closed "
+                               "instead of opening them with break variables")
 
 
 def _user_errors(fn):
@@ -55,26 +58,33 @@ def main():
 @main.command()
 @click.argument("model", type=click.Path(dir_okay=False))
 @_method_opt
+@_loops_opt
 @_json_opt
 @_user_errors
-def check(model, method, as_json):
+def check(model, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
-    derivative causality and conflicts."""
-    c = build(model, method)
+    derivative causality and conflicts; with --method zcp, the zero-order causal paths."""
+    from .zcp import paths
+    c = build(model, method, open_loops=not keep_loops)
     s = c.system
+    zcps = paths(c.causal.graph, s) if method == "zcp" else []
     rep = c.causal.report()
     report = {
         "model": c.model.name, "file": model, "method": method,
         "elements": len(c.causal.graph.elements), "bonds": len(c.causal.graph.bonds),
         "bodies": len(c.model.bodies),
         "states": [st.name for st in s.states],
-        "storage": rep["storage"], "resistors": rep["resistors"],
+        "storage": {n: (c.causal.graph.zcp.storage(n) if c.causal.graph.zcp else None) or v
+                    for n, v in rep["storage"].items()},
+        "resistors": rep["resistors"],
         "derivative_causality": dict(s.dependent),
         "algebraic_loops": [lp.__dict__ for lp in s.loops],
         "free_choices": rep["free_choices"], "strokes": rep["bonds"],
         "notes": s.notes, "conflicts": [],
         "constraints": [name for name, _, _ in s.constraints],
     }
+    if method == "zcp":
+        report["zcp_paths"] = [z.to_dict() for z in zcps]
     if as_json:
         click.echo(json.dumps(report, indent=2))
         return
@@ -82,19 +92,31 @@ def check(model, method, as_json):
                f"{report['bonds']} bonds, "
                f"{len(s.states)} states ({', '.join(report['states']) or 'none'})")
     click.echo("causality: no conflicts")
+    plan = c.causal.graph.zcp
     for name, cz in rep["storage"].items():
         kind = c.causal.graph.elements[name].kind
         extra = f" (dependent state {s.dependent[name]})" if name in s.dependent else ""
+        if plan is not None:
+            cz = plan.storage(name) or cz
         click.echo(f"  {kind} {name}: {cz}{extra}")
     for name, form in rep["resistors"].items():
         click.echo(f"  R {name}: {form}")
-    loops = s.loops
+    # under zcp the flow-source and constraint blocks are reported as ZCPs below
+    loops = [lp for lp in s.loops if method != "zcp" or lp.kind not in ("imposed-flow",
+                                                                       "constraint")]
     click.echo(f"algebraic loops: {len(loops) or 'none'}")
     for lp in loops:
         click.echo(f"  {lp.describe()}")
-    if s.constraints:
+    if s.constraints and method == "lagrange":
         click.echo(f"constraints (method {method}): {len(s.constraints)} multipliers, "
                    f"solved at the acceleration level with Baumgarte stabilisation")
+    if method == "zcp":
+        n_imp = len(s.imposed)
+        click.echo(f"zero-order causal paths: {len(zcps) or 'none'} ({n_imp} flow sources, "
+                   f"{len(s.constraints) - n_imp} break variables)")
+        for z in zcps:
+            click.echo(f"  class {z.cls}: {z.what}")
+            click.echo(f"    {z.summary()}")
     for note in rep["free_choices"] + s.notes:
         click.echo(f"note: {note}")
 
@@ -104,11 +126,12 @@ def check(model, method, as_json):
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="directory for <model>.py")
 @_method_opt
+@_loops_opt
 @_json_opt
 @_user_errors
-def compile_cmd(model, out_dir, method, as_json):
+def compile_cmd(model, out_dir, method, keep_loops, as_json):
     """Generate the numba simulation module for MODEL."""
-    c, path = compile_model(model, out_dir, method)
+    c, path = compile_model(model, out_dir, method, open_loops=not keep_loops)
     text = path.read_text()
     info = {"module": str(path), "states": len(c.system.states),
             "assignments": len(c.system.assignments), "bytes": len(text.encode()),
@@ -121,8 +144,8 @@ def compile_cmd(model, out_dir, method, as_json):
                    f"assignments, {info['bytes']} bytes) in {total:.3f} s")
 
 
-def _parse_params(module, items):
-    p = np.array(module.PARAMS, dtype=np.float64)
+def _parse_params(module, items, base=None):
+    p = np.array(module.PARAMS if base is None else base, dtype=np.float64)
     for item in items:
         name, _, value = item.partition("=")
         if name not in module.PARAM_NAMES:
@@ -148,11 +171,18 @@ def _parse_params(module, items):
 @click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
+@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
+              default="given", show_default=True,
+              help="method parasitic: the joints' stiffness and damping as the model gives "
+                   "them, or chosen from the eigenfrequencies")
+@click.option("--separation", type=float, default=10.0, show_default=True,
+              help="--parasitic auto: parasitic frequencies over the highest functional one")
 @_method_opt
+@_loops_opt
 @_json_opt
 @_user_errors
-def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_dir, method,
-             as_json):
+def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_dir,
+             parasitic_mode, separation, method, keep_loops, as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
     from .results import plot as plot_png
     from .results import write_csv
@@ -161,11 +191,22 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",
                        hint="valid solvers: " + ", ".join(SOLVERS))
-    module, m, compiled = ensure_module(model, out_dir, method)
+    module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
+    p, choice = _parse_params(module, params), None
+    if parasitic_mode == "auto":
+        from . import parasitic
+        if method != "parasitic":
+            raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
+                           key="--parasitic", hint="drop --parasitic or use --method "
+                                                    "parasitic")
+        if not separation > 1:
+            raise BgcError(f"--separation must be > 1, got {separation}", key="--separation")
+        p, choice = parasitic.auto(module, m, module.initial_state(p), p, separation)
+        p = _parse_params(module, params, base=p)     # explicit -p values still win
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                  atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
-                 params=_parse_params(module, params))
+                 params=p)
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out))
@@ -177,10 +218,13 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
         click.echo(json.dumps({"model": m.name, "method": method, "solver": result.solver,
                                "t_end": float(result.t[-1]), "stats": stats,
                                "projection": proj.to_dict() if proj else None,
+                               "parasitic": choice.to_dict() if choice else None,
                                "compiled": compiled is not None, "files": files}, indent=2))
         return
     if proj is not None:
         click.echo(proj.describe())
+    if choice is not None:
+        click.echo(choice.describe())
     click.echo(f"{m.name}: {result.solver} to t = {result.t[-1]:g} s: {stats['steps']} steps, "
                f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
                f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "

@@ -127,7 +127,12 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
         r = _split(module, x, p)[1]
         x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
-    rank = _rank(K)
+    # zcp: the imposed flows hold by construction (their rows on the states are zero);
+    # each is one rank of the constraints, the break variables' rows count as measured
+    imposed = np.asarray(getattr(module, "IMPOSED", np.zeros(len(names))), dtype=bool)
+    free = [n for n, i in zip(names, imposed) if not i]
+    Kb = K[~imposed]
+    rank = int(imposed.sum()) + _rank(Kb)
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
         worst = int(np.argmax(np.abs(r)))
         raise SimulationError(
@@ -138,7 +143,8 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     dx = x - x_user
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
-                      _dependent(K, names, rank) if rank < len(names) else [])
+                      _dependent(Kb, free, rank - int(imposed.sum()))
+                      if rank < len(names) else [])
     return x, proj
 
 
@@ -157,7 +163,10 @@ def singular_configuration(module, x, p, rank: int) -> str | None:
     """If the constraints at ``x`` have lost rank (or nearly: condition beyond 1e8), which
     joint directions have become dependent."""
     K, _ = velocity_jacobian(module, x, p)
-    s = np.linalg.svd(K, compute_uv=False)
+    imposed = np.asarray(getattr(module, "IMPOSED", np.zeros(len(K))), dtype=bool)
+    K, rank = K[~imposed], rank - int(imposed.sum())
+    names = [n for n, i in zip(module.CONSTRAINT_NAMES, imposed) if not i]
+    s = np.linalg.svd(K, compute_uv=False) if K.size else np.zeros(0)
     if rank < 1 or rank > len(s) or s[rank - 1] > 1e-8 * s[0]:
         return None
-    return ", ".join(_dependent(K, list(module.CONSTRAINT_NAMES), rank - 1))
+    return ", ".join(_dependent(K, names, rank - 1))

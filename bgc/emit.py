@@ -183,6 +183,7 @@ def render(system: EquationSystem) -> str:
         kkt=bool(kkt),
         constraint_names=[n for n, _, _ in system.constraints],
         has_position=[int(g is not None) for _, g, _ in system.constraints],
+        imposed=[int(n in system.imposed) for n, _, _ in system.constraints],
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         con_out=[f"c[{k}] = {code(e)}" for k, e in enumerate(con_exprs)],
         tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[repr(c) for c in jt.scale],

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
-from . import cardan, lagrange, symbols
+from . import cardan, lagrange, symbols, zcp
 from .causality import CausalGraph
 from .errors import EquationError
 from .expand import AXES, body_junction, position, rotation_matrix
@@ -126,6 +126,8 @@ class EquationSystem:
     guards: list[tuple[str, sp.Expr]] = field(default_factory=list)
     # lagrange: (joint.direction, deflection g or None, rate dg/dt) per multiplier
     constraints: list[tuple[str, sp.Expr | None, sp.Expr]] = field(default_factory=list)
+    # zcp: the constraints whose flow is imposed (tree joints), not break variables
+    imposed: set[str] = field(default_factory=set)
 
     @property
     def tables(self) -> list[Table]:
@@ -152,6 +154,7 @@ class _Builder:
         self.refs: dict[sp.Symbol, sp.Expr] = {}
         self.guards: list[tuple[str, sp.Expr]] = []
         self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
+        self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):
@@ -648,7 +651,7 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
 
 
 def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int,
-                   refuse, rank=None) -> LinearBlock:
+                   refuse, rank=None, numeric_rhs=False) -> LinearBlock:
     """A linear loop solved numerically in its tearing variables only. ``A = I - d
     tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
     loop's assignments (small, hoisted; never the substituted residual, which swells with
@@ -668,7 +671,7 @@ def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int
     if any(e.has(*loop_vars) for e in [e for _, e in pre] + [a for _, _, a in entries]):
         raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
     zero = {t: 0 for t in tears}
-    rhs = (None if rank is not None else
+    rhs = (None if rank is not None or numeric_rhs else
            tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears))
     return LinearBlock(index, tuple(tears), tuple(entries), rhs,
                        tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
@@ -686,6 +689,7 @@ def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock
                      key=lambda x: x.name)
     col = {x: j for j, x in enumerate(dynamic)}
     dstate = {st.dsym: st.sym for st in b.states}
+    dstate.update({ds: x for x, ds, _ in b.zcp_dependent})
     sens = {t: {k: sp.S.One} for k, t in enumerate(tears)}
     pre = propagate(chain, sens, lambda v, k: f"S{index}_{v.name}__{k}")
     B = tuple((col[dstate[dx]], k, d) for dx in sorted(sens, key=lambda s: s.name)
@@ -700,7 +704,8 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
     multipliers = [v for v in comp if v.name.startswith("LAM_")]
-    tears = _tear(comp, deps, multipliers)
+    dependent = [v for v in comp if v in {x for x, _, _ in b.zcp_dependent}]
+    tears = _tear(comp, deps, multipliers + dependent)
     rest = [v for v in comp if v not in tears]
     sub_deps = {v: [d for d in deps[v] if d in rest] for v in rest}
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
@@ -730,6 +735,12 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                         f"({len(multipliers)} Lagrange multipliers)"]
         block = _reduced_block(b, tears, order, subs, block_index, refuse,
                                rank=symbols.param(lagrange.RANK))
+        return [block] + [(v, eqs[v]) for v in order], loop
+    if dependent:
+        loop.kind = "imposed-flow"
+        loop.tearing = [f"numeric LU of the {len(dependent)} dependent momenta (class-1 "
+                        "ZCP: velocities imposed by the flow sources)"]
+        block = _reduced_block(b, tears, order, subs, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
     if any(v.name.startswith("W_") for v in comp):
         loop.kind = "negligible-mass"
@@ -766,6 +777,8 @@ def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> Equat
     b.build()
     b.resolve_refs()
     b.resolve_derivatives()
+    if cg.graph.zcp is not None:
+        zcp.embed(b)
     constraints = lagrange.acceleration_constraints(b)
     deps = _deps(b.eqs)
     assignments, loops, blocks = [], [], 0
@@ -781,14 +794,15 @@ def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> Equat
     outputs = [(o.name, o.expr.xreplace(b.refs).xreplace(aliases)) for o in b.m.outputs]
     params = [(symbols.param(p.name), p.name, p.value) for p in b.m.parameters.values()]
     if constraints:
-        params += [(symbols.param(lagrange.ALPHA), lagrange.ALPHA,
-                    lagrange.default_alpha(b.m.settings.t_end)),
+        alpha = lagrange.alpha_param(method)
+        params += [(symbols.param(alpha), alpha, lagrange.default_alpha(b.m.settings.t_end)),
                    (symbols.param(lagrange.RANK), lagrange.RANK, float(len(constraints)))]
         constraints = [(n, g if g is None else g.xreplace(aliases), r.xreplace(aliases))
                        for n, g, r in constraints]
     system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
                             {n: b.display[v] for n, v in b.dependent.items()}, b.display,
-                            guards=b.guards, constraints=constraints)
+                            guards=b.guards, constraints=constraints,
+                            imposed={c.name for c in cg.graph.constraints if c.imposed})
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

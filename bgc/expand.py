@@ -156,7 +156,7 @@ class _Expander:
                 self.bond(src, mtf, j.loc)
                 self.bond(mtf, zero, j.loc, dim=1)
             parts = []
-            if d.blocked and self.method == "lagrange":
+            if d.blocked and self.method in ("lagrange", "zcp"):
                 L = self.add(f"{zero}__L", "MSe", j.loc,
                              effort=symbols.multiplier(j.name, d.label))
                 self.constraints.append(Constraint(j.name, d.label, L, d.g, d.rotational))
@@ -301,7 +301,9 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict):
 
 def expand(model: Model, method: str = "parasitic") -> BondGraph:
     """``method`` decides what the constraint element L of a blocked joint direction is:
-    ``parasitic`` a stiff spring || damper, ``lagrange`` an effort source (the multiplier)."""
+    ``parasitic`` a stiff spring || damper, ``lagrange`` an effort source (the multiplier);
+    ``zcp`` starts from the latter and ``zcp.assign`` turns the tree joints' L into flow
+    sources."""
     ex = _Expander(model, method)
     for body in model.bodies.values():
         ex.body(body)

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from . import symbols
+from . import symbols, zcp
 from .consistent import RANK_PARAM
 from .errors import EquationError
 from .forward_mode import directional, propagate
@@ -38,6 +38,11 @@ ALPHA = "lagrange__alpha"
 RANK = RANK_PARAM            # set by the simulator from the rank at the start
 
 
+def alpha_param(method: str) -> str:
+    """The stabilisation rate's parameter: ``lagrange__alpha`` or ``zcp__alpha``."""
+    return zcp.ALPHA if method == "zcp" else ALPHA
+
+
 def default_alpha(t_end: float | None) -> float:
     """Baumgarte rate: 10 time constants over the run (at least 10/s)."""
     return max(10.0, 10.0 / t_end) if t_end else 10.0
@@ -45,16 +50,21 @@ def default_alpha(t_end: float | None) -> float:
 
 def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     """Define every multiplier by its Baumgarte equation in ``b`` (an equations builder);
-    return ``(name, g, dg/dt)`` of every constraint, for the generated ``constraints``."""
+    return ``(name, g, dg/dt)`` of every constraint, for the generated ``constraints``.
+
+    Method zcp: the flow sources' rates are already ``-alpha g`` (the dependent momenta,
+    ``zcp.embed``, are leaves here with their rates from the forces), so their efforts
+    keep ``d2g/dt2 + alpha dg/dt = 0``; the break variables are multipliers as above."""
     cons = b.g.constraints
     if not cons:
         return []
-    alpha = symbols.param(ALPHA)
+    alpha = symbols.param(alpha_param(b.g.method))
+    leaves = {s for s, _, _ in b.zcp_dependent}
     rates = {}
     for c in cons:
         bond, s, E, F = b._port(c.element)
         rates[c] = -s * F          # the flow into the 0-junction's direction: dg/dt
-    cone = _cone(b, list(rates.values()) + [c.g for c in cons if c.g is not None])
+    cone = _cone(b, list(rates.values()) + [c.g for c in cons if c.g is not None], leaves)
     bad = [v for v in cone if v.name.startswith(("DX_", "LAM_", "W_"))]
     if bad:
         c = cons[0]
@@ -77,33 +87,37 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     for v, e in propagate(chain, pose, lambda v, k: f"D_{v.name}"):
         b.define(v, e, None)
         b.display[v] = f"d({b.display.get(v, v.name)})/dt at fixed momenta"
-    dynamic = [st for st in b.states if st.element not in b.g.bodies]
-    ksens = {st.sym: {j: sp.S.One} for j, st in enumerate(dynamic)}
+    dynamic = [(st.sym, st.dsym) for st in b.states if st.element not in b.g.bodies]
+    dynamic += [(s, ds) for s, ds, _ in b.zcp_dependent]
+    ksens = {x: {j: sp.S.One} for j, (x, _) in enumerate(dynamic)}
     for v, e in propagate(chain, ksens, lambda v, j: f"K_{v.name}__{j}"):
         b.define(v, e, None)
     out = []
     for c in cons:
         r = rates[c]
         lam = symbols.multiplier(c.joint, c.label)
-        rows = {dynamic[j].sym: d for j, d in directional(r, ksens).items()}
+        rows = {dynamic[j][0]: d for j, d in directional(r, ksens).items()}
         b.kkt_rows[lam] = rows
         rdot = directional(r, pose).get(0, sp.S.Zero) + sum(
-            (d * st.dsym for st in dynamic if (d := rows.get(st.sym)) is not None),
-            sp.S.Zero)
+            (d * dx for x, dx in dynamic if (d := rows.get(x)) is not None), sp.S.Zero)
         g = c.g if c.g is not None else sp.S.Zero
-        b.eqs[lam] = lam + rdot + 2 * alpha * r + alpha ** 2 * g
+        if c.imposed:
+            b.eqs[lam] = lam + rdot + alpha * r
+        else:
+            b.eqs[lam] = lam + rdot + 2 * alpha * r + alpha ** 2 * g
         b.origin[lam] = (c.element, None)
-        b.display[lam] = f"{c.name}.lambda"
+        role = "lambda" if b.g.method == "lagrange" else "e" if c.imposed else "break"
+        b.display[lam] = f"{c.name}.{role}"
         out.append((c.name, c.g, r))
     return out
 
 
-def _cone(b, exprs) -> set:
-    """The assigned variables ``exprs`` depend on."""
+def _cone(b, exprs, leaves=frozenset()) -> set:
+    """The assigned variables ``exprs`` depend on (not looking past ``leaves``)."""
     seen, stack = set(), [s for e in exprs for s in e.free_symbols]
     while stack:
         v = stack.pop()
-        if v in seen or v not in b.eqs:
+        if v in seen or v not in b.eqs or v in leaves:
             continue
         seen.add(v)
         stack.extend(b.eqs[v].free_symbols)

@@ -6,13 +6,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import causality, emit, equations, expand, load
+from . import causality, emit, equations, expand, load, zcp
 from .causality import CausalGraph
 from .equations import EquationSystem
 from .model import Model
 
 # what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
-METHODS = ("parasitic", "lagrange")
+METHODS = ("parasitic", "lagrange", "zcp")
 
 
 @dataclass
@@ -23,9 +23,12 @@ class Compiled:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def build(model: str | Path | Model, method: str = "parasitic", **derive_options) -> Compiled:
-    """Run load (unless given a Model) -> expand -> causality -> equations, timing each
-    stage. ``derive_options`` go to ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
+def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool = True,
+          **derive_options) -> Compiled:
+    """Run load (unless given a Model) -> expand -> (zcp) -> causality -> equations, timing
+    each stage. ``open_loops``: method zcp opens kinematic loops with break variables
+    (else refuses them). ``derive_options`` go to ``equations.derive`` (e.g.
+    ``max_symbolic_loop``)."""
     timings = {}
     t0 = time.perf_counter()
     if not isinstance(model, Model):
@@ -33,6 +36,8 @@ def build(model: str | Path | Model, method: str = "parasitic", **derive_options
     timings["load"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     graph = expand.expand(model, method)
+    if method == "zcp":
+        graph = zcp.assign(graph, open_loops)
     cg = causality.assign(graph)
     timings["causality"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -52,11 +57,12 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
 
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
-                  method: str = "parasitic"):
-    """The generated module for a model, recompiled only if missing or stale."""
+                  method: str = "parasitic", open_loops: bool = True):
+    """The generated module for a model, recompiled only if missing or stale (with
+    ``open_loops=False`` always rebuilt, so that method zcp can refuse a closed loop)."""
     model = load.load(model_path)
     path = emit.module_path(model.name, out_dir, method)
     compiled = None
-    if emit.is_stale(path, model.digest, method):
-        compiled, path = compile_model(model, out_dir, method)
+    if emit.is_stale(path, model.digest, method) or not open_loops:
+        compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
     return emit.import_module(path), model, compiled

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "b8b04e0d99527c846afa0188f056f9f7"
+MODEL_HASH = "d633596268e961bc02af167e370c0b16"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("beta", "Theta", "gamma", "Phi", "delta", "Omega", "epsilon", )
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos body1.ay -\u003e 0) of body \u0027body1\u0027", "Cardan singularity (gimbal lock, cos body2.ay -\u003e 0) of body \u0027body2\u0027", "Cardan singularity (gimbal lock, cos body3.ay -\u003e 0) of body \u0027body3\u0027", "Cardan singularity (gimbal lock, cos body4.ay -\u003e 0) of body \u0027body4\u0027", "Cardan singularity (gimbal lock, cos body5.ay -\u003e 0) of body \u0027body5\u0027", "Cardan singularity (gimbal lock, cos body6.ay -\u003e 0) of body \u0027body6\u0027", "Cardan singularity (gimbal lock, cos body7.ay -\u003e 0) of body \u0027body7\u0027", )
 PARAMS = np.array([0.033, -0.06171389001427645, 0.0, 0.45527981916307037, 0.22266839016588588, 0.48736497954384256, -0.22266839016588588, 1.2305474445498212, 4530.0, 0.07785, -0.03635, 0.03273, 0.014, 0.072, 0.018, 0.02, 1000000000.0, 10000.0, 100000.0, 10.0, 0.0, 0.0, 0.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 0.0, 0.0, 0.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0, 1000000000.0, 10000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83], dtype=np.int64)
 
 

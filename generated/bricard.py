@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "c33a027e136c05a9838abfd3f011b471"
+MODEL_HASH = "02f3284f3d98166e06be1c211caa7e64"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("tip_x", "tip_y", "tip_z", "P3_x", "P3_y", "P3_z", "energy", "J1
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos bar1.ay -\u003e 0) of body \u0027bar1\u0027", "Cardan singularity (gimbal lock, cos bar2.ay -\u003e 0) of body \u0027bar2\u0027", "Cardan singularity (gimbal lock, cos bar3.ay -\u003e 0) of body \u0027bar3\u0027", "Cardan singularity (gimbal lock, cos bar4.ay -\u003e 0) of body \u0027bar4\u0027", "Cardan singularity (gimbal lock, cos bar5.ay -\u003e 0) of body \u0027bar5\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([30, 31, 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "a1ee4129c69dac42cc154dfb550e1db6"
+MODEL_HASH = "0953c20238eb72802b360659929adec9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("current", "motor_speed", "load_momentum", "load_speed", "motor_
 GUARD_NAMES = ()
 PARAMS = np.array([1.2, 0.003, 0.05, 2e-05, 0.1, 0.002, 0.001, 0.05, 24.0], dtype=np.float64)
 BREAKPOINTS = np.array([0.01], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
 
 

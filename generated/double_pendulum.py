@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "9abd817fb3b120fadfbcb34dd6688874"
+MODEL_HASH = "ba4305a5312382076a84a33a4413ce96"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("y2", "gap", "energy", )
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos rod1.ay -\u003e 0) of body \u0027rod1\u0027", "Cardan singularity (gimbal lock, cos rod2.ay -\u003e 0) of body \u0027rod2\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "88c776da9ed79f847d383eefbc4058d6"
+MODEL_HASH = "c01175459f48618badb1fb2c81710ced"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("crank_angle", "rocker_angle", "coupler_length", "coupler_spin",
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos crank.ay -\u003e 0) of body \u0027crank\u0027", "Cardan singularity (gimbal lock, cos coupler.ay -\u003e 0) of body \u0027coupler\u0027", "Cardan singularity (gimbal lock, cos rocker.ay -\u003e 0) of body \u0027rocker\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "8e5d6af3330119a318b41a239ca8f573"
+MODEL_HASH = "d2f29b2d42ad85ef4c6286c3c929ef25"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("x", "y", "z", "gap", )
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos top.ay -\u003e 0) of body \u0027top\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([6, 7, 8, 9, 10, 11], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "8393f38549f672e1dc12285111e99bd3"
+MODEL_HASH = "b255c45d2472f0d3afd1966c9e2d1fca"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("x", "tip_vx", "tip_accx", "force_z", "gap", "energy", )
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos rod.ay -\u003e 0) of body \u0027rod\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([6, 7, 8, 9, 10, 11], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "a3e373e76f614aec3c80f41f84472b0e"
+MODEL_HASH = "a574bb4c31f84c52e5ba176c4c794f51"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("v_in", "v_C", )
 GUARD_NAMES = ()
 PARAMS = np.array([2000.0, 1e-06], dtype=np.float64)
 BREAKPOINTS = np.array([0.0, 0.01, 0.03], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
 TABLE_T0 = np.array([0.0, 0.01, 0.03])
 TABLE_Y0 = np.array([0.0, 5.0, 5.0])

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "db0f3ed553cb037b3410b3a58aabd6ae"
+MODEL_HASH = "2d221bd2ab935a924b7468369848ec21"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("v_out", "i_diode", )
 GUARD_NAMES = ()
 PARAMS = np.array([10.0, 50.0, 1e-12, 0.02585, 0.0001, 1000.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "20f3b353d42bc8df9cc7cf15dbdee670"
+MODEL_HASH = "7e1a8fa6820c15af94060c1c861e0e83"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("v_C", "v_node", "i_source", )
 GUARD_NAMES = ()
 PARAMS = np.array([10.0, 1000.0, 3000.0, 500.0, 1e-06], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
 
 

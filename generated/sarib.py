@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "f769603e4751a2a9a9e5b037d1b3db6d"
+MODEL_HASH = "eae72428cf04062bd9a0f6788676aa1f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("a_OF_z", "F_A1_x", "F_A1_y", "F_A1_z", "F_A2_x", "F_A2_y", "F_A
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos fuselage.ay -\u003e 0) of body \u0027fuselage\u0027", "Cardan singularity (gimbal lock, cos mgb.ay -\u003e 0) of body \u0027mgb\u0027", "Cardan singularity (gimbal lock, cos beater_1.ay -\u003e 0) of body \u0027beater_1\u0027", "Cardan singularity (gimbal lock, cos beater_2.ay -\u003e 0) of body \u0027beater_2\u0027", "Cardan singularity (gimbal lock, cos beater_3.ay -\u003e 0) of body \u0027beater_3\u0027", "Cardan singularity (gimbal lock, cos beater_4.ay -\u003e 0) of body \u0027beater_4\u0027", "Cardan singularity (gimbal lock, cos bar_1.ay -\u003e 0) of body \u0027bar_1\u0027", "Cardan singularity (gimbal lock, cos bar_2.ay -\u003e 0) of body \u0027bar_2\u0027", "Cardan singularity (gimbal lock, cos bar_3.ay -\u003e 0) of body \u0027bar_3\u0027", "Cardan singularity (gimbal lock, cos bar_4.ay -\u003e 0) of body \u0027bar_4\u0027", "Cardan singularity (gimbal lock, cos attach_int_1.ay -\u003e 0) of body \u0027attach_int_1\u0027", "Cardan singularity (gimbal lock, cos attach_int_2.ay -\u003e 0) of body \u0027attach_int_2\u0027", "Cardan singularity (gimbal lock, cos membrane_int_1.ay -\u003e 0) of body \u0027membrane_int_1\u0027", "Cardan singularity (gimbal lock, cos membrane_int_2.ay -\u003e 0) of body \u0027membrane_int_2\u0027", )
 PARAMS = np.array([10000000.0, 1000.0, 100000.0, 10.0, 11000.0, 200.0, 1222.326, 10000000.0, 1000.0, 100000.0, 10.0, 0.0, 2.0, 0.0, 10000000.0, 1000.0, 100000.0, 10.0, 0.0, 2.0, 0.0, 10000000.0, 1000.0, 100000.0, 10.0, 2000.0, 1.0, 0.0, 10000000.0, 1000.0, 100000.0, 10.0, 2000.0, 1.0, 0.0, 10000000.0, 1000.0, 100000.0, 10.0, 5000.0, 20.0, 0.0, 10000000.0, 1000.0, 100000.0, 10.0, 700.0, 0.3, 5.998815, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 700.0, 0.3, 5.998815, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 700.0, 0.3, 5.998815, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0, 700.0, 0.3, 5.998815, 10000000.0, 1000.0, 100000.0, 10.0, 10000000.0, 1000.0, 100000.0, 10.0], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([68, 69, 70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 90, 91, 92, 93, 94, 95, 96, 97, 98, 99, 100, 101, 102, 103, 104, 105, 106, 107, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119, 120, 121, 122, 123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 135, 136, 137, 138, 139, 140, 141, 142, 143, 144, 145, 146, 147, 148, 149, 150, 151], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "281944ae7bb4913d9fabcf9c30bd0ece"
+MODEL_HASH = "64cc3231cc13d1766bff9145477353c3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("ref", "theta", "voltage", "current", )
 GUARD_NAMES = ()
 PARAMS = np.array([2.0, 0.001, 0.08, 5e-05, 0.05, 0.01, 0.002, 60.0, 1.5, 1.0], dtype=np.float64)
 BREAKPOINTS = np.array([0.05], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
 
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "094ad0d045495915df0149e3edda1aed"
+MODEL_HASH = "72156cb840ebfc437f886f51b9e49e2e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -23,10 +23,12 @@ OUTPUT_NAMES = ("kinetic_energy", "wx", "wy", "wz", "x", )
 GUARD_NAMES = ("Cardan singularity (gimbal lock, cos box.ay -\u003e 0) of body \u0027box\u0027", )
 PARAMS = np.array([], dtype=np.float64)
 BREAKPOINTS = np.array([], dtype=np.float64)
-# method lagrange: the blocked joint directions (one multiplier each), whether each has a
-# position-level deflection, and the states that are body poses (position, Cardan angles)
+# methods lagrange and zcp: the blocked joint directions (one multiplier each), whether
+# each has a position-level deflection, whether its flow is imposed (zcp: a flow source
+# of a tree joint, enforced by the dependent momenta), and the states that are body poses
 CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
+IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([6, 7, 8, 9, 10, 11], dtype=np.int64)
 
 

@@ -67,3 +67,16 @@ def rel_err(actual, expected) -> float:
     import numpy as np
     actual, expected = np.asarray(actual), np.asarray(expected)
     return float(np.max(np.abs(actual - expected)) / np.max(np.abs(expected)))
+
+
+def fd_jacobian(mod, t, x, p):
+    """Central differences of a generated module's rhs, to check its analytic jac."""
+    import numpy as np
+    fd = np.empty((len(x), len(x)))
+    for j in range(len(x)):
+        h = 1e-6 * max(abs(x[j]), 1e-2)
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        fd[:, j] = (mod.rhs(t, xp, p) - mod.rhs(t, xm, p)) / (2 * h)
+    return fd

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from bgc.cli import main
 from bgc.simulate import simulate
-from conftest import MODELS
+from conftest import MODELS, fd_jacobian
 from test_mechanisms import _slider_closure, _stiffer
 
 # Andrews' squeezing mechanism at t = 0.03: the IVP test set's reference (PSIDE, tol 1e-14)
@@ -33,13 +33,7 @@ def test_jacobian_through_the_constraint_block_matches_finite_differences(compil
     for x0 in run.x[1:]:
         x = x0 + 1e-4 * rng.uniform(-1, 1, len(x0)) * np.maximum(np.abs(x0), 1e-2)
         J = mod.jac(0.1, x, p)
-        fd = np.empty_like(J)
-        for j in range(len(x)):
-            h = 1e-6 * max(abs(x[j]), 1e-2)
-            xp, xm = x.copy(), x.copy()
-            xp[j] += h
-            xm[j] -= h
-            fd[:, j] = (mod.rhs(0.1, xp, p) - mod.rhs(0.1, xm, p)) / (2 * h)
+        fd = fd_jacobian(mod, 0.1, x, p)
         assert np.abs(J - fd).max() / np.abs(fd).max() < 1e-5
 
 

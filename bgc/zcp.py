@@ -1,0 +1,331 @@
+"""Method pass **zcp** (paper 11.2.5.1): the constraint element L of a blocked joint
+direction is an ideal flow source, and the zero-order causal paths (ZCPs) it creates are
+found, classified and resolved.
+
+With flow sources on the blocked directions, the bodies' inertias can no longer all
+integrate: the flow a joint imposes fixes some velocity components of the body it carries
+(derivative causality on those components of its mass or inertia I). This is done at the
+equation level, per component (the graphical vector rule C1 would forbid a revolute's two
+blocked rotations on a three-component inertia):
+
+- a **spanning tree** of the joints from the fixed frame; every tree joint's blocked
+  directions are flow sources, and each fixes one velocity component of the joint's child
+  body, chosen where the joint's rows are best conditioned at the initial pose (column-
+  pivoted QR, translations first). Those components are *dependent*: not states, but
+  solved at run time from the imposed flows ``dg/dt = -alpha g`` (``alpha = zcp__alpha``
+  keeps the positions on the constraints; 0 gives the ideal source ``dg/dt = 0``). The
+  class-1 ZCP between a dependent (derivative) component and the integral ones is the
+  linear solve of the dependent momenta, and their derivative-causal efforts (the joint
+  forces) meet the integral momenta's rates in the constraint block;
+- a joint that closes a **kinematic loop** (a tree's chord) would impose a flow the tree
+  already fixes: a class-4 ZCP, a causal cycle whose topological loop is closed, an index-2
+  DAE. It is opened with break variables: its blocked directions become effort sources
+  whose efforts are solved with the others at the acceleration level (Baumgarte), so the
+  result stays an explicit ODE for any integrator. ``open_loops=False`` refuses instead,
+  naming each loop.
+
+Class-2 (algebraic loops of R-like elements, topologically flat) and class-3 ZCPs (causal
+cycles through one element's port, topologically open) are the algebraic loops the
+equations stage finds; ``paths`` classifies everything for ``bgc check --method zcp``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.linalg
+import sympy as sp
+
+from . import symbols
+from .bondgraph import BondGraph
+from .errors import EquationError
+from .expand import AXES, _initial_pose, _twist_row
+
+ALPHA = "zcp__alpha"
+FIXED = "fixed_frame"
+_ROTATION_WEIGHT = 1e-3     # pivot on translations first: they are the physical choice
+
+
+@dataclass
+class TreeJoint:
+    """A joint of the spanning tree: its flow sources fix ``dependent`` components
+    ((I element, axis index)) of ``child``."""
+    joint: str
+    parent: str | None
+    child: str
+    dependent: list[tuple[str, int]]
+
+
+@dataclass
+class KinematicLoop:
+    """A class-4 ZCP: the closed chain of bodies and joints that ``cut`` closes."""
+    cut: str
+    joints: list[str]
+    bodies: list[str]
+
+    def describe(self) -> str:
+        chain = " - ".join(b or FIXED for b in self.bodies)
+        return f"kinematic loop {chain} (joints {', '.join(self.joints)}), closed by '{self.cut}'"
+
+
+@dataclass
+class Plan:
+    tree: list[TreeJoint] = field(default_factory=list)
+    loops: list[KinematicLoop] = field(default_factory=list)
+
+    @property
+    def dependent(self) -> list[tuple[str, int]]:
+        return [d for tj in self.tree for d in tj.dependent]
+
+    def storage(self, element: str) -> str | None:
+        """How a body inertia's components are split, e.g. 'derivative (y, z: joint
+        guide), integral (x)'; None if all integrate."""
+        for tj in self.tree:
+            dep = [AXES[k] for el, k in tj.dependent if el == element]
+            if dep:
+                free = [a for a in AXES if a not in dep]
+                return (f"derivative ({', '.join(dep)}: imposed by joint '{tj.joint}')"
+                        + (f", integral ({', '.join(free)})" if free else ""))
+        return None
+
+
+@dataclass
+class Path:
+    """One zero-order causal path of the report."""
+    cls: int
+    what: str
+    elements: list[str]
+    bonds: list[str]
+    lines: list[int]
+    key: list[str] = field(default_factory=list)   # its sources and storages, for a summary
+
+    def to_dict(self) -> dict:
+        return {"class": self.cls, "what": self.what, "elements": self.elements,
+                "bonds": self.bonds, "lines": self.lines}
+
+    def summary(self) -> str:
+        """Lines, the path's sources and storages, and its bonds (abridged)."""
+        key = self.key or self.elements
+        bonds = ", ".join(self.bonds[:6]) + (f" and {len(self.bonds) - 6} more"
+                                              if len(self.bonds) > 6 else "")
+        return (f"lines {', '.join(map(str, self.lines))}; elements {', '.join(key)}"
+                + (f" ({len(self.elements)} with the junction structure)"
+                   if len(self.elements) > len(key) else "") + f"; bonds {bonds or 'none'}")
+
+
+def _spanning_tree(graph: BondGraph):
+    """(tree edges (joint, parent, child), chords) by breadth-first search from the
+    fixed frame, then from any body no joint connects to it; joints in file order."""
+    edges = [(name, graph.model.joints[name]) for name, dirs in graph.joints.items()
+             if any(d.blocked for d in dirs)]
+    seen, tree, chords, used = {None}, [], [], set()
+    roots = [None] + list(graph.model.bodies)
+    for root in roots:
+        if root not in seen and root is not None:
+            seen.add(root)
+        elif root is not None:
+            continue
+        queue = [root]
+        while queue:
+            node = queue.pop(0)
+            for name, j in edges:
+                if name in used or node not in (j.body1, j.body2):
+                    continue
+                other = j.body2 if j.body1 == node else j.body1
+                used.add(name)
+                if other in seen:
+                    chords.append(name)
+                else:
+                    seen.add(other)
+                    tree.append((name, node, other))
+                    queue.append(other)
+    return tree, chords
+
+
+def _loop(cut: str, graph: BondGraph, parent: dict) -> KinematicLoop:
+    """The tree path between the cut joint's bodies, closed by the cut joint."""
+    j = graph.model.joints[cut]
+
+    def up(n):
+        out = [(n, None)]
+        while n in parent:
+            jn, n = parent[n]
+            out[-1] = (out[-1][0], jn)
+            out.append((n, None))
+        return out
+    a, b = up(j.body1), up(j.body2)
+    common = next(n for n, _ in a if n in {m for m, _ in b})
+    pa = a[:[n for n, _ in a].index(common) + 1]
+    pb = b[:[n for n, _ in b].index(common)]
+    bodies = [n for n, _ in pa] + [n for n, _ in reversed(pb)]
+    joints = [jn for _, jn in pa[:-1]] + [jn for _, jn in reversed(pb)] + [cut]
+    return KinematicLoop(cut, joints, bodies)
+
+
+def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
+    """Choose the flow-source (tree) and break-variable (loop-closing) directions and the
+    dependent velocity components; return the graph with its ``zcp`` plan and its
+    constraints marked ``imposed`` where L is a flow source."""
+    model = graph.model
+    tree, chords = _spanning_tree(graph)
+    parent = {child: (name, par) for name, par, child in tree}
+    plan = Plan(loops=[_loop(c, graph, parent) for c in chords])
+    if plan.loops and not open_loops:
+        lp = plan.loops[0]
+        j = model.joints[lp.cut]
+        raise EquationError(
+            f"class-4 zero-order causal path: {lp.describe()}; kept closed it is an index-2 "
+            "DAE, which no integrator of bgc takes (they need an ODE: BDF/Radau handle "
+            "index 1 at most), so nothing was run (t = 0)" + (f"; {len(plan.loops) - 1} more loop(s)"
+                                  if len(plan.loops) > 1 else ""),
+            loc=j.loc, key=f"joints.{lp.cut}",
+            hint="let zcp open it with break variables (the default), or use --method "
+                 "lagrange or parasitic")
+    pose = _initial_pose(model)
+    for name, par, child in tree:
+        j = model.joints[name]
+        body = model.bodies[child]
+        if body.mass == 0:
+            raise EquationError(
+                f"method zcp: joint '{name}' imposes the velocity of body '{child}', which "
+                "has negligible mass (no inertia can take derivative causality)",
+                loc=j.loc, key=f"joints.{name}",
+                hint="give the body a small mass, or use --method parasitic")
+        rows = np.array([_twist_row(model, j, d, {child: 0}, pose, 6)
+                         for d in graph.joints[name] if d.blocked])
+        weights = np.array([1.0] * 3 + [_ROTATION_WEIGHT] * 3)
+        _, _, piv = scipy.linalg.qr(rows * weights, mode="economic", pivoting=True)
+        cols = sorted(piv[:len(rows)])
+        block = rows[:, cols]
+        if np.linalg.cond(block) > 1e10:
+            raise EquationError(
+                f"method zcp: the blocked directions of joint '{name}' do not fix "
+                f"{len(rows)} independent velocity components of body '{child}'",
+                loc=j.loc, key=f"joints.{name}", hint="use --method lagrange")
+        dep = [(f"{child}__m", c) if c < 3 else (f"{child}__J", c - 3) for c in cols]
+        plan.tree.append(TreeJoint(name, par, child, dep))
+    imposed = {tj.joint for tj in plan.tree}
+    graph.constraints = [replace(c, imposed=c.joint in imposed) for c in graph.constraints]
+    graph.zcp = plan
+    return graph
+
+
+def dependent_states(graph: BondGraph) -> list[tuple[sp.Symbol, sp.Symbol, str]]:
+    """(momentum symbol, its rate's symbol, display name) of every dependent component."""
+    out = []
+    for el, k in graph.zcp.dependent:
+        label = f"{el.replace('__', '.')}.p{AXES[k]}"
+        out.append((symbols.state(el, f"p{AXES[k]}"), symbols.dstate(el, f"p{AXES[k]}"),
+                    label))
+    return out
+
+
+def embed(b) -> set:
+    """In an equations builder: the dependent momenta stop being states; each gets the
+    equation ``p = p + (dg/dt + alpha g)`` of a flow source of its tree joint, so that they
+    form one linear loop (solved numerically, ``equations``) whose solution imposes the
+    flows. Returns the dependent momenta."""
+    g = b.g
+    dep = dependent_states(g)
+    syms = {s for s, _, _ in dep}
+    b.states = [st for st in b.states if st.sym not in syms]
+    b.zcp_dependent = dep
+    alpha = symbols.param(ALPHA)
+    imposed = [c for c in g.constraints if c.imposed]
+    by_joint: dict[str, list] = {}
+    for c in imposed:
+        by_joint.setdefault(c.joint, []).append(c)
+    for tj in g.zcp.tree:
+        for c, (el, k) in zip(by_joint[tj.joint], tj.dependent):
+            bond, s, E, F = b._port(c.element)
+            rate = -s * F
+            p = symbols.state(el, f"p{AXES[k]}")
+            gap = c.g if c.g is not None else sp.S.Zero
+            b.eqs[p] = p + rate + alpha * gap
+            b.origin[p] = (el, None)
+            b.display[p] = f"{el.replace('__', '.')}.p{AXES[k]} (dependent)"
+    return syms
+
+
+def paths(graph: BondGraph, system) -> list[Path]:
+    """Every zero-order causal path of the compiled model, classified 1-4."""
+    els = graph.elements
+    out: list[Path] = []
+
+    def bonds_among(names: set) -> list[str]:
+        return [bd.name for bd in graph.bonds if bd.src in names and bd.dst in names]
+
+    def lines(names) -> list[int]:
+        return sorted({els[n].loc.line for n in names if n in els and els[n].loc})
+
+    plan = getattr(graph, "zcp", None)
+    if plan is not None:
+        for tj in plan.tree:
+            srcs = [c.element for c in graph.constraints if c.joint == tj.joint]
+            zeros = {f"{tj.joint}__{c.label}" for c in graph.constraints
+                     if c.joint == tj.joint}
+            proj = {n for n in els if any(n.startswith(z + "__") for z in zeros)
+                    and els[n].kind == "MTF"}
+            child = tj.child
+            body = {n for n in els if n.startswith(f"{child}__") and els[n].kind != "Se"}
+            names = set(srcs) | zeros | proj | body
+            parts = {}
+            for el, k in tj.dependent:
+                parts.setdefault(el.replace("__", "."), []).append(AXES[k])
+            fixed = ", ".join(f"{n} ({''.join(a)})" for n, a in parts.items())
+            free = [f"{child}.{part}.p{a}" for part, el in (("m", f"{child}__m"),
+                                                             ("J", f"{child}__J"))
+                    for k, a in enumerate(AXES) if (el, k) not in tj.dependent]
+            what = (f"joint '{tj.joint}': flow sources on {', '.join(c.label for c in graph.constraints if c.joint == tj.joint)} "
+                    f"impose the velocity of {fixed}: derivative causality, the dependent "
+                    "momenta follow the integral ones" + (f" ({', '.join(free)}" if free
+                                                          else " (of the parent bodies")
+                    + (f" and of '{tj.parent}')" if tj.parent and free else ")"))
+            key = srcs + sorted({el for el, _ in tj.dependent})
+            out.append(Path(1, what, sorted(names), bonds_among(names), lines(names), key))
+    for name, dep in system.dependent.items():
+        lp = next((lp for lp in system.loops if name in lp.elements), None)
+        names = set(lp.elements) if lp else {name}
+        out.append(Path(1, f"{els[name].kind} '{name}' in derivative causality (dependent "
+                           f"state {dep})", sorted(names),
+                        lp.bonds if lp else [], lines(names)))
+    for lp in system.loops:
+        if lp.kind != "algebraic":
+            continue
+        ends = [(bd.src, bd.dst) for bd in graph.bonds if bd.name in lp.bonds]
+        nodes = {n for e in ends for n in e}
+        closed = bool(ends) and len(ends) > len(nodes) - _components(nodes, ends)
+        if any(els[n].kind == "R" for n in lp.elements):
+            cls, what = 2, "algebraic loop between resistors"
+        elif closed:
+            cls, what = 4, "causal cycle around a closed junction-structure loop"
+        else:
+            cls, what = 3, "causal cycle back to its own port (topologically open)"
+        out.append(Path(cls, f"{what}: {lp.describe()}", lp.elements, lp.bonds,
+                        lines(lp.elements)))
+    if plan is not None:
+        for kl in plan.loops:
+            names = {c.element for c in graph.constraints if c.joint in kl.joints}
+            names |= {n for n in els if any(n.startswith(f"{b}__") for b in kl.bodies if b)}
+            cut = [c for c in graph.constraints if c.joint == kl.cut]
+            what = (f"{kl.describe()}: opened with {len(cut)} break variable(s) "
+                    f"({', '.join(c.name + '.break' for c in cut)})")
+            joints = [graph.model.joints[j] for j in kl.joints]
+            out.append(Path(4, what, sorted(names), bonds_among(names),
+                            sorted(set(lines(names)) | {j.loc.line for j in joints}),
+                            [c.element for c in cut]))
+    return out
+
+
+def _components(nodes: set, edges) -> int:
+    parent = {n: n for n in nodes}
+
+    def find(n):
+        while parent[n] != n:
+            parent[n] = parent[parent[n]]
+            n = parent[n]
+        return n
+    for a, c in edges:
+        parent[find(a)] = find(c)
+    return len({find(n) for n in nodes})

@@ -86,6 +86,15 @@ def _other_states(module, n: int) -> list[int]:
     return [j for j in range(n) if j not in pose]
 
 
+def _measured_rows(module, K):
+    """The rows of ``K`` whose rank is measured, their names, and how many rows are left
+    out: method zcp's imposed flows hold by construction (zero rows on the states), each
+    one rank of the constraints."""
+    imposed = np.asarray(module.IMPOSED, dtype=bool)
+    names = [n for n, i in zip(module.CONSTRAINT_NAMES, imposed) if not i]
+    return K[~imposed], names, int(imposed.sum())
+
+
 def velocity_jacobian(module, x, p) -> tuple[np.ndarray, list[int]]:
     """d(dg/dt)/d(other states) (the constraint rows acting on the momenta), and those
     states' indices."""
@@ -127,12 +136,8 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
         r = _split(module, x, p)[1]
         x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
-    # zcp: the imposed flows hold by construction (their rows on the states are zero);
-    # each is one rank of the constraints, the break variables' rows count as measured
-    imposed = np.asarray(getattr(module, "IMPOSED", np.zeros(len(names))), dtype=bool)
-    free = [n for n, i in zip(names, imposed) if not i]
-    Kb = K[~imposed]
-    rank = int(imposed.sum()) + _rank(Kb)
+    Kb, free, n_imposed = _measured_rows(module, K)
+    rank = n_imposed + _rank(Kb)
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
         worst = int(np.argmax(np.abs(r)))
         raise SimulationError(
@@ -143,8 +148,7 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     dx = x - x_user
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
-                      _dependent(Kb, free, rank - int(imposed.sum()))
-                      if rank < len(names) else [])
+                      _dependent(Kb, free, rank - n_imposed) if rank < len(names) else [])
     return x, proj
 
 
@@ -162,10 +166,8 @@ def drift(module, xs, p) -> tuple[float, float]:
 def singular_configuration(module, x, p, rank: int) -> str | None:
     """If the constraints at ``x`` have lost rank (or nearly: condition beyond 1e8), which
     joint directions have become dependent."""
-    K, _ = velocity_jacobian(module, x, p)
-    imposed = np.asarray(getattr(module, "IMPOSED", np.zeros(len(K))), dtype=bool)
-    K, rank = K[~imposed], rank - int(imposed.sum())
-    names = [n for n, i in zip(module.CONSTRAINT_NAMES, imposed) if not i]
+    K, names, n_imposed = _measured_rows(module, velocity_jacobian(module, x, p)[0])
+    rank -= n_imposed
     s = np.linalg.svd(K, compute_uv=False) if K.size else np.zeros(0)
     if rank < 1 or rank > len(s) or s[rank - 1] > 1e-8 * s[0]:
         return None

@@ -120,12 +120,11 @@ def _spanning_tree(graph: BondGraph):
     edges = [(name, graph.model.joints[name]) for name, dirs in graph.joints.items()
              if any(d.blocked for d in dirs)]
     seen, tree, chords, used = {None}, [], [], set()
-    roots = [None] + list(graph.model.bodies)
-    for root in roots:
-        if root not in seen and root is not None:
+    for root in [None] + list(graph.model.bodies):
+        if root is not None:
+            if root in seen:
+                continue
             seen.add(root)
-        elif root is not None:
-            continue
         queue = [root]
         while queue:
             node = queue.pop(0)
@@ -236,15 +235,13 @@ def embed(b) -> set:
     by_joint: dict[str, list] = {}
     for c in imposed:
         by_joint.setdefault(c.joint, []).append(c)
-    for tj in g.zcp.tree:
-        for c, (el, k) in zip(by_joint[tj.joint], tj.dependent):
-            bond, s, E, F = b._port(c.element)
-            rate = -s * F
-            p = symbols.state(el, f"p{AXES[k]}")
-            gap = c.g if c.g is not None else sp.S.Zero
-            b.eqs[p] = p + rate + alpha * gap
-            b.origin[p] = (el, None)
-            b.display[p] = f"{el.replace('__', '.')}.p{AXES[k]} (dependent)"
+    sources = [c for tj in g.zcp.tree for c in by_joint[tj.joint]]   # as plan.dependent
+    for c, (el, _), (p, _, label) in zip(sources, g.zcp.dependent, dep):
+        bond, s, E, F = b._port(c.element)
+        gap = c.g if c.g is not None else sp.S.Zero
+        b.eqs[p] = p - s * F + alpha * gap         # -s F: the direction's rate dg/dt
+        b.origin[p] = (el, None)
+        b.display[p] = f"{label} (dependent)"
     return syms
 
 
@@ -277,7 +274,8 @@ def paths(graph: BondGraph, system) -> list[Path]:
             free = [f"{child}.{part}.p{a}" for part, el in (("m", f"{child}__m"),
                                                              ("J", f"{child}__J"))
                     for k, a in enumerate(AXES) if (el, k) not in tj.dependent]
-            what = (f"joint '{tj.joint}': flow sources on {', '.join(c.label for c in graph.constraints if c.joint == tj.joint)} "
+            labels = ", ".join(c.label for c in graph.constraints if c.joint == tj.joint)
+            what = (f"joint '{tj.joint}': flow sources on {labels} "
                     f"impose the velocity of {fixed}: derivative causality, the dependent "
                     "momenta follow the integral ones" + (f" ({', '.join(free)}" if free
                                                           else " (of the parent bodies")

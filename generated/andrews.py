@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "d633596268e961bc02af167e370c0b16"
+MODEL_HASH = "e3f5c02f5ee54d45c7e68c8e94f5fbe7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "02f3284f3d98166e06be1c211caa7e64"
+MODEL_HASH = "a96c3e4b02fdb42d60f94cf9beb29275"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "0953c20238eb72802b360659929adec9"
+MODEL_HASH = "774493374e9e02d882c6307b9b09653a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

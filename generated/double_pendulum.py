@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "ba4305a5312382076a84a33a4413ce96"
+MODEL_HASH = "7d45ebfd58d85a43d9985d217a1d6b0b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "e20ae9436a14480da61fb9cff1962d1f"
+MODEL_HASH = "cdea417f025e5664d6d84e372db78494"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "c01175459f48618badb1fb2c81710ced"
+MODEL_HASH = "91dc8dc744ceed24aa58e000044ec9a0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

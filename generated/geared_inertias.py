@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "efdbce49b577a4480e2baa6b277f97f8"
+MODEL_HASH = "4a41146d8d5536f812e5e968c4793123"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "d2f29b2d42ad85ef4c6286c3c929ef25"
+MODEL_HASH = "fdb8a03ec2af97d1746067608b193c63"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "fb6e9990c45c648c7584f109c56ed22d"
+MODEL_HASH = "fa57236773f8fbc6a1711cd2bb2b63b7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

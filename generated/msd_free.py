@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "9537125ead2aaeee4bbd260a55aa424f"
+MODEL_HASH = "15d0ad37b1ad41ccc3a30cdfbeb267b4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "b255c45d2472f0d3afd1966c9e2d1fca"
+MODEL_HASH = "d10db9d028cb50d493eaaa19f41a28d4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "a574bb4c31f84c52e5ba176c4c794f51"
+MODEL_HASH = "f7c61d4df47b173a6ec3582ed2b22e98"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "2d221bd2ab935a924b7468369848ec21"
+MODEL_HASH = "213b4c69db7497d79bb874daab41f54c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

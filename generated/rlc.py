@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "225ce45b16af9f2c0189093ce49608a4"
+MODEL_HASH = "23c3fb2a74e53e4baa159fd06c78c415"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "7e1a8fa6820c15af94060c1c861e0e83"
+MODEL_HASH = "7ce03d82934baccf9367594afdb0176c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "eae72428cf04062bd9a0f6788676aa1f"
+MODEL_HASH = "5f28d33f821bfc2fd4f23530d943a25a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "64cc3231cc13d1766bff9145477353c3"
+MODEL_HASH = "a37c25ec7b737c4dfd3d5974386cebfe"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "7d3932d3fc718a1f491c316a9dcfa3a4"
+MODEL_HASH = "3f636bb1816f1b89c4c1451a5a362fcf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

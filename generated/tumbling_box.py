@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "72156cb840ebfc437f886f51b9e49e2e"
+MODEL_HASH = "bf115e68b66551ed019a8b27758876aa"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,12 +13,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 
 from .errors import SimulationError
 
 RANK_TOL = 1e-9          # singular values below this fraction of the largest are zero
 # the generated module's parameter holding the rank its constraint block keeps
 RANK_PARAM = "lagrange__rank"
+# a failed run whose kept constraint conditioning fell this many times below its value at
+# the start (or below RANK_TOL) is diagnosed as a singular configuration; where the
+# monitored minor crossed zero (located to round-off) it must have fallen LOST_RANK_EVENT
+# times: a smaller drop there is a minor that became singular on its own
+LOST_RANK = 10.0
+LOST_RANK_EVENT = 1e6
 
 
 @dataclass
@@ -29,6 +36,9 @@ class Projection:
     rank: int
     n_constraints: int
     redundant: list[str] = field(default_factory=list)   # constraints in a dependent set
+    # smallest kept over largest singular value of the measured constraint rows at the
+    # start: a run that fails where this has dropped LOST_RANK-fold met a singular pose
+    conditioning: float = 1.0
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -80,6 +90,14 @@ def _rank(J: np.ndarray) -> int:
     return int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
 
 
+def _conditioning(J: np.ndarray, rank: int) -> float:
+    """The ``rank``-th singular value of ``J`` over its largest (1 where nothing is kept)."""
+    if rank < 1 or J.size == 0:
+        return 1.0
+    s = np.linalg.svd(J, compute_uv=False)
+    return float(s[rank - 1] / s[0]) if rank <= len(s) and s[0] > 0 else 0.0
+
+
 def _other_states(module, n: int) -> list[int]:
     """The states that are not body poses (momenta, functional springs)."""
     pose = set(module.POSE_STATES)
@@ -114,6 +132,7 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     pose = list(module.POSE_STATES)
     it = 0
     scale = max(1.0, float(np.abs(x[pose]).max())) if pose else 1.0
+    stalled = False
     for it in range(1, max_iter + 1):
         g = _split(module, x, p)[0][pos]
         if not len(g) or np.abs(g).max() <= tol * scale:
@@ -122,15 +141,21 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
         G = _jacobian(lambda y: _split(module, y, p)[0][pos], x, pose)
         dx = np.linalg.lstsq(G, -g, rcond=RANK_TOL)[0]
         x[pose] += dx
+        if np.abs(dx).max() <= 1e-14 * scale:      # no step left: round-off or stuck
+            stalled = np.abs(g).max() > 1e-9 * scale
+            break
     else:
+        stalled = True
+    if stalled:
         g = _split(module, x, p)[0][pos]
         worst = pos[int(np.argmax(np.abs(g)))]
         raise SimulationError(
-            f"the initial positions cannot be made consistent with the joints: after "
-            f"{max_iter} Newton iterations joint direction {names[worst]} is still open by "
+            f"the initial positions (t = 0) cannot be made consistent with the joints: after "
+            f"{it} Newton iterations joint direction {names[worst]} is still open by "
             f"{abs(g).max():.3g}", hint="the bodies' initial poses are too far from an "
-                                        "assembly of the joints (or none exists): check the "
-                                        "joint points and the bodies' com/frame")
+                                        "assembly of the joints (a blocked rotation turned "
+                                        "a quarter turn stalls the Newton steps): check the "
+                                        "joint points and the bodies' com/frame or x0")
     K, other = velocity_jacobian(module, x, p)
     for _ in range(2):
         r = _split(module, x, p)[1]
@@ -141,14 +166,15 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
         worst = int(np.argmax(np.abs(r)))
         raise SimulationError(
-            f"the initial velocities cannot be made consistent: joint direction "
+            f"the initial velocities (t = 0) cannot be made consistent: joint direction "
             f"{names[worst]} still moves at {abs(r[worst]):.3g} after projection",
             hint="the constraints are singular at the initial pose; move the mechanism "
                  "away from the dead point")
     dx = x - x_user
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
-                      _dependent(Kb, free, rank - n_imposed) if rank < len(names) else [])
+                      _dependent(Kb, free, rank - n_imposed) if rank < len(names) else [],
+                      _conditioning(Kb, rank - n_imposed))
     return x, proj
 
 
@@ -163,12 +189,43 @@ def drift(module, xs, p) -> tuple[float, float]:
     return gmax, vmax
 
 
-def singular_configuration(module, x, p, rank: int) -> str | None:
-    """If the constraints at ``x`` have lost rank (or nearly: condition beyond 1e8), which
-    joint directions have become dependent."""
-    K, names, n_imposed = _measured_rows(module, velocity_jacobian(module, x, p)[0])
-    rank -= n_imposed
-    s = np.linalg.svd(K, compute_uv=False) if K.size else np.zeros(0)
-    if rank < 1 or rank > len(s) or s[rank - 1] > 1e-8 * s[0]:
-        return None
-    return ", ".join(_dependent(K, names, rank - 1))
+class RankMonitor:
+    """A terminal event for a constrained run: the determinant of an r x r minor of the
+    measured constraint rows (r = their rank at the start; rows and columns chosen by
+    pivoted QR), normalised to 1 where it was chosen. It falls through zero where the
+    constraints lose rank, a singular configuration (``lost`` names it), or where only
+    this minor does; then ``repick`` chooses another and the run goes on."""
+
+    def __init__(self, module, x, p, projection: Projection):
+        self.module, self.p, self.projection = module, p, projection
+        self.rank = projection.rank - int(np.sum(module.IMPOSED))
+        self.terminal, self.direction = True, 0
+        U = np.linalg.svd(self._rows(x)[0])[0]
+        self.start_null = U[:, self.rank:]          # the consistent redundancy
+        self.repick(x)
+
+    def _rows(self, x):
+        return _measured_rows(self.module, velocity_jacobian(self.module, x, self.p)[0])
+
+    def repick(self, x) -> None:
+        K = self._rows(x)[0]
+        self.rows = np.sort(scipy.linalg.qr(K.T, pivoting=True)[2][:self.rank])
+        self.cols = np.sort(scipy.linalg.qr(K[self.rows], pivoting=True)[2][:self.rank])
+        self.scale = float(np.linalg.det(K[np.ix_(self.rows, self.cols)]))
+
+    def __call__(self, t, x) -> float:
+        K = self._rows(x)[0]
+        return float(np.linalg.det(K[np.ix_(self.rows, self.cols)])) / self.scale
+
+    def lost(self, x, drop: float = LOST_RANK) -> str | None:
+        """If the constraints at ``x`` have lost (or nearly lost: conditioning ``drop``
+        times worse than at the start) the rank they had, the joint directions of the new
+        dependency (left out: the redundancy there was at the start)."""
+        K, names, _ = self._rows(x)
+        if _conditioning(K, self.rank) > max(RANK_TOL, self.projection.conditioning / drop):
+            return None
+        near = np.linalg.svd(K)[0][:, self.rank - 1:]
+        # the combination of the near-null rows farthest from the start's redundancy
+        off = near - self.start_null @ (self.start_null.T @ near)
+        u = np.abs(near @ np.linalg.svd(off)[2][0])
+        return ", ".join(n for n, w in zip(names, u) if w > 0.05 * u.max())

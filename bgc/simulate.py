@@ -123,6 +123,18 @@ _GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's fr
                "its large rotations are not about its y axis")
 
 
+_SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
+                  "change its geometry or initial state, or use --method parasitic to pass "
+                  "through it")
+
+
+def _singular(monitor, seg: Segment, drop: float) -> str | None:
+    """The message for a segment that ended at a singular configuration, else None."""
+    lost = monitor.lost(seg.x_end, drop)
+    return lost and (f"singular configuration at t = {seg.t_reached:.6g}: the constraints "
+                     f"lost rank, joint directions {lost} became dependent")
+
+
 def _guard_events(module, p):
     """One terminal event per guard; the integrator asks each at the same (t, x), so the
     margins are computed once per point and shared."""
@@ -180,6 +192,10 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             k = int(np.argmin(margins))
             raise SimulationError(f"{module.GUARD_NAMES[k]} at the initial state (margin "
                                   f"{margins[k]:.3g})", hint=_GUARD_HINT)
+    monitor = None
+    if projection is not None and projection.rank > int(np.sum(module.IMPOSED)):
+        monitor = consistent.RankMonitor(module, x, p, projection)
+        events.append(monitor)
     stats.compile_time = time.perf_counter() - t0
 
     def rhs(t, xx):
@@ -195,9 +211,11 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             "singularity at that time")
     t_start = time.perf_counter()
     segs = _segments(t_end, module.BREAKPOINTS)
-    for k, (a, b) in enumerate(segs):
-        last = k == len(segs) - 1
-        sel = grid[(grid >= a) & ((grid < b) | (last & (grid <= b)))]
+    done = -np.inf                # last output time recorded
+    while segs:
+        a, b = segs.pop(0)
+        last = not segs
+        sel = grid[(grid >= a) & (grid > done) & ((grid < b) | (last & (grid <= b)))]
         if x.size == 0:
             ts.append(sel)
             xs.append(np.zeros((len(sel), 0)))
@@ -205,6 +223,16 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         seg = method.integrate(rhs, jac, a, b, x, sel, rtol, atol, stats, events)
         ts.append(sel[:len(seg.x_eval)])
         xs.append(seg.x_eval)
+        done = ts[-1][-1] if len(ts[-1]) else done
+        if monitor is not None and seg.event == len(events) - 1:
+            singular = _singular(monitor, seg, consistent.LOST_RANK_EVENT)
+            if singular:
+                ok, message, hint = False, singular, _SINGULAR_HINT
+                break
+            monitor.repick(seg.x_end)        # only the monitored minor was singular
+            x = np.array(seg.x_end, dtype=np.float64)
+            segs.insert(0, (seg.t_reached, b))
+            continue
         if seg.event is not None:
             ok, message = False, (f"{module.GUARD_NAMES[seg.event]} reached at "
                                   f"t = {seg.t_reached:.6g}")
@@ -221,14 +249,10 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         len(t_all), len(module.OUTPUT_NAMES))
     if projection is not None and len(x_all):
         stats.drift_position, stats.drift_velocity = consistent.drift(module, x_all, p)
-        if not ok:
-            lost = consistent.singular_configuration(module, seg.x_end, p, projection.rank)
-            if lost:
-                message = (f"singular configuration at t = {seg.t_reached:.6g}: the "
-                           f"constraints lost rank, joint directions {lost} became "
-                           f"dependent ({message})")
-                hint = ("the mechanism reached a dead point; change its geometry or "
-                        "initial state, or use --method parasitic to pass through it")
+        singular = None if ok or hint == _SINGULAR_HINT or monitor is None else _singular(
+            monitor, seg, consistent.LOST_RANK)
+        if singular:       # the integrator gave up short of the singular pose: say why
+            message, hint = f"{singular} ({message})", _SINGULAR_HINT
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection)
     if not ok:

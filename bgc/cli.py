@@ -9,12 +9,15 @@ from __future__ import annotations
 import functools
 import json
 import sys
+from pathlib import Path
 
 import click
 import numpy as np
 
 from . import __version__, emit
 from .errors import BgcError, SimulationError
+from .joints import JOINT_KINDS
+from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
 
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
@@ -44,7 +47,7 @@ def _save_partial(result, kwargs):
     from .results import write_csv
     out = kwargs.get("out")
     if out and len(result.t):
-        write_csv(result, out)
+        write_csv(result, out, kwargs.get("states", True))
         click.echo(f"partial results up to t = {result.t[-1]:.6g} written to {out}",
                    err=True)
 
@@ -81,8 +84,13 @@ def check(model, method, keep_loops, as_json):
         "algebraic_loops": [lp.__dict__ for lp in s.loops],
         "free_choices": rep["free_choices"], "strokes": rep["bonds"],
         "notes": s.notes, "conflicts": [],
-        "constraints": [name for name, _, _ in s.constraints],
+        "constraint_multipliers": [name for name, _, _ in s.constraints],
     }
+    if c.model.bodies:      # Table 11.1: absolute coordinates, scalar constraints, Gruebler
+        report["coordinates"] = 6 * len(c.model.bodies)
+        report["constraints"] = sum(len(JOINT_KINDS[j.kind].blocked)
+                                    for j in c.model.joints.values())
+        report["dof"] = report["coordinates"] - report["constraints"]
     if method == "zcp":
         report["zcp_paths"] = [z.to_dict() for z in zcps]
     if as_json:
@@ -91,6 +99,11 @@ def check(model, method, keep_loops, as_json):
     click.echo(f"{model}: {report['bodies']} bodies, {report['elements']} elements, "
                f"{report['bonds']} bonds, "
                f"{len(s.states)} states ({', '.join(report['states']) or 'none'})")
+    if c.model.bodies:
+        click.echo(f"mechanism: {report['coordinates']} absolute coordinates, "
+                   f"{report['constraints']} scalar constraints, {report['dof']} degrees of "
+                   f"freedom (Gruebler count: redundant constraints make the real mobility "
+                   f"larger)")
     click.echo("causality: no conflicts")
     plan = c.causal.graph.zcp
     for name, cz in rep["storage"].items():
@@ -158,6 +171,29 @@ def _parse_params(module, items, base=None):
     return p
 
 
+def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | None:
+    """Set the parameters of the excitation the options choose (in place); what was chosen."""
+    if kind is None and direction is None:
+        for opt, val in (("--amplitude", amplitude), ("--frequency", frequency)):
+            if val is not None:
+                raise BgcError(f"{opt} needs --excitation KIND --direction NAME", key=opt)
+        return None
+    exc = m.excitation
+    if exc is None:
+        raise BgcError(f"{m.file} has no 'excitation' section", key="--excitation",
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    if kind is None or direction is None:
+        raise BgcError("--excitation and --direction go together", key="--excitation",
+                       hint=f"kinds: {', '.join(exc.kinds)}; directions: "
+                            f"{', '.join(exc.directions)}")
+    for name, value in exc.select(kind, direction, amplitude, frequency).items():
+        p[module.PARAM_NAMES.index(name)] = value
+    return {"kind": kind, "direction": direction,
+            "amplitude": float(p[module.PARAM_NAMES.index(exc.param(direction))]),
+            "frequency": (float(p[module.PARAM_NAMES.index(exc.FREQUENCY)])
+                          if exc.kinds[kind].kind == "sine" else None)}
+
+
 @main.command()
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("--t-end", type=float, help="end time [s] (default: the model's)")
@@ -169,20 +205,32 @@ def _parse_params(module, items, base=None):
               help="override a parameter (no recompilation)")
 @click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
 @click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
+@click.option("--states/--no-states", default=True, show_default=True,
+              help="whether the CSV holds the states besides t and the outputs")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
 @click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
               default="given", show_default=True,
               help="method parasitic: the joints' stiffness and damping as the model gives "
                    "them, or chosen from the eigenfrequencies")
-@click.option("--separation", type=float, default=10.0, show_default=True,
+@click.option("--separation", type=float, default=SEPARATION, show_default=True,
               help="--parasitic auto: parasitic frequencies over the highest functional one")
+@click.option("--excitation", "exc_kind", metavar="KIND",
+              help="the model's excitation g(t) (e.g. constant, sine, chirp)")
+@click.option("--direction", "exc_dir", metavar="NAME",
+              help="where the excitation acts (e.g. pumping, roll, pitch)")
+@click.option("--amplitude", type=float, help="excitation amplitude (default: the model's)")
+@click.option("--frequency", type=float, help="sine excitation frequency [Hz]")
+@click.option("--zoom", type=(float, float), metavar="T0 T1",
+              help="with --plot: also <plot>_zoom.png over [T0, T1], outputs that differ "
+                   "only by a number (F_A1_z, F_A2_z) in one panel")
 @_method_opt
 @_loops_opt
 @_json_opt
 @_user_errors
-def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_dir,
-             parasitic_mode, separation, method, keep_loops, as_json):
+def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, states, out_dir,
+             parasitic_mode, separation, exc_kind, exc_dir, amplitude, frequency, zoom,
+             method, keep_loops, as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
     from .results import plot as plot_png
     from .results import write_csv
@@ -194,6 +242,9 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
     module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
     p, choice = _parse_params(module, params), None
+    exc = _excitation(module, m, p, exc_kind, exc_dir, amplitude, frequency)
+    if exc:
+        p = _parse_params(module, params, base=p)     # explicit -p values still win
     if parasitic_mode == "auto":
         from . import parasitic
         if method != "parasitic":
@@ -209,9 +260,27 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
                  params=p)
     files = {}
     if out:
-        files["csv"] = str(write_csv(result, out))
+        files["csv"] = str(write_csv(result, out, states))
+    title = f"{m.name} ({result.solver}" + (f", {exc['kind']} {exc['direction']}" if exc
+                                            else "") + ")"
     if plot:
-        files["png"] = str(plot_png(result, plot, title=f"{m.name} ({result.solver})"))
+        files["png"] = str(plot_png(result, plot, title=title))
+    minima = None
+    if exc and m.excitation.kinds[exc["kind"]].kind == "chirp":
+        from .envelope import analyse
+        from .results import plot_envelopes
+        chirp = m.excitation.kinds[exc["kind"]].numbers
+        if result.t[-1] > chirp["t2"] + 1.0:
+            curves = analyse(result, chirp)
+            minima = {k: [round(f, 2) for f in c[2]] for k, c in curves.items()}
+            if plot:
+                path = Path(plot).with_name(Path(plot).stem + "_envelope.png")
+                files["envelope_png"] = str(plot_envelopes(curves, path, title))
+    if zoom and plot:
+        t0, t1 = zoom
+        path = Path(plot).with_name(Path(plot).stem + "_zoom.png")
+        files["zoom_png"] = str(plot_png(result, path, title=title, window=(t0, t1),
+                                         overlay=True))
     stats = result.stats.to_dict()
     proj = result.projection
     if as_json:
@@ -219,6 +288,7 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
                                "t_end": float(result.t[-1]), "stats": stats,
                                "projection": proj.to_dict() if proj else None,
                                "parasitic": choice.to_dict() if choice else None,
+                               "excitation": exc, "envelope_minima_hz": minima,
                                "compiled": compiled is not None, "files": files}, indent=2))
         return
     if proj is not None:
@@ -233,8 +303,60 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, out_di
     if stats["drift_position"] is not None:
         click.echo(f"  constraint drift: position {stats['drift_position']:.3g}, velocity "
                    f"{stats['drift_velocity']:.3g}")
+    for name, fs in (minima or {}).items():
+        click.echo(f"  envelope minima of {name} over the chirp: "
+                   f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
     for kind, f in files.items():
         click.echo(f"  {kind}: {f}")
+
+
+@main.command()
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("--input", "direction", required=True, metavar="NAME",
+              help="the excitation direction driven (e.g. pumping, roll, pitch)")
+@click.option("--output", "output", required=True, metavar="NAME", help="the model output")
+@click.option("--f-min", type=float, default=5.0, show_default=True, help="band start [Hz]")
+@click.option("--f-max", type=float, default=25.0, show_default=True, help="band end [Hz]")
+@click.option("--out", type=click.Path(dir_okay=False),
+              help="CSV of f, |H|, phase [deg] on a 0.01 Hz grid")
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="override a parameter (no recompilation)")
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="where the generated module is kept")
+@_method_opt
+@_json_opt
+@_user_errors
+def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as_json):
+    """Frequency response of an output to an excitation direction, linearized about the
+    static equilibrium; its anti-resonances and resonances in the band."""
+    from . import frf as bfrf
+    if not 0 < f_min < f_max:
+        raise BgcError(f"need 0 < --f-min < --f-max, got {f_min} and {f_max}", key="--f-min")
+    module, m, _ = ensure_module(model, out_dir, method)
+    if output not in module.OUTPUT_NAMES:
+        raise BgcError(f"unknown output '{output}'", key="--output",
+                       hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
+    lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
+    anti, res = bfrf.extrema(lin, output, f_min, f_max)
+    report = {"model": m.name, "method": method, "input": direction, "output": output,
+              "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
+              "antiresonances_hz": [round(f, 2) for f in anti],
+              "resonances_hz": [round(f, 2) for f in res]}
+    if out:
+        from .results import write_table
+        f = np.linspace(f_min, f_max, int(round((f_max - f_min) / 0.01)) + 1)
+        h = lin.response(f, output)
+        report["files"] = {"csv": str(write_table(out, ["f_hz", "abs_H", "phase_deg"],
+                                                  [f, np.abs(h), np.degrees(np.angle(h))]))}
+    if as_json:
+        click.echo(json.dumps(report, indent=2))
+        return
+    click.echo(f"{m.name}: {output} / {direction} in [{f_min:g}, {f_max:g}] Hz, linearized "
+               f"about the equilibrium (|dx/dt| = {lin.residual:.2g})")
+    click.echo(f"  anti-resonances: {', '.join(f'{f:.2f}' for f in anti) or 'none'} Hz")
+    click.echo(f"  resonances: {', '.join(f'{f:.2f}' for f in res) or 'none'} Hz")
+    if out:
+        click.echo(f"  csv: {report['files']['csv']}")
 
 
 if __name__ == "__main__":

@@ -53,6 +53,38 @@ class Projection:
         return out
 
 
+def static_loads(module, x, p) -> np.ndarray:
+    """Method parasitic, a model whose initial state is a static equilibrium
+    (``STATIC_LOADS``): ``p`` with each blocked direction's load parameter
+    (``<joint>__<dir>_load``) set to what its parasitic spring carries there, with no
+    excitation. The rhs is affine in the loads (exact differences); least squares, the
+    minimum-norm share where joints are hyperstatic. Without them the springs start
+    slack and the rig drops by load/stiffness at t = 0."""
+    names = list(module.PARAM_NAMES)
+    loads = [i for i, n in enumerate(names) if "__" in n and n.endswith("_load")]
+    q = np.array(p, dtype=np.float64)
+    q[loads] = 0.0
+    q[[i for i, n in enumerate(names) if n.startswith("excitation__")]] = 0.0
+    f0 = module.rhs(0.0, x, q)
+    M = np.empty((len(f0), len(loads)))
+    for k, i in enumerate(loads):
+        qq = q.copy()
+        qq[i] = 1.0
+        M[:, k] = module.rhs(0.0, x, qq) - f0
+    q[loads] = np.linalg.lstsq(M, -f0, rcond=RANK_TOL)[0]
+    left = module.rhs(0.0, x, q)
+    worst = int(np.argmax(np.abs(left)))
+    if abs(left[worst]) > 1e-6 * max(1.0, float(np.abs(f0).max())):
+        raise SimulationError(
+            f"the initial state (t = 0) is not a static equilibrium: with the parasitic "
+            f"springs' best static loads d{module.STATE_NAMES[worst]}/dt is still "
+            f"{left[worst]:.3g}", hint="check the functional preloads and the initial "
+                                       "velocities, or drop 'parasitic: {loads: static}'")
+    out = np.array(p, dtype=np.float64)
+    out[loads] = q[loads]
+    return out
+
+
 def _split(module, x, p):
     c = module.constraints(0.0, x, p)
     m = len(module.CONSTRAINT_NAMES)

@@ -193,6 +193,7 @@ def render(system: EquationSystem) -> str:
                   colour=[jt.colours[j] for _, j, _ in jt.pattern]),
         out_out=[f"y[{k}] = {code(e)}" for k, e in enumerate(out_exprs)],
         guard_names=[what for what, _ in system.guards],
+        static_loads=bool(m.static_loads and system.method == "parasitic"),
         guard_out=[f"g[{k}] = {code(e)}" for k, e in enumerate(guard_exprs)],
     )
     for key, (params, unpack, body) in funcs.items():

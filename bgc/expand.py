@@ -165,8 +165,9 @@ class _Expander:
                 kind = "rot_" if d.rotational else ""
                 k = symbols.param(joint_param(j.name, kind + "stiffness"))
                 c = symbols.param(joint_param(j.name, kind + "damping"))
-                if d.g is not None:
-                    parts.append(self.add(f"{zero}__L", "MSe", j.loc, effort=k * d.g))
+                if d.g is not None:     # load: the static joint load it starts with
+                    load = symbols.param(joint_param(j.name, f"{d.label}_load"))
+                    parts.append(self.add(f"{zero}__L", "MSe", j.loc, effort=k * d.g - load))
                 else:
                     parts.append(self.add(f"{zero}__L", "C", j.loc, k=k, initial=sp.S.Zero))
                 parts.append(self.add(f"{zero}__Lc", "R", j.loc, R=c))

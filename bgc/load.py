@@ -23,12 +23,12 @@ from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
 from .joints import JOINT_KINDS, NEEDS_AXIS2
-from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Functional, Joint, Model,
-                    Output, Parameter, Parasitic, Settings, Signal, Table)
+from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Excitation, Functional, Joint,
+                    Model, Output, Parameter, Parasitic, Settings, Signal, Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
-            "parasitic", "elements", "bonds", "outputs", "simulation")
+            "parasitic", "excitation", "elements", "bonds", "outputs", "simulation")
 BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
 JOINT_KEYS = ("type", "between", "at", "axis", "axis2", "frame", "pitch", "spring", "actuator",
               "directions", "parasitic", "description")
@@ -213,46 +213,55 @@ class _Loader:
         for name, v in sec.items():
             key = f"signals.{name}"
             self.declare(name, f"signal '{name}'", sec.key_locs[name], key)
-            v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
-            kind = v.get("type")
-            if kind not in bsignals.SIGNAL_TYPES:
-                self.err(f"unknown signal type {kind!r}", v.val_locs.get("type", v.loc),
-                         f"{key}.type", "valid types: " + ", ".join(bsignals.SIGNAL_TYPES))
-            required, optional = bsignals.SIGNAL_TYPES[kind]
-            self.check_keys(v, ("type", "description") + required + tuple(optional), key)
-            vals = {}
-            for k in required:
-                if k not in v:
-                    self.err(f"missing '{k}' for a {kind} signal", v.loc, key,
-                             "needs: " + ", ".join(required))
-            for k in required + tuple(optional):
-                kk, kloc = f"{key}.{k}", v.val_locs.get(k, v.loc)
-                if kind == "table":
-                    vals[k] = self.number_list(v[k], kloc, kk)
-                elif k == "time":
-                    vals[k] = self.number(v.get(k, optional.get(k)), kloc, kk)
-                elif k == "expr":
-                    vals[k] = bexpr.parse(v[k], loc=kloc, key=kk,
-                                          names={**names, "t": symbols.t})
-                else:
-                    vals[k] = bexpr.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
-                                          names=names)
-            if kind == "table":
-                tt, yy = vals["t"], vals["values"]
-                if len(tt) != len(yy) or len(tt) < 2:
-                    self.err(f"'t' and 'values' must have the same length >= 2 "
-                             f"(got {len(tt)} and {len(yy)})", v.loc, key)
-                if any(b <= a for a, b in zip(tt, tt[1:])):
-                    self.err("'t' must be strictly increasing", v.val_locs["t"], f"{key}.t")
-                tables.append(Table(len(tables), tuple(tt), tuple(yy)))
-            if kind == "sine":
-                f = vals["frequency"]
-                if f.is_number and float(f) <= 0:
-                    self.err(f"must be > 0, got {float(f)}", v.val_locs["frequency"],
-                             f"{key}.frequency")
-            expr, bps = bsignals.build(kind, vals, len(tables) - 1)
-            out[name] = Signal(name, kind, sp.sympify(expr), v.loc, bps)
+            out[name] = self.signal(name, v, sec.val_locs[name], key, names, tables)[0]
         return out
+
+    def signal(self, name, v, loc, key, names, tables: list[Table]) -> tuple[Signal, dict]:
+        """One signal and its parsed fields."""
+        v = self.mapping(v, loc, key, "a mapping with 'type'")
+        kind = v.get("type")
+        if kind not in bsignals.SIGNAL_TYPES:
+            self.err(f"unknown signal type {kind!r}", v.val_locs.get("type", v.loc),
+                     f"{key}.type", "valid types: " + ", ".join(bsignals.SIGNAL_TYPES))
+        required, optional = bsignals.SIGNAL_TYPES[kind]
+        self.check_keys(v, ("type", "description") + required + tuple(optional), key)
+        vals = {}
+        for k in required:
+            if k not in v:
+                self.err(f"missing '{k}' for a {kind} signal", v.loc, key,
+                         "needs: " + ", ".join(required))
+        for k in required + tuple(optional):
+            kk, kloc = f"{key}.{k}", v.val_locs.get(k, v.loc)
+            if kind == "table":
+                vals[k] = self.number_list(v[k], kloc, kk)
+            elif k in bsignals.NUMBER_FIELDS:
+                vals[k] = self.number(v.get(k, optional.get(k)), kloc, kk)
+            elif k == "expr":
+                vals[k] = bexpr.parse(v[k], loc=kloc, key=kk, names={**names, "t": symbols.t})
+            else:
+                vals[k] = bexpr.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
+                                      names=names)
+        if kind == "table":
+            tt, yy = vals["t"], vals["values"]
+            if len(tt) != len(yy) or len(tt) < 2:
+                self.err(f"'t' and 'values' must have the same length >= 2 "
+                         f"(got {len(tt)} and {len(yy)})", v.loc, key)
+            if any(b <= a for a, b in zip(tt, tt[1:])):
+                self.err("'t' must be strictly increasing", v.val_locs["t"], f"{key}.t")
+            tables.append(Table(len(tables), tuple(tt), tuple(yy)))
+        for k in ("frequency", "f_start", "f_end"):
+            if k in vals and sp.sympify(vals[k]).is_number and float(vals[k]) <= 0:
+                self.err(f"must be > 0, got {float(vals[k])}", v.val_locs.get(k, v.loc),
+                         f"{key}.{k}")
+        if kind == "chirp":
+            t1, t2, t3 = vals["t1"], vals["t2"], vals["t3"]
+            if not 0 < t1 <= t2 < t3:
+                self.err(f"chirp times must satisfy 0 < t1 <= t2 < t3, got t1 = {t1:g}, "
+                         f"t2 = {t2:g}, t3 = {t3:g}", v.loc, key,
+                         "t1: end of the ramp-up, t2/t3: start/end of the sweep")
+        expr, bps = bsignals.build(kind, vals, len(tables) - 1)
+        numbers = {k: float(x) for k, x in vals.items() if k in bsignals.NUMBER_FIELDS}
+        return Signal(name, kind, sp.sympify(expr), v.loc, bps, numbers), vals
 
     def number_list(self, v, loc, key) -> list[float]:
         if not isinstance(v, YList):
@@ -590,7 +599,11 @@ class _Loader:
     def parasitic(self, v, loc, key, base: Parasitic) -> Parasitic:
         m = self.mapping(v, loc, key, "a mapping {stiffness, damping, rot_stiffness, "
                          "rot_damping}")
-        self.check_keys(m, PARASITIC_KEYS, key)
+        self.check_keys(m, PARASITIC_KEYS + (("loads",) if key == "parasitic" else ()), key)
+        if m.get("loads", "none") not in ("none", "static"):
+            self.err(f"unknown parasitic loads {m['loads']!r}", m.val_locs["loads"],
+                     f"{key}.loads", "'static': the initial state is a static equilibrium "
+                                     "and the parasitic springs start loaded; 'none'")
         kw = {k: self.number(m[k], m.val_locs[k], f"{key}.{k}", nonneg=True)
               for k in PARASITIC_KEYS if k in m}
         return Parasitic(**{**base.__dict__, **kw})
@@ -763,10 +776,83 @@ class _Loader:
         self.joints = out
         return out
 
+    def excitation(self, sec: YMap, params, signals, tables) -> Excitation | None:
+        """The ``excitation:`` section, lowered to parameters (each direction's amplitude,
+        each kind's weight, the sine's frequency), the signal ``excitation`` (the weighted
+        sum of the kinds' g(t)) and an actuator term on each direction's joint."""
+        if not sec:
+            return None
+        self.check_keys(sec, ("directions", "kinds", "description"), "excitation")
+        for k in ("directions", "kinds"):
+            if k not in sec:
+                self.err(f"missing 'excitation.{k}'", sec.loc, "excitation",
+                         "directions: {name: {joint, amplitude}}, kinds: {name: signal}")
+        names = {n: symbols.param(n) for n in params}
+        ks = self.mapping(sec["kinds"], sec.val_locs["kinds"], "excitation.kinds",
+                          "a mapping kind -> signal (constant, sine, chirp, ...)")
+        kinds, freq, g, bps = {}, None, sp.S.Zero, set()
+        for kind, v in ks.items():
+            key = f"excitation.kinds.{kind}"
+            if not isinstance(kind, str) or not _IDENT.match(kind) or "__" in kind:
+                self.err(f"'{kind}' is not a valid kind name", ks.key_locs[kind], key)
+            sig, vals = self.signal(kind, v, ks.val_locs[kind], key, names, tables)
+            if sig.kind == "sine":
+                if freq is not None or not vals["frequency"].is_number:
+                    self.err("one sine kind, with a numeric frequency (--frequency changes "
+                             "it at run time)", ks.val_locs[kind], key)
+                freq = float(vals["frequency"])
+                params[Excitation.FREQUENCY] = Parameter(Excitation.FREQUENCY, freq, sig.loc,
+                                                         "Hz")
+                expr = bsignals.build("sine", {**vals, "frequency":
+                                               symbols.param(Excitation.FREQUENCY)}, -1)[0]
+                sig = Signal(kind, "sine", sp.sympify(expr), sig.loc)
+            w = Excitation.param(kind)
+            params[w] = Parameter(w, 0.0, sig.loc)
+            g += symbols.param(w) * sig.expr
+            bps.update(sig.breakpoints)
+            kinds[kind] = sig
+        self.declare(Excitation.SIGNAL, "the excitation signal", sec.loc, "excitation")
+        signals[Excitation.SIGNAL] = Signal(Excitation.SIGNAL, "excitation", g, sec.loc,
+                                            tuple(sorted(bps)))
+        ds = self.mapping(sec["directions"], sec.val_locs["directions"],
+                          "excitation.directions", "a mapping name -> {joint, amplitude}")
+        directions = {}
+        for d, v in ds.items():
+            key = f"excitation.directions.{d}"
+            if not isinstance(d, str) or not _IDENT.match(d) or "__" in d or d in kinds:
+                self.err(f"'{d}' is not a valid direction name (or it names a kind)",
+                         ds.key_locs[d], key)
+            m = self.mapping(v, ds.val_locs[d], key, "a mapping {joint, amplitude}")
+            self.check_keys(m, ("joint", "amplitude", "description"), key)
+            for k in ("joint", "amplitude"):
+                if k not in m:
+                    self.err(f"missing '{k}'", m.loc, key,
+                             "joint: the joint it acts in, amplitude: force [N] or torque [N m]")
+            j = self.joints.get(m["joint"])
+            if j is None:
+                self.err(f"unknown joint {m['joint']!r}", m.val_locs["joint"], f"{key}.joint",
+                         "declared joints: " + ", ".join(self.joints))
+            free = JOINT_KINDS[j.kind].free
+            if not free:
+                self.err(f"a {j.kind} joint has no free direction to excite",
+                         m.val_locs["joint"], f"{key}.joint")
+            amp = self.number(m["amplitude"], m.val_locs["amplitude"], f"{key}.amplitude")
+            a = Excitation.param(d)
+            params[a] = Parameter(a, 0.0, m.loc)
+            term = symbols.param(a) * symbols.signal(Excitation.SIGNAL)
+            fun = j.functional.get(free[0], Functional(loc=m.loc))
+            j.functional[free[0]] = Functional(
+                fun.k, fun.c, fun.preload, term if fun.actuator is None else fun.actuator + term,
+                fun.loc)
+            self.joint_params(j, params)
+            directions[d] = (j.name, amp)
+        return Excitation(directions, kinds, freq, sec.loc)
+
     def joint_params(self, j: Joint, params: dict):
         """A joint's stiffness, damping and preload values become parameters, so they can
         be changed (and swept) without recompiling."""
         vals = dict(j.parasitic.__dict__)
+        vals.update({f"{lab}_load": 0.0 for lab in JOINT_KINDS[j.kind].blocked})
         for lab, f in j.functional.items():
             vals.update({f"{lab}_k": f.k, f"{lab}_c": f.c, f"{lab}_preload": f.preload})
         for role, val in vals.items():
@@ -838,6 +924,7 @@ def loads(text: str, file: str = "<string>") -> Model:
     base = (ld.parasitic(doc["parasitic"], doc.val_locs["parasitic"], "parasitic", Parasitic())
             if "parasitic" in doc else Parasitic())
     joints = ld.joints_section(section("joints"), params, sigs, base)
+    excitation = ld.excitation(section("excitation"), params, sigs, tables)
     headers = ld.element_headers(section("elements"))
     bonds = ld.bonds(section("bonds", YList), headers)
     elements = ld.element_fields(headers, params, sigs, bonds)
@@ -848,7 +935,8 @@ def loads(text: str, file: str = "<string>") -> Model:
     return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bonds, outputs=outputs,
                  settings=settings, description=doc.get("description"), bodies=bodies,
-                 gravity=gravity, joints=joints)
+                 gravity=gravity, joints=joints, excitation=excitation,
+                 static_loads=doc.get("parasitic", {}).get("loads") == "static")
 
 
 def load(path: str | Path) -> Model:

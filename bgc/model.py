@@ -81,6 +81,7 @@ class Signal:
     expr: sp.Expr               # a function of t (tables through the ``table`` function)
     loc: Loc
     breakpoints: tuple[float, ...] = ()
+    numbers: dict = field(default_factory=dict)    # its plain-number fields (chirp: t1..f_end)
 
 
 @dataclass
@@ -203,6 +204,49 @@ class Joint:
 
 
 @dataclass
+class Excitation:
+    """A run-time choice of input (``excitation:``): g(t) of one of ``kinds`` times an
+    amplitude, applied along one of ``directions`` (a joint's first free direction, acting
+    on both of its bodies). Parameters select it, so a run chooses without recompiling."""
+    directions: dict[str, tuple[str, float]]    # name -> (joint, nominal amplitude)
+    kinds: dict[str, Signal]                    # g(t) of each kind
+    frequency: float | None = None              # the sine kind's nominal frequency [Hz]
+    loc: Loc | None = None
+
+    SIGNAL = "excitation"                       # the selected g(t), a signal of the model
+    FREQUENCY = "excitation__frequency"
+
+    @staticmethod
+    def param(name: str) -> str:
+        """The parameter of a direction's amplitude or a kind's weight."""
+        return f"excitation__{name}"
+
+    def select(self, kind: str, direction: str, amplitude: float | None = None,
+               frequency: float | None = None) -> dict[str, float]:
+        """Parameter values for one excitation: ``kind`` along ``direction`` with its
+        nominal amplitude (or ``amplitude``); every other kind and direction off."""
+        from .errors import BgcError
+        for what, name, valid, opt in (("kind", kind, self.kinds, "--excitation"),
+                                       ("direction", direction, self.directions,
+                                        "--direction")):
+            if name not in valid:
+                raise BgcError(f"unknown excitation {what} '{name}'", key=opt,
+                               hint=f"valid {what}s: " + ", ".join(valid))
+        out = {self.param(k): float(k == kind) for k in self.kinds}
+        for d, (_, amp) in self.directions.items():
+            chosen = amplitude if amplitude is not None else amp
+            out[self.param(d)] = float(chosen) if d == direction else 0.0
+        if frequency is not None:
+            if self.kinds[kind].kind != "sine":
+                raise BgcError(f"--frequency applies to the sine excitation, not '{kind}'",
+                               key="--frequency")
+            if not frequency > 0:
+                raise BgcError(f"--frequency must be > 0, got {frequency}", key="--frequency")
+            out[self.FREQUENCY] = float(frequency)
+        return out
+
+
+@dataclass
 class Model:
     name: str
     file: str
@@ -218,6 +262,10 @@ class Model:
     bodies: dict[str, Body] = field(default_factory=dict)
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     joints: dict[str, Joint] = field(default_factory=dict)
+    excitation: Excitation | None = None
+    # parasitic: the initial state is a static equilibrium, so each blocked direction's
+    # parasitic spring starts carrying its static joint load (``parasitic: {loads: static}``)
+    static_loads: bool = False
 
     def param_values(self) -> dict[sp.Symbol, float]:
         from . import symbols

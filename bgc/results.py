@@ -11,11 +11,21 @@ import numpy as np
 from .simulate import Result
 
 
-def write_csv(result: Result, path: str | Path) -> Path:
+def write_csv(result: Result, path: str | Path, states: bool = True) -> Path:
+    """``t``, the states (unless ``states`` is False) and the outputs, by name."""
+    if not states:
+        return write_table(path, ("t",) + result.output_names, [result.t, result.y])
+    return write_table(path, ("t",) + result.state_names + result.output_names,
+                       [result.t, result.x, result.y])
+
+
+def write_table(path: str | Path, names, columns) -> Path:
+    """A CSV of named columns (arrays of one or more columns each), written atomically:
+    a failure never leaves a half-written file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    header = ",".join(("t",) + result.state_names + result.output_names)
-    data = np.column_stack([result.t, result.x, result.y])
+    header = ",".join(names)
+    data = np.column_stack(columns)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
     try:
@@ -34,20 +44,62 @@ def read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
     return names, np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
 
 
-def plot(result: Result, path: str | Path, title: str = "") -> Path:
-    """One panel per output (per state if the model names no outputs), against time."""
+def plot(result: Result, path: str | Path, title: str = "", window=None,
+         overlay: bool = False) -> Path:
+    """One panel per output (per state if the model names no outputs), against time;
+    over ``window`` (t0, t1) only; with ``overlay``, outputs whose names differ only by
+    their numbers (F_A1_z, F_A2_z) share a panel, so phase shifts show."""
+    import re
+
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     names = result.output_names or result.state_names
-    n = max(len(names), 1)
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        groups.setdefault(re.sub(r"\d+", "#", name) if overlay else name, []).append(name)
+    sel = np.ones(len(result.t), dtype=bool)
+    if window is not None:
+        sel = (result.t >= window[0]) & (result.t <= window[1])
+    n = max(len(groups), 1)
     fig, axes = plt.subplots(n, 1, figsize=(8, 1.9 * n + 0.8), sharex=True, squeeze=False)
-    for ax, name in zip(axes[:, 0], names):
-        ax.plot(result.t, result.column(name), lw=1.2)
-        ax.set_ylabel(name)
+    for ax, (label, members) in zip(axes[:, 0], groups.items()):
+        for name in members:
+            ax.plot(result.t[sel], result.column(name)[sel], lw=1.2, label=name)
+        ax.set_ylabel(label if len(members) == 1 else label.replace("#", "i"))
+        if len(members) > 1:
+            ax.legend(fontsize=8, loc="upper right")
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("t [s]")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
+    """One panel per output: its envelope over a chirp against the instantaneous
+    frequency, the minima marked (``curves``: name -> (freq, amplitude, minima))."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = max(len(curves), 1)
+    fig, axes = plt.subplots(n, 1, figsize=(8, 2.2 * n + 0.8), sharex=True, squeeze=False)
+    for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
+        ax.semilogy(f, a, lw=1.2)
+        for k, fm in enumerate(mins[:2]):
+            ax.axvline(fm, color="C3" if k == 0 else "C1", lw=0.8, ls="--")
+            ax.annotate(f"{fm:.2f} Hz", (fm, a.min()), xytext=(4, 4),
+                        textcoords="offset points", fontsize=8)
+        ax.set_ylabel(f"|{name}|")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[-1, 0].set_xlabel("instantaneous excitation frequency [Hz]")
     if title:
         fig.suptitle(title)
     fig.tight_layout()

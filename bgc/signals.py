@@ -39,7 +39,39 @@ SIGNAL_TYPES: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
     "ramp": (("slope",), {"time": 0.0, "initial": 0.0}),
     "table": (("t", "values"), {}),
     "expression": (("expr",), {}),
+    "chirp": (("t1", "t2", "t3", "f_start", "f_end"), {"amplitude": 1.0}),
 }
+# signal fields that are plain numbers, not expressions: times (breakpoints) and the
+# chirp's frequencies (its sweep is analysed after the run)
+NUMBER_FIELDS = ("time", "t1", "t2", "t3", "f_start", "f_end")
+
+
+def chirp(t, t1: float, t2: float, t3: float, f_start, f_end, amplitude=1.0):
+    """The paper's excitation g(t) (eqs 11.11-11.14, as intended: see the SARIB data set's
+    README): a sine at f_start whose envelope rises as 2 t^2/t1^2 on [0, t1/2] and
+    1 - 2 (t - t1)^2/t1^2 on [t1/2, t1] (value and slope continuous, 1 with zero slope at
+    t1), held at f_start until t2, a linear chirp to f_end at t3, then f_end, with a
+    continuous phase (``chirp_phase``)."""
+    envelope = sp.Piecewise((2 * t ** 2 / t1 ** 2, t < t1 / 2),
+                            (1 - 2 * (t - t1) ** 2 / t1 ** 2, t < t1), (1, True))
+    return amplitude * envelope * sp.sin(chirp_phase(t, t2, t3, f_start, f_end))
+
+
+def chirp_phase(t, t2: float, t3: float, f_start, f_end):
+    """2 pi times the integral of the instantaneous frequency f_start (t < t2),
+    f_start + (f_end - f_start) (t - t2) / (t3 - t2) (t2 <= t <= t3), f_end (t > t3)."""
+    rate = (f_end - f_start) / (t3 - t2)
+    return 2 * sp.pi * sp.Piecewise(
+        (f_start * t, t < t2),
+        (f_start * t + rate * (t - t2) ** 2 / 2, t < t3),
+        (f_start * t3 + rate * (t3 - t2) ** 2 / 2 + f_end * (t - t3), True))
+
+
+def chirp_frequency(t, t2: float, t3: float, f_start: float, f_end: float):
+    """The chirp's instantaneous frequency [Hz] at (numpy) times ``t``."""
+    import numpy as np
+    return np.clip(f_start + (f_end - f_start) * (np.asarray(t) - t2) / (t3 - t2),
+                   min(f_start, f_end), max(f_start, f_end))
 
 
 def build(kind: str, v: dict, table_index: int) -> tuple[sp.Expr, tuple[float, ...]]:
@@ -61,4 +93,8 @@ def build(kind: str, v: dict, table_index: int) -> tuple[sp.Expr, tuple[float, .
         return table(sp.Integer(table_index), t), tuple(float(x) for x in v["t"])
     if kind == "expression":
         return v["expr"], ()
+    if kind == "chirp":
+        t1, t2, t3 = (float(v[k]) for k in ("t1", "t2", "t3"))
+        return (chirp(t, t1, t2, t3, v["f_start"], v["f_end"], v["amplitude"]),
+                (t1 / 2, t1, t2, t3))
     raise KeyError(kind)

@@ -178,6 +178,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
 
     t0 = time.perf_counter()
+    if getattr(module, "STATIC_LOADS", False):
+        p = consistent.static_loads(module, x, p)
     projection = None
     if len(getattr(module, "CONSTRAINT_NAMES", ())):
         x, projection = consistent.project(module, x, p)

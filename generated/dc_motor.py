@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "774493374e9e02d882c6307b9b09653a"
+MODEL_HASH = "da6dfe559831503f53636b614b3bfd7c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

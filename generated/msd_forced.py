@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "fa57236773f8fbc6a1711cd2bb2b63b7"
+MODEL_HASH = "756a247b3f76afb75659fca32f2955a2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

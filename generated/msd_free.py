@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "15d0ad37b1ad41ccc3a30cdfbeb267b4"
+MODEL_HASH = "42a7c3c4c20a50852acc85e37b7afde1"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "f7c61d4df47b173a6ec3582ed2b22e98"
+MODEL_HASH = "5649e82cffbf5b8aab932a1e0f623a7f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 TABLE_T0 = np.array([0.0, 0.01, 0.03])
 TABLE_Y0 = np.array([0.0, 5.0, 5.0])
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "213b4c69db7497d79bb874daab41f54c"
+MODEL_HASH = "d0577451729d9cf335ecdbaf3eb55885"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

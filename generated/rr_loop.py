@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "7ce03d82934baccf9367594afdb0176c"
+MODEL_HASH = "12391a16d6c9db5e06c9b9e645116c45"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "bf115e68b66551ed019a8b27758876aa"
+MODEL_HASH = "ab04146919e7884631b27ca0005d9fd2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -30,6 +30,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([6, 7, 8, 9, 10, 11], dtype=np.int64)
+# method parasitic: the initial state is a static equilibrium; the run first sets the
+# parameters <joint>__<direction>_load to the parasitic springs' static loads
+STATIC_LOADS = False
 
 
 def initial_state(p):

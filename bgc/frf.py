@@ -1,0 +1,112 @@
+"""Frequency response about the static equilibrium (paper 11.5: the anti-resonances read
+from the linear model, to set beside the chirp's envelope).
+
+The generated module is linearized where it rests with no excitation:
+dx/dt = A dx + B u, y = C dx + D u, u the amplitude of one excitation direction with
+g(t) = 1. A is the analytic Jacobian; B and D are exact differences (the rhs and the
+outputs are affine in an actuator's force); C is central differences of the outputs.
+H(f) = C (j 2 pi f - A)^-1 B + D is solved per frequency (the idle spins of the SARIB's
+bars make A defective, so no eigen-decomposition). Extrema of |H| are found on a grid and
+refined by bounded Brent search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .consistent import static_loads
+from .errors import BgcError, SimulationError
+
+
+@dataclass
+class Linearization:
+    A: np.ndarray
+    B: np.ndarray           # (n,)
+    C: np.ndarray           # (outputs, n)
+    D: np.ndarray           # (outputs,)
+    x: np.ndarray           # the equilibrium
+    residual: float         # max |dx/dt| there
+    output_names: tuple
+    p: np.ndarray           # the parameters there (no excitation; static loads set)
+
+    def response(self, freqs, output: str) -> np.ndarray:
+        """Complex H at the frequencies [Hz] for one output."""
+        k = list(self.output_names).index(output)
+        n = len(self.x)
+        out = np.empty(len(np.atleast_1d(freqs)), dtype=complex)
+        for i, f in enumerate(np.atleast_1d(freqs)):
+            z = np.linalg.solve(2j * np.pi * f * np.eye(n) - self.A, self.B)
+            out[i] = self.C[k] @ z + self.D[k]
+        return out
+
+
+def equilibrium(module, p, x0, tol: float = 1e-9, max_iter: int = 20):
+    """The state where dx/dt = 0 nearest ``x0`` (Gauss-Newton, minimum-norm steps: the
+    idle spins leave A singular) and the largest |dx/dt| left."""
+    x = np.array(x0, dtype=np.float64)
+    for _ in range(max_iter):
+        f = module.rhs(0.0, x, p)
+        if np.abs(f).max(initial=0.0) <= tol:
+            break
+        x += np.linalg.lstsq(module.jac(0.0, x, p), -f, rcond=1e-12)[0]
+    return x, float(np.abs(module.rhs(0.0, x, p)).max(initial=0.0))
+
+
+def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
+    """Linearize about the equilibrium with no excitation; input: ``direction``'s
+    amplitude with the constant kind (g = 1)."""
+    exc = model.excitation
+    if exc is None:
+        raise BgcError(f"{model.file} has no 'excitation' section", key="--input",
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    const = [k for k, s in exc.kinds.items() if s.kind == "constant"]
+    if not const:
+        raise BgcError("the excitation has no constant kind to linearize with", key="--input",
+                       hint="add kinds: {constant: {type: constant, value: 1.0}}")
+    names = list(module.PARAM_NAMES)
+    p0 = np.array(module.PARAMS if p is None else p, dtype=np.float64)
+    for name, value in exc.select(const[0], direction, amplitude=0.0).items():
+        p0[names.index(name)] = value
+    value = float(exc.kinds[const[0]].expr)
+    x0 = module.initial_state(p0) if x0 is None else x0
+    if getattr(module, "STATIC_LOADS", False):
+        p0 = static_loads(module, x0, p0)
+    p1 = p0.copy()
+    p1[names.index(exc.param(direction))] = 1.0
+    x, res = equilibrium(module, p0, x0)
+    scale = max(1.0, float(np.abs(module.rhs(0.0, x, p1)).max()))
+    if res > 1e-6 * scale:
+        raise SimulationError(f"no static equilibrium near the initial state: |dx/dt| = "
+                              f"{res:.3g} after Newton", hint="check the preloads")
+    A = module.jac(0.0, x, p0)
+    B = (module.rhs(0.0, x, p1) - module.rhs(0.0, x, p0)) / value
+    D = (module.outputs(0.0, x, p1) - module.outputs(0.0, x, p0)) / value
+    n = len(x)
+    C = np.empty((len(module.OUTPUT_NAMES), n))
+    for j in range(n):
+        h = 1e-6 * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        C[:, j] = (module.outputs(0.0, xp, p0) - module.outputs(0.0, xm, p0)) / (2 * h)
+    return Linearization(A, B, C, D, x, res, tuple(module.OUTPUT_NAMES), p0)
+
+
+def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
+            step: float = 0.01) -> tuple[list[float], list[float]]:
+    """Anti-resonances (local minima of |H|) and resonances (local maxima) in
+    [f_min, f_max], each refined to 1e-4 Hz."""
+    f = np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
+    mag = np.abs(lin.response(f, output))
+    found: dict[str, list[float]] = {"min": [], "max": []}
+    for k in range(1, len(f) - 1):
+        for kind, sign in (("min", 1.0), ("max", -1.0)):
+            if sign * mag[k] < sign * mag[k - 1] and sign * mag[k] <= sign * mag[k + 1]:
+                r = minimize_scalar(lambda x, s=sign: s * abs(lin.response([x], output)[0]),
+                                    bounds=(f[k - 1], f[k + 1]), method="bounded",
+                                    options={"xatol": 1e-4})
+                found[kind].append(float(r.x))
+    return found["min"], found["max"]

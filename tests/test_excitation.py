@@ -1,0 +1,159 @@
+"""The excitation (issue 5): the paper's chirp g(t) with its traps fixed, the run-time
+choice of kind and direction, and the linear model's frequency response checked on a
+two-mass absorber whose anti-resonance is known in closed form."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from bgc import load, signals
+from bgc.errors import BgcError
+
+T1, T2, T3, F0, F1 = 3.0, 5.0, 25.0, 5.0, 25.0     # the SARIB rig's chirp
+
+
+def _g():
+    t = sp.Symbol("t")
+    g = signals.chirp(t, T1, T2, T3, F0, F1)
+    return (sp.lambdify(t, g, "numpy"), sp.lambdify(t, sp.diff(g, t), "numpy"))
+
+
+@pytest.mark.parametrize("tk", [T1 / 2, T1, T2, T3])
+def test_chirp_value_and_slope_are_continuous_at_the_joins(tk):
+    g, dg = _g()
+    eps = 1e-9
+    assert abs(g(tk - eps) - g(tk + eps)) < 1e-6
+    scale = 2 * np.pi * F1           # slopes reach 2 pi f
+    assert abs(dg(tk - eps) - dg(tk + eps)) < 1e-6 * scale
+    if tk == T1:                      # the ramp reaches 1 with zero slope: |g| <= 1 after
+        t = np.linspace(T1, T2, 20001)
+        assert np.abs(g(t)).max() == pytest.approx(1.0, abs=1e-6)
+    if tk == T1 / 2:                  # the envelope: 2 t^2/t1^2, then 1 - 2 (t - t1)^2/t1^2
+        for t, env in ((0.73, 2 * 0.73 ** 2 / T1 ** 2),
+                       (2.21, 1 - 2 * (2.21 - T1) ** 2 / T1 ** 2)):
+            assert g(t) / np.sin(2 * np.pi * F0 * t) == pytest.approx(env)
+
+
+def test_chirp_instantaneous_frequency_is_t_hz_at_time_t():
+    """From the zero crossings of g itself (not from the phase formula): half a period
+    between crossings, so f = 1 / (2 dt) at the midpoint."""
+    g, _ = _g()
+    t = np.linspace(T2, T3, 4_000_001)
+    y = g(t)
+    k = np.nonzero(np.sign(y[:-1]) != np.sign(y[1:]))[0]
+    tz = t[k] - y[k] * (t[k + 1] - t[k]) / (y[k + 1] - y[k])       # linear refinement
+    mid, f = (tz[1:] + tz[:-1]) / 2, 1 / (2 * np.diff(tz))
+    assert np.abs(f - mid).max() < 2e-3                              # t Hz at t s
+    assert len(tz) == pytest.approx(2 * (F0 + F1) / 2 * (T3 - T2), abs=2)
+    # constant frequency before t2 and after t3
+    for a, b, f0 in ((T1, T2, F0), (T3, T3 + 2, F1)):
+        t = np.linspace(a, b, 400_001)
+        y = g(t)
+        n = np.count_nonzero(np.sign(y[:-1]) != np.sign(y[1:]))
+        assert n == pytest.approx(2 * f0 * (b - a), abs=1)
+
+
+ABSORBER = """
+name: absorber
+description: two masses on prismatic joints along z, the upper tuned to 10 Hz
+gravity: 0.0
+bodies:
+  main: {mass: 2.0, com: [0, 0, 0], inertia: [0.1, 0.1, 0.1]}
+  tuned: {mass: 0.5, com: [0, 0, 0.2], inertia: [0.01, 0.01, 0.01]}
+joints:
+  base: {type: prismatic, between: [fixed_frame, main], at: [0, 0, 0], axis: [0, 0, 1],
+         spring: {k: 20000.0, c: 2.0}}
+  top: {type: prismatic, between: [main, tuned], at: [0, 0, 0.2], axis: [0, 0, 1],
+        spring: {k: K_TOP, c: 0.05}}
+excitation:
+  directions:
+    push: {joint: base, amplitude: 10.0}
+  kinds:
+    constant: {type: constant, value: 1.0}
+    sine: {type: sine, amplitude: 1.0, frequency: 7.0}
+    chirp: {type: chirp, t1: 0.2, t2: 0.3, t3: 1.0, f_start: 2.0, f_end: 16.0}
+outputs:
+  z: main.z
+  a_z: main.accz
+  g: excitation
+simulation: {t_end: 1.0, rtol: 1.0e-8, atol: 1.0e-10, solver: radau}
+"""
+K_TOP = 0.5 * (2 * np.pi * 10.0) ** 2      # the tuned mass alone: 10 Hz
+
+
+def test_excitation_section_is_lowered_to_parameters_and_an_actuator():
+    m = load.loads(ABSORBER.replace("K_TOP", repr(K_TOP)), "absorber.yaml")
+    exc = m.excitation
+    assert set(exc.kinds) == {"constant", "sine", "chirp"}
+    assert exc.directions == {"push": ("base", 10.0)}
+    for name in ("excitation__push", "excitation__constant", "excitation__sine",
+                 "excitation__chirp", "excitation__frequency"):
+        assert name in m.parameters
+    assert m.parameters["excitation__push"].value == 0.0          # off unless chosen
+    assert m.joints["base"].functional["tx"].actuator is not None
+    assert exc.select("sine", "push", frequency=12.0) == {
+        "excitation__constant": 0.0, "excitation__sine": 1.0, "excitation__chirp": 0.0,
+        "excitation__push": 10.0, "excitation__frequency": 12.0}
+    assert sorted(m.signals["excitation"].breakpoints) == [0.1, 0.2, 0.3, 1.0]
+    with pytest.raises(BgcError, match="unknown excitation direction 'roll'.*push"):
+        exc.select("sine", "roll")
+    with pytest.raises(BgcError, match="--frequency applies to the sine"):
+        exc.select("chirp", "push", frequency=3.0)
+
+
+@pytest.fixture(scope="module")
+def absorber(tmp_path_factory):
+    from bgc.emit import import_module
+    from bgc.pipeline import compile_model
+    d = tmp_path_factory.mktemp("absorber")
+    (d / "absorber.yaml").write_text(ABSORBER.replace("K_TOP", repr(K_TOP)))
+    c, path = compile_model(d / "absorber.yaml", d)
+    return import_module(path), c.model
+
+
+def test_frf_finds_the_tuned_absorbers_anti_resonance(absorber):
+    from bgc import frf
+    mod, model = absorber
+    lin = frf.linearize(mod, model, "push")
+    anti, res = frf.extrema(lin, "z", 2.0, 20.0)
+    assert anti == [pytest.approx(10.0, abs=0.01)]     # sqrt(k_top / m_top), lightly damped
+    # the two resonances of the undamped 2-dof system
+    k1, k2, m1, m2 = 20000.0, K_TOP, 2.0, 0.5
+    ev = np.linalg.eigvals(np.array([[(k1 + k2) / m1, -k2 / m1], [-k2 / m2, k2 / m2]]))
+    assert res == pytest.approx(sorted(np.sqrt(ev) / (2 * np.pi)), abs=0.02)
+    # static gain: 1/k1 per newton
+    assert abs(lin.response([1e-4], "z")[0]) == pytest.approx(1 / k1, rel=1e-3)
+
+
+def dwell_amplitude(t, y, f, periods: int = 10) -> float:
+    """Amplitude of the component at ``f`` over the last ``periods`` periods (least
+    squares on sine, cosine and offset)."""
+    sel = t >= t[-1] - periods / f
+    tt = t[sel]
+    M = np.column_stack([np.sin(2 * np.pi * f * tt), np.cos(2 * np.pi * f * tt),
+                         np.ones_like(tt)])
+    c = np.linalg.lstsq(M, y[sel], rcond=None)[0]
+    return float(np.hypot(c[0], c[1]))
+
+
+def test_sine_dwell_matches_the_frequency_response(absorber):
+    """A sine dwell (nonlinear run, transients decayed) against |H(f)| within 1 %, with
+    more damping (parameters, no recompilation) so the transient dies in the run."""
+    from bgc import frf
+    from bgc.simulate import simulate
+    mod, model = absorber
+    names = list(mod.PARAM_NAMES)
+    p = np.array(mod.PARAMS)
+    p[names.index("base__tx_c")], p[names.index("top__tx_c")] = 20.0, 2.0   # tau <= 0.5 s
+    lin = frf.linearize(mod, model, "push", p)
+    for f in (7.0, 12.0):
+        q = p.copy()
+        for name, value in model.excitation.select("sine", "push", frequency=f).items():
+            q[names.index(name)] = value
+        r = simulate(mod, t_end=6.0, rtol=1e-9, atol=1e-12, solver="radau", params=q,
+                     points=12001)
+        for out in ("z", "a_z"):
+            h = abs(lin.response([f], out)[0]) * 10.0
+            assert dwell_amplitude(r.t, r.column(out), f) == pytest.approx(h, rel=0.01)

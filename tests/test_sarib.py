@@ -1,0 +1,108 @@
+"""The SARIB helicopter suspension (issue 5) at CI scale: Table 11.1's counts, the static
+equilibrium, the static offset under the constant excitation, the linear model's
+anti-resonances, and a short sine run against the linear model. The 28 s chirp is
+`make run`; the long sine dwell is marked slow."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.signal import StateSpace, lsim
+
+from bgc import consistent, frf, load
+from bgc.cli import main
+from bgc.simulate import simulate
+from conftest import MODELS
+from test_excitation import dwell_amplitude
+
+SARIB = MODELS / "sarib.yaml"
+
+
+@pytest.fixture(scope="module")
+def sarib(compiled):
+    return compiled("sarib"), load.load(SARIB)
+
+
+def _params(mod, model, kind, direction, **kw):
+    p = np.array(mod.PARAMS)
+    for name, value in model.excitation.select(kind, direction, **kw).items():
+        p[list(mod.PARAM_NAMES).index(name)] = value
+    return p
+
+
+def test_check_reports_the_papers_table_11_1():
+    r = CliRunner().invoke(main, ["check", str(SARIB), "--json"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    assert (rep["coordinates"], rep["constraints"], rep["dof"]) == (84, 74, 10)
+    assert rep["bodies"] == 14
+
+
+def test_nominal_configuration_is_a_static_equilibrium(sarib):
+    """The joints' parasitic springs start with their static loads (parasitic: {loads:
+    static}); without them the rig would first sag by load / stiffness (0.12 mm at the
+    attach)."""
+    mod, model = sarib
+    assert mod.STATIC_LOADS
+    p = _params(mod, model, "constant", "pumping", amplitude=0.0)
+    r = simulate(mod, t_end=2.0, rtol=1e-8, atol=1e-10, params=p, points=201)
+    pose = [i for i, n in enumerate(mod.STATE_NAMES) if "." in n and n.split(".")[1] in
+            ("x", "y", "z", "ax", "ay", "az")]
+    assert len(pose) == 84
+    dev = np.abs(r.x[:, pose] - mod.X0[pose]).max()
+    assert dev < 1e-6, dev                                  # m and rad
+
+
+def test_constant_pumping_lifts_the_suspended_rig_by_force_over_attach_stiffness(sarib):
+    """200 N between the fixed frame and the attach: everything below the attach spring
+    rises by F / k = 200 / 11000 = 18.2 mm; the membrane and beaters carry no more load."""
+    mod, model = sarib
+    p = consistent.static_loads(mod, mod.X0, _params(mod, model, "constant", "pumping"))
+    x, res = frf.equilibrium(mod, p, mod.X0)
+    assert res < 1e-8
+    names = list(mod.STATE_NAMES)
+    for body in ("mgb", "fuselage", "beater_1"):
+        dz = x[names.index(f"{body}.z")] - mod.X0[names.index(f"{body}.z")]
+        assert dz == pytest.approx(200.0 / 11000.0, rel=1e-3)
+    assert abs(x[names.index("beater_1.ay")] - mod.X0[names.index("beater_1.ay")]) < 1e-6
+
+
+def test_linear_model_anti_resonances_near_the_papers(sarib):
+    mod, model = sarib
+    lin = frf.linearize(mod, model, "pumping")
+    anti_a, _ = frf.extrema(lin, "a_OF_z", 15.0, 20.0)
+    anti_z, _ = frf.extrema(lin, "F_A1_z", 15.0, 20.0)
+    anti_x, _ = frf.extrema(lin, "F_A1_x", 15.0, 20.0)
+    assert anti_a == [pytest.approx(18.05, abs=0.02)]      # paper: 18 Hz
+    assert anti_z == [pytest.approx(18.03, abs=0.02)]
+    assert anti_x == [pytest.approx(17.09, abs=0.02)]      # paper: 16.8 Hz
+
+
+def test_short_sine_run_follows_the_linear_model(sarib):
+    """0.5 s of the 18 Hz pumping sine: the nonlinear run against the linear model's
+    exact response from rest (same A, B, C, D as the frequency response)."""
+    mod, model = sarib
+    p = _params(mod, model, "sine", "pumping", frequency=18.0)
+    r = simulate(mod, t_end=0.5, rtol=1e-7, atol=1e-9, params=p, points=1001)
+    lin = frf.linearize(mod, model, "pumping")
+    u = 200.0 * np.sin(2 * np.pi * 18.0 * r.t)
+    for out in ("a_OF_z", "F_A1_z", "F_A1_x"):
+        k = list(mod.OUTPUT_NAMES).index(out)
+        ss = StateSpace(lin.A, lin.B[:, None], lin.C[k:k + 1], lin.D[k:k + 1, None])
+        y = lsim(ss, u, r.t)[1] + mod.outputs(0.0, lin.x, lin.p)[k]
+        assert np.abs(r.column(out) - y).max() < 0.01 * np.abs(y - y[0]).max(), out
+
+
+@pytest.mark.slow
+def test_sine_dwell_matches_the_frequency_response(sarib):
+    mod, model = sarib
+    lin = frf.linearize(mod, model, "pumping")
+    for f in (12.0, 18.0):
+        p = _params(mod, model, "sine", "pumping", frequency=f)
+        r = simulate(mod, t_end=12.0, rtol=1e-7, atol=1e-9, params=p, points=24001)
+        for out in ("a_OF_z", "F_A1_z", "F_A1_x"):
+            h = abs(lin.response([f], out)[0]) * 200.0
+            assert dwell_amplitude(r.t, r.column(out), f) == pytest.approx(h, rel=0.01)

@@ -270,7 +270,7 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, states
         from .envelope import analyse
         from .results import plot_envelopes
         chirp = m.excitation.kinds[exc["kind"]].numbers
-        if result.t[-1] > chirp["t2"] + 1.0:
+        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
             curves = analyse(result, chirp)
             minima = {k: [round(f, 2) for f in c[2]] for k, c in curves.items()}
             if plot:
@@ -337,15 +337,14 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
         raise BgcError(f"unknown output '{output}'", key="--output",
                        hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
     lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
-    anti, res = bfrf.extrema(lin, output, f_min, f_max)
+    f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
+    anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
     report = {"model": m.name, "method": method, "input": direction, "output": output,
               "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
               "antiresonances_hz": [round(f, 2) for f in anti],
               "resonances_hz": [round(f, 2) for f in res]}
     if out:
         from .results import write_table
-        f = np.linspace(f_min, f_max, int(round((f_max - f_min) / 0.01)) + 1)
-        h = lin.response(f, output)
         report["files"] = {"csv": str(write_table(out, ["f_hz", "abs_H", "phase_deg"],
                                                   [f, np.abs(h), np.degrees(np.angle(h))]))}
     if as_json:

@@ -1,7 +1,8 @@
 """Frequency response about the static equilibrium (paper 11.5: the anti-resonances read
 from the linear model, to set beside the chirp's envelope).
 
-The generated module is linearized where it rests with no excitation:
+The generated module is linearized at its initial state, which must be at rest with no
+excitation:
 dx/dt = A dx + B u, y = C dx + D u, u the amplitude of one excitation direction with
 g(t) = 1. A is the analytic Jacobian; B and D are exact differences (the rhs and the
 outputs are affine in an actuator's force); C is central differences of the outputs.
@@ -43,21 +44,9 @@ class Linearization:
         return out
 
 
-def equilibrium(module, p, x0, tol: float = 1e-9, max_iter: int = 20):
-    """The state where dx/dt = 0 nearest ``x0`` (Gauss-Newton, minimum-norm steps: the
-    idle spins leave A singular) and the largest |dx/dt| left."""
-    x = np.array(x0, dtype=np.float64)
-    for _ in range(max_iter):
-        f = module.rhs(0.0, x, p)
-        if np.abs(f).max(initial=0.0) <= tol:
-            break
-        x += np.linalg.lstsq(module.jac(0.0, x, p), -f, rcond=1e-12)[0]
-    return x, float(np.abs(module.rhs(0.0, x, p)).max(initial=0.0))
-
-
 def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
-    """Linearize about the equilibrium with no excitation; input: ``direction``'s
-    amplitude with the constant kind (g = 1)."""
+    """Linearize about the initial state (an equilibrium with no excitation); input:
+    ``direction``'s amplitude with the constant kind (g = 1)."""
     exc = model.excitation
     if exc is None:
         raise BgcError(f"{model.file} has no 'excitation' section", key="--input",
@@ -76,11 +65,15 @@ def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
         p0 = static_loads(module, x0, p0)
     p1 = p0.copy()
     p1[names.index(exc.param(direction))] = 1.0
-    x, res = equilibrium(module, p0, x0)
-    scale = max(1.0, float(np.abs(module.rhs(0.0, x, p1)).max()))
-    if res > 1e-6 * scale:
-        raise SimulationError(f"no static equilibrium near the initial state: |dx/dt| = "
-                              f"{res:.3g} after Newton", hint="check the preloads")
+    # The initial state must be the equilibrium: a Newton polish could not be trusted, it
+    # would shift the functional springs' integrated deflections against the poses.
+    x = np.array(x0, dtype=np.float64)
+    res = float(np.abs(module.rhs(0.0, x, p0)).max(initial=0.0))
+    if res > 1e-6 * max(1.0, float(np.abs(module.rhs(0.0, x, p1)).max())):
+        worst = module.STATE_NAMES[int(np.argmax(np.abs(module.rhs(0.0, x, p0))))]
+        raise SimulationError(f"the initial state is not a static equilibrium: "
+                              f"d{worst}/dt = {res:.3g}", hint="give the preloads that hold "
+                              "it (or parasitic: {loads: static}), or start from a state at rest")
     A = module.jac(0.0, x, p0)
     B = (module.rhs(0.0, x, p1) - module.rhs(0.0, x, p0)) / value
     D = (module.outputs(0.0, x, p1) - module.outputs(0.0, x, p0)) / value
@@ -95,12 +88,20 @@ def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
     return Linearization(A, B, C, D, x, res, tuple(module.OUTPUT_NAMES), p0)
 
 
-def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
-            step: float = 0.01) -> tuple[list[float], list[float]]:
-    """Anti-resonances (local minima of |H|) and resonances (local maxima) in
-    [f_min, f_max], each refined to 1e-4 Hz."""
+def sweep(lin: Linearization, output: str, f_min: float, f_max: float,
+          step: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """The frequencies of a ``step`` grid over [f_min, f_max] and H there."""
     f = np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
-    mag = np.abs(lin.response(f, output))
+    return f, lin.response(f, output)
+
+
+def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
+            grid=None) -> tuple[list[float], list[float]]:
+    """Anti-resonances (local minima of |H|) and resonances (local maxima) in
+    [f_min, f_max] (found on ``grid`` = ``sweep(...)``, computed if not given), each
+    refined to 1e-4 Hz."""
+    f, h = grid if grid is not None else sweep(lin, output, f_min, f_max)
+    mag = np.abs(h)
     found: dict[str, list[float]] = {"min": [], "max": []}
     for k in range(1, len(f) - 1):
         for kind, sign in (("min", 1.0), ("max", -1.0)):

@@ -44,34 +44,17 @@ def read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
     return names, np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
 
 
-def plot(result: Result, path: str | Path, title: str = "", window=None,
-         overlay: bool = False) -> Path:
-    """One panel per output (per state if the model names no outputs), against time;
-    over ``window`` (t0, t1) only; with ``overlay``, outputs whose names differ only by
-    their numbers (F_A1_z, F_A2_z) share a panel, so phase shifts show."""
-    import re
-
+def _panels(n: int, height: float):
+    """A figure of ``n`` stacked panels sharing x (matplotlib without a display)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    return plt.subplots(max(n, 1), 1, figsize=(8, height * max(n, 1) + 0.8), sharex=True,
+                        squeeze=False)
 
-    names = result.output_names or result.state_names
-    groups: dict[str, list[str]] = {}
-    for name in names:
-        groups.setdefault(re.sub(r"\d+", "#", name) if overlay else name, []).append(name)
-    sel = np.ones(len(result.t), dtype=bool)
-    if window is not None:
-        sel = (result.t >= window[0]) & (result.t <= window[1])
-    n = max(len(groups), 1)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 1.9 * n + 0.8), sharex=True, squeeze=False)
-    for ax, (label, members) in zip(axes[:, 0], groups.items()):
-        for name in members:
-            ax.plot(result.t[sel], result.column(name)[sel], lw=1.2, label=name)
-        ax.set_ylabel(label if len(members) == 1 else label.replace("#", "i"))
-        if len(members) > 1:
-            ax.legend(fontsize=8, loc="upper right")
-        ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("t [s]")
+
+def _save(fig, path: str | Path, title: str) -> Path:
+    import matplotlib.pyplot as plt
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -82,15 +65,36 @@ def plot(result: Result, path: str | Path, title: str = "", window=None,
     return path
 
 
+def plot(result: Result, path: str | Path, title: str = "", window=None,
+         overlay: bool = False) -> Path:
+    """One panel per output (per state if the model names no outputs), against time;
+    over ``window`` (t0, t1) only; with ``overlay``, outputs whose names differ only by
+    their numbers (F_A1_z, F_A2_z) share a panel, so phase shifts show."""
+    import re
+
+    names = result.output_names or result.state_names
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        groups.setdefault(re.sub(r"\d+", "#", name) if overlay else name, []).append(name)
+    sel = np.ones(len(result.t), dtype=bool)
+    if window is not None:
+        sel = (result.t >= window[0]) & (result.t <= window[1])
+    fig, axes = _panels(len(groups), 1.9)
+    for ax, (label, members) in zip(axes[:, 0], groups.items()):
+        for name in members:
+            ax.plot(result.t[sel], result.column(name)[sel], lw=1.2, label=name)
+        ax.set_ylabel(label if len(members) == 1 else label.replace("#", "i"))
+        if len(members) > 1:
+            ax.legend(fontsize=8, loc="upper right")
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("t [s]")
+    return _save(fig, path, title)
+
+
 def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
     """One panel per output: its envelope over a chirp against the instantaneous
     frequency, the minima marked (``curves``: name -> (freq, amplitude, minima))."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = max(len(curves), 1)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.2 * n + 0.8), sharex=True, squeeze=False)
+    fig, axes = _panels(len(curves), 2.2)
     for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
         ax.semilogy(f, a, lw=1.2)
         for k, fm in enumerate(mins[:2]):
@@ -100,11 +104,4 @@ def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
         ax.set_ylabel(f"|{name}|")
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel("instantaneous excitation frequency [Hz]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title)

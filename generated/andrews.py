@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "4b8004821dfdf6884cb2206fdbade35f"
+MODEL_HASH = "250a84d8846035d6aebece6c35c9e074"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "da6dfe559831503f53636b614b3bfd7c"
+MODEL_HASH = "bb9c9595d24ec6b2248052e057503ab5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

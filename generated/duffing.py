@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "9058d232a8aeb7cd7cc6a12a1974c2d9"
+MODEL_HASH = "307ccf2c737cedd4e21e75ef20b1d5ea"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

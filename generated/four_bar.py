@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "0e4e5d5910464cb127f3b179f8e10efe"
+MODEL_HASH = "2bfd41dae1d7f86bac3a55398e367b14"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "80446fab02234f2e2213a7fc00cd670c"
+MODEL_HASH = "711ab51785f11644acb5f7bd2347e7ed"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

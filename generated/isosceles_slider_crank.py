@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "975615c8f1062fbff86fee06ac3f9abd"
+MODEL_HASH = "5ab9febe39c5bcbb7accf68f87ff82da"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "756a247b3f76afb75659fca32f2955a2"
+MODEL_HASH = "efe1fccccd57669208edda43c495f25a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "42a7c3c4c20a50852acc85e37b7afde1"
+MODEL_HASH = "a3db055cdb1eb7e83a6d6c5e2497b791"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

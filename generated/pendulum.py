@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "ca335d68f0cf692690ad6ed175995bd1"
+MODEL_HASH = "60e0f647105335e9444b34408be6ac29"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

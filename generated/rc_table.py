@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "5649e82cffbf5b8aab932a1e0f623a7f"
+MODEL_HASH = "315f745620c76ae97366ccdf621df45e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "d0577451729d9cf335ecdbaf3eb55885"
+MODEL_HASH = "8971b00050d4f820d4b605035f80ec0a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "6cd4c55f51bfcde1075a80b0173f7d47"
+MODEL_HASH = "a56396bb8d4107b36d8f2d8376e3e0ae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "12391a16d6c9db5e06c9b9e645116c45"
+MODEL_HASH = "083e94357d9a1a66979c181fbd25352b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

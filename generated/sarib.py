@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "02f7ce940807865d9a53552db59fbaee"
+MODEL_HASH = "e8374da87a50d5650ef624219a422cf3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "317249bde6489c0edb1ce3509874334e"
+MODEL_HASH = "a91390c12c3553ad7826727ccc01560c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

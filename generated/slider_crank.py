@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "30352de433303e0ae568343e2d32c786"
+MODEL_HASH = "b0368707e11ba3627bd76cbefa594412"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 from scipy.signal import StateSpace, lsim
 
-from bgc import consistent, frf, load
+from bgc import frf, load
 from bgc.cli import main
 from bgc.simulate import simulate
 from conftest import MODELS
@@ -57,17 +57,20 @@ def test_nominal_configuration_is_a_static_equilibrium(sarib):
 
 
 def test_constant_pumping_lifts_the_suspended_rig_by_force_over_attach_stiffness(sarib):
-    """200 N between the fixed frame and the attach: everything below the attach spring
-    rises by F / k = 200 / 11000 = 18.2 mm; the membrane and beaters carry no more load."""
+    """200 N between the fixed frame and the attach, held 12 s (the attach mode's decay
+    time is 1.25 s): everything below the attach spring rises by F / k = 200 / 11000 =
+    18.18 mm; the hinges carry the same load as before (196.2 N, a quarter of the
+    fuselage's weight)."""
     mod, model = sarib
-    p = consistent.static_loads(mod, mod.X0, _params(mod, model, "constant", "pumping"))
-    x, res = frf.equilibrium(mod, p, mod.X0)
-    assert res < 1e-8
+    p = _params(mod, model, "constant", "pumping")
+    r = simulate(mod, t_end=12.0, rtol=1e-6, atol=1e-8, params=p, points=121)
     names = list(mod.STATE_NAMES)
     for body in ("mgb", "fuselage", "beater_1"):
-        dz = x[names.index(f"{body}.z")] - mod.X0[names.index(f"{body}.z")]
-        assert dz == pytest.approx(200.0 / 11000.0, rel=1e-3)
-    assert abs(x[names.index("beater_1.ay")] - mod.X0[names.index("beater_1.ay")]) < 1e-6
+        dz = r.column(f"{body}.z") - mod.X0[names.index(f"{body}.z")]
+        assert dz[-1] == pytest.approx(200.0 / 11000.0, rel=1e-3)     # measured 3.5e-5
+        assert np.ptp(dz[-10:]) < 1e-5                                 # at rest by then
+    assert r.column("F_A1_z")[-1] == pytest.approx(196.2, rel=1e-4)
+    assert abs(r.column("beater_1.ay")[-1] - mod.X0[names.index("beater_1.ay")]) < 1e-6
 
 
 def test_linear_model_anti_resonances_near_the_papers(sarib):
@@ -82,13 +85,16 @@ def test_linear_model_anti_resonances_near_the_papers(sarib):
 
 
 def test_short_sine_run_follows_the_linear_model(sarib):
-    """0.5 s of the 18 Hz pumping sine: the nonlinear run against the linear model's
-    exact response from rest (same A, B, C, D as the frequency response)."""
+    """0.5 s of a 12 Hz pumping sine: the nonlinear run against the linear model's exact
+    response from rest (same A, B, C, D as the frequency response). Measured: 0.04 % (a_OF_z,
+    F_A1_z), 0.28 % (F_A1_x); at 18 Hz, where the beaters swing hardest, F_A1_x is 2.2 %
+    off: the radial hinge force carries the beater's centrifugal term, quadratic in its
+    swing rate, which no linear model has."""
     mod, model = sarib
-    p = _params(mod, model, "sine", "pumping", frequency=18.0)
+    p = _params(mod, model, "sine", "pumping", frequency=12.0)
     r = simulate(mod, t_end=0.5, rtol=1e-7, atol=1e-9, params=p, points=1001)
     lin = frf.linearize(mod, model, "pumping")
-    u = 200.0 * np.sin(2 * np.pi * 18.0 * r.t)
+    u = 200.0 * np.sin(2 * np.pi * 12.0 * r.t)
     for out in ("a_OF_z", "F_A1_z", "F_A1_x"):
         k = list(mod.OUTPUT_NAMES).index(out)
         ss = StateSpace(lin.A, lin.B[:, None], lin.C[k:k + 1], lin.D[k:k + 1, None])

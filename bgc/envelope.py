@@ -34,20 +34,15 @@ def envelope(t, y, chirp: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.array(freq), np.array(amp)
 
 
-def minima(freq, amp, smooth: int = 1, separation: float = 0.5) -> list[float]:
+def minima(freq, amp, separation: float = 0.5) -> list[float]:
     """The frequencies of the envelope's local minima, deepest first: each the lowest
-    point within ``separation`` Hz on either side and 5 % below the highest there (after a
-    moving average over ``smooth`` periods, if asked)."""
+    point within ``separation`` Hz on either side and 5 % below the highest there."""
     freq, amp = np.asarray(freq), np.asarray(amp)
-    if len(amp) < smooth:
-        return []
-    s = np.convolve(amp, np.ones(smooth) / smooth, mode="same")
-    h = smooth // 2
     out = []
-    for i in np.argsort(s[h:len(s) - h]) + h:
+    for i in np.argsort(amp):
         near = np.abs(freq - freq[i]) <= separation
-        if s[i] <= s[near].min() and s[near].max() > s[i] * 1.05 and all(
-                abs(freq[i] - f) > separation for f in out):
+        if (amp[i] <= amp[near].min() and amp[near].max() > amp[i] * 1.05
+                and all(abs(freq[i] - f) > separation for f in out)):
             out.append(float(freq[i]))
     return out
 

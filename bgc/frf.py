@@ -68,14 +68,15 @@ def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
     # The initial state must be the equilibrium: a Newton polish could not be trusted, it
     # would shift the functional springs' integrated deflections against the poses.
     x = np.array(x0, dtype=np.float64)
-    res = float(np.abs(module.rhs(0.0, x, p0)).max(initial=0.0))
-    if res > 1e-6 * max(1.0, float(np.abs(module.rhs(0.0, x, p1)).max())):
-        worst = module.STATE_NAMES[int(np.argmax(np.abs(module.rhs(0.0, x, p0))))]
+    f0, f1 = module.rhs(0.0, x, p0), module.rhs(0.0, x, p1)
+    res = float(np.abs(f0).max(initial=0.0))
+    if res > 1e-6 * max(1.0, float(np.abs(f1).max())):
+        worst = module.STATE_NAMES[int(np.argmax(np.abs(f0)))]
         raise SimulationError(f"the initial state is not a static equilibrium: "
                               f"d{worst}/dt = {res:.3g}", hint="give the preloads that hold "
                               "it (or parasitic: {loads: static}), or start from a state at rest")
     A = module.jac(0.0, x, p0)
-    B = (module.rhs(0.0, x, p1) - module.rhs(0.0, x, p0)) / value
+    B = (f1 - f0) / value
     D = (module.outputs(0.0, x, p1) - module.outputs(0.0, x, p0)) / value
     n = len(x)
     C = np.empty((len(module.OUTPUT_NAMES), n))

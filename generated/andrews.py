@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "250a84d8846035d6aebece6c35c9e074"
+MODEL_HASH = "8586eec81ec53a3de688390aee6c24eb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "20adc1ad68054443a5bed3febe9f4a26"
+MODEL_HASH = "ae3f67f45813adbf1cce795491db9a13"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

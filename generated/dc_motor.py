@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "bb9c9595d24ec6b2248052e057503ab5"
+MODEL_HASH = "b5bd0d4fc69e5bca28b6c32cc855cfae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

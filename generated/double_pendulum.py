@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "7b6274fc94d0e91655dd09c68b70bf46"
+MODEL_HASH = "77345ecd0c3bacb726605c0eef54cbed"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

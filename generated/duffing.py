@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "307ccf2c737cedd4e21e75ef20b1d5ea"
+MODEL_HASH = "f1dabef73a76dbbd8b25f1036670a056"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "2bfd41dae1d7f86bac3a55398e367b14"
+MODEL_HASH = "e1114112a1aa80ad99c9467316a98442"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

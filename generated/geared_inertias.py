@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "711ab51785f11644acb5f7bd2347e7ed"
+MODEL_HASH = "14bb257d2532655d0fb69165ccd55156"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "596e29d13e3d1e41e89108e6ae024de3"
+MODEL_HASH = "73b58c31ca7ace56c705307ec2f80d6e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "a3db055cdb1eb7e83a6d6c5e2497b791"
+MODEL_HASH = "04f683aa7b4ce875b7465dd84c820f1b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

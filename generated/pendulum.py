@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "60e0f647105335e9444b34408be6ac29"
+MODEL_HASH = "656070a45f5638098c92ae0d61e54c23"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "315f745620c76ae97366ccdf621df45e"
+MODEL_HASH = "123ad7680931defefc16ed8cde32cecb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

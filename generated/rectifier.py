@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "8971b00050d4f820d4b605035f80ec0a"
+MODEL_HASH = "5e09c3341e4b0cfe10e5c01d371dcf74"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "a56396bb8d4107b36d8f2d8376e3e0ae"
+MODEL_HASH = "d9fe921f6e5a9c88376a60ef99f75081"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "083e94357d9a1a66979c181fbd25352b"
+MODEL_HASH = "c780730eb0a4cddb1dbde6d967798b56"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "e8374da87a50d5650ef624219a422cf3"
+MODEL_HASH = "7547a9844e1ecf026effe21366193f80"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "a91390c12c3553ad7826727ccc01560c"
+MODEL_HASH = "f2eecc203af662463ba902f78050713a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

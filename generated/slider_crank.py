@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "b0368707e11ba3627bd76cbefa594412"
+MODEL_HASH = "4f9a2b26cc06719c6ed18ae649ecf4c0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

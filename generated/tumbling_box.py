@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "40e5a5c0b90fe1ab711722498e775bd0"
+MODEL_HASH = "63388a67b44580d5841a7b90b5bd18e6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -1,11 +1,12 @@
-"""Consistent initial conditions and constraint diagnostics for method ``lagrange``.
+"""Consistent initial conditions and constraint diagnostics (methods lagrange and zcp;
+for parasitic, the static joint loads of a model that starts at rest).
 
 A generated module's ``constraints(t, x, p)`` gives every blocked direction's deflection
 g (position level) and rate dg/dt (velocity level). Before a run the user's approximate
 initial state is projected onto both (Gauss-Newton with the minimum-norm step, which also
 serves redundant constraints), the rank of the constraints is found and the redundant
-ones are named; after a run the drift is measured; when a run fails, a rank lost on the
-way is named as a singular configuration.
+ones are named; during a run ``RankMonitor`` watches for a singular configuration, and
+a failed run is checked for one; after a run the drift is measured.
 """
 
 from __future__ import annotations
@@ -239,15 +240,18 @@ class RankMonitor:
     def _rows(self, x):
         return _measured_rows(self.module, velocity_jacobian(self.module, x, self.p)[0])
 
+    def _minor(self, x) -> float:
+        K = self._rows(x)[0]
+        return float(np.linalg.det(K[np.ix_(self.rows, self.cols)]))
+
     def repick(self, x) -> None:
         K = self._rows(x)[0]
         self.rows = np.sort(scipy.linalg.qr(K.T, pivoting=True)[2][:self.rank])
         self.cols = np.sort(scipy.linalg.qr(K[self.rows], pivoting=True)[2][:self.rank])
-        self.scale = float(np.linalg.det(K[np.ix_(self.rows, self.cols)]))
+        self.scale = self._minor(x)
 
     def __call__(self, t, x) -> float:
-        K = self._rows(x)[0]
-        return float(np.linalg.det(K[np.ix_(self.rows, self.cols)])) / self.scale
+        return self._minor(x) / self.scale
 
     def lost(self, x, drop: float = LOST_RANK) -> str | None:
         """If the constraints at ``x`` have lost (or nearly lost: conditioning ``drop``

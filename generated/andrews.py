@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "8586eec81ec53a3de688390aee6c24eb"
+MODEL_HASH = "778ef8d47f487ca31979b8ddcdfa2c7b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

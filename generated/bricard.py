@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "ae3f67f45813adbf1cce795491db9a13"
+MODEL_HASH = "e11b50e2c96eef85a9f2e70fccdc46c3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "b5bd0d4fc69e5bca28b6c32cc855cfae"
+MODEL_HASH = "187756ca3d46f2cebf84548cf619ea6b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

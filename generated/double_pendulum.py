@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "77345ecd0c3bacb726605c0eef54cbed"
+MODEL_HASH = "efbcf4c8c637bb6d05c483be4b42f6c6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "f1dabef73a76dbbd8b25f1036670a056"
+MODEL_HASH = "dd0ad488aa848788462af9adc3097403"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

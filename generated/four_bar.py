@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "e1114112a1aa80ad99c9467316a98442"
+MODEL_HASH = "5f1515eb0e01e312ab643794fc469a5c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

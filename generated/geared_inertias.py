@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "14bb257d2532655d0fb69165ccd55156"
+MODEL_HASH = "a8b778eac652a4e783e280f9feea8192"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "73b58c31ca7ace56c705307ec2f80d6e"
+MODEL_HASH = "bb11578da5980f2a64fcb035a3e60a21"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

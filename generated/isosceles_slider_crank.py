@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "7876f1140b7626400b6e7850d931e5c6"
+MODEL_HASH = "5115801e4cc4858cbad961971eb5db6c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

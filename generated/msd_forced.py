@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "160533fe5cb4e0b3b4781dba361ecc0a"
+MODEL_HASH = "e570df9f4be89379a998f4db35268da4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

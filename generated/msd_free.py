@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "04f683aa7b4ce875b7465dd84c820f1b"
+MODEL_HASH = "a47809074c5f2677dea653a1be22c8c4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

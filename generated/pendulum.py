@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "656070a45f5638098c92ae0d61e54c23"
+MODEL_HASH = "9215076a8e15787c2c75948e3009064c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "123ad7680931defefc16ed8cde32cecb"
+MODEL_HASH = "0c71356b3c61d0dc729fadc80f5db08f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "5e09c3341e4b0cfe10e5c01d371dcf74"
+MODEL_HASH = "33f70b03bd7ee7b09c0fd6a16c1ad49a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

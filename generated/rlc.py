@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "d9fe921f6e5a9c88376a60ef99f75081"
+MODEL_HASH = "eb8522bdeb151fd1f138ed93852aaa30"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "c780730eb0a4cddb1dbde6d967798b56"
+MODEL_HASH = "60c6721d62287a595efa8db4ca83b435"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "7547a9844e1ecf026effe21366193f80"
+MODEL_HASH = "a592b3201716a2e619d8aababd914a39"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "f2eecc203af662463ba902f78050713a"
+MODEL_HASH = "0a35b70126430d94bcece993aac9a57c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "4f9a2b26cc06719c6ed18ae649ecf4c0"
+MODEL_HASH = "a909846cda380bf8c4c22e58ce096b45"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "63388a67b44580d5841a7b90b5bd18e6"
+MODEL_HASH = "9d270b5532f9b2b070f1b373664c027b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

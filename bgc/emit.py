@@ -100,7 +100,7 @@ def _body(assignments):
             if item.rank is None:
                 lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
             else:
-                lines.append(f"_P{k} = _kkt_pinv(_A{k}, {item.rank.name})")
+                lines.append(f"_P{k} = _kkt_pinv(_A{k}, {code(item.rank)})")
                 lines.append(f"_u{k} = _P{k} @ _b{k}")
             lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
         else:
@@ -155,6 +155,7 @@ def render(system: EquationSystem) -> str:
     con_asg, con_used = _cone(system.assignments, con_exprs)
     kkt = {it.index for it in system.assignments
            if isinstance(it, LinearBlock) and it.rank is not None}
+    freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     funcs = {}
     for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
                            ("jac", jac_all, jac_used),
@@ -172,6 +173,9 @@ def render(system: EquationSystem) -> str:
         output_names=[name for name, _ in system.outputs],
         x0_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)
                    if any(st.initial.has(sy) for st in system.states)],
+        freq_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)
+                     if any(f.has(sy) for f in freqs)],
+        freq=code(sp.Max(sp.S.Zero, *freqs)) if freqs else "0.0",
         x0=[code(st.initial) for st in system.states],
         p0=[repr(float(v)) for _, _, v in system.params],
         breakpoints=[repr(float(b)) for b in system.breakpoints],

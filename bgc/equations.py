@@ -72,15 +72,16 @@ class LinearBlock:
     tear_eqs: tuple[sp.Expr, ...]
     chain: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
     pre: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
-    # None: LU. A symbol: the constraint block of method lagrange, solved by SVD keeping
-    # that many singular values (the rank of the constraints at the initial state)
-    rank: sp.Symbol | None = None
+    # None: LU. An expression: the constraint block of method lagrange, solved by SVD
+    # keeping that many singular values (the rank of the constraints at the initial state,
+    # plus the twist rates of bodies of negligible mass)
+    rank: sp.Expr | None = None
     # constraint blocks: A = -K B with K (n x d) and B (d x n) sparse, d dynamic states
     factors: tuple | None = None
 
     @property
     def free_symbols(self) -> set:
-        out = {self.rank} if self.rank is not None else set()
+        out = set(self.rank.free_symbols) if self.rank is not None else set()
         exprs = [e for _, _, e in self.A] + [e for _, e in self.pre]
         if self.factors is not None:
             exprs += [e for _, _, e in self.factors[1] + self.factors[2]]
@@ -154,6 +155,7 @@ class _Builder:
         self.refs: dict[sp.Symbol, sp.Expr] = {}
         self.guards: list[tuple[str, sp.Expr]] = []
         self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
+        self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
         self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
 
     # --- helpers --------------------------------------------------------------------
@@ -422,13 +424,38 @@ class _Builder:
 
     def _el_M0(self, name, el):
         """A body of negligible mass: its velocity is an unknown U of the algebraic loop
-        closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``)."""
+        closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``).
+
+        Methods lagrange and zcp (whose tree leaves such bodies out, ``zcp._spanning_tree``):
+        the constraints fix U only at the velocity level, so U is a state
+        and its rate A an unknown of the constraint block next to the multipliers, defined
+        by the same balance ``A = A + e``: the block becomes the saddle point
+        ``[J M^-1 J^T, J_U; J_U^T, 0]``, regular where the blocked directions fix U."""
         b, s, E, F = self._port(name)
+        if self.g.method in ("lagrange", "zcp"):
+            return self._massless_lagrange(name, b, s, E, F)
         U = sp.Matrix([symbols.unknown(name, k) for k in range(len(E))])
         self.define(F, s * U, name, b)
         self.define(U, U + s * E, name, b)
         for k, u in enumerate(U):
             self.display[u] = f"{name.replace('__', '.')}.{AXES[k]}"
+
+    def _massless_lagrange(self, name, b, s, E, F):
+        for k in range(len(E)):
+            u, du = symbols.state(name, f"u{AXES[k]}"), symbols.dstate(name, f"u{AXES[k]}")
+            acc = symbols.acceleration(name, k)
+            self.define(F[k], s * u, name, b)
+            self.define(du, acc, name, b)
+            self.define(acc, acc + s * E[k], name, b)
+            label = f"{name.replace('__', '.')}.{AXES[k]}"
+            self.states.append(State(label, u, du, sp.S.Zero, name))
+            self.display[u], self.display[du] = label, f"d({label})/dt"
+            self.display[acc] = f"{label}.balance"
+            # the block's row of A: e, the net force on the body, as the rate of a virtual
+            # momentum (column ``net``) that must stay zero
+            net = symbols.state(name, f"net{AXES[k]}")
+            self.kkt_rows[acc] = {net: sp.Integer(s)}
+            self.kkt_rates[E[k]] = net
 
     def common_flow(self, junction: str):
         return self.F(self.g.ports[junction][0])
@@ -690,20 +717,23 @@ def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock
     col = {x: j for j, x in enumerate(dynamic)}
     dstate = {st.dsym: st.sym for st in b.states}
     dstate.update({ds: x for x, ds, _ in b.zcp_dependent})
+    dstate.update(b.kkt_rates)
     sens = {t: {k: sp.S.One} for k, t in enumerate(tears)}
     pre = propagate(chain, sens, lambda v, k: f"S{index}_{v.name}__{k}")
     B = tuple((col[dstate[dx]], k, d) for dx in sorted(sens, key=lambda s: s.name)
               if dx in dstate and dstate[dx] in col for k, d in sens[dx].items())
     K = tuple((i, col[x], d) for i, t in enumerate(tears)
               for x, d in sorted(b.kkt_rows[t].items(), key=lambda kv: kv[0].name))
+    # a body of negligible mass adds its twist's rates, each one rank of the saddle point
+    rank = symbols.param(lagrange.RANK) + sum(t.name.startswith("ACC_") for t in tears)
     return LinearBlock(index, tuple(tears), (), None, tuple(b.eqs[t] for t in tears), chain,
-                       tuple(pre), symbols.param(lagrange.RANK), (len(dynamic), K, B))
+                       tuple(pre), rank, (len(dynamic), K, B))
 
 
 def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
-    multipliers = [v for v in comp if v.name.startswith("LAM_")]
+    multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
     dependent = [v for v in comp if v in {x for x, _, _ in b.zcp_dependent}]
     tears = _tear(comp, deps, multipliers + dependent)
     rest = [v for v in comp if v not in tears]
@@ -727,7 +757,10 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
 
     if multipliers and set(tears) == set(multipliers):
         loop.kind = "constraint"
-        loop.tearing = [f"numeric SVD of the {len(tears)} Lagrange multipliers"]
+        n_acc = sum(v.name.startswith("ACC_") for v in tears)
+        loop.tearing = [f"numeric SVD of the {len(tears) - n_acc} Lagrange multipliers"
+                        + (f" and {n_acc} twist rates of bodies of negligible mass"
+                           if n_acc else "")]
         return [_kkt_block(b, tears, order, block_index)] + [(v, eqs[v]) for v in order], loop
     if multipliers:
         loop.kind = "constraint"

@@ -262,9 +262,11 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
                              "to a direction that is free in both")
 
 
-def _check_massless(model: Model, joint_dirs: dict, subs: dict):
+def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: str):
     """A body of negligible mass must have its twist fixed by its joints (blocked or damped
-    directions), or the balance of forces on it cannot be solved."""
+    directions), or the balance of forces on it cannot be solved. Under lagrange (and zcp)
+    its twist is a state whose rate the constraint block solves: only blocked
+    directions fix it."""
     massless = [n for n, b in model.bodies.items() if b.mass == 0]
     if not massless:
         return
@@ -273,7 +275,8 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict):
     for name, (j, dirs) in joint_dirs.items():
         for d in dirs:
             fun = j.functional.get(d.label)
-            if not (d.blocked or (fun is not None and fun.c != 0)):
+            damped = fun is not None and fun.c != 0 and method == "parasitic"
+            if not (d.blocked or damped):
                 continue
             for n in (j.body1, j.body2):
                 if n in col and name not in touching[n]:
@@ -291,7 +294,10 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict):
                              f"undetermined in {6 - rank} direction(s)", loc=b.loc,
                              key=f"bodies.{n}.mass",
                              hint="give it a mass, join it, or put a damper on the free "
-                                  "direction of one of its joints")
+                                  "direction of one of its joints" + (
+                                      " with --method parasitic (under lagrange and zcp "
+                                      "only blocked directions fix it)"
+                                      if method != "parasitic" else ""))
     if np.linalg.matrix_rank(A, tol=1e-9) < A.shape[1]:
         names = ", ".join(massless)
         raise ModelError(f"the bodies of negligible mass ({names}) can move together without "
@@ -311,7 +317,7 @@ def expand(model: Model, method: str = "parasitic") -> BondGraph:
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
     pose = _initial_pose(model)
     _check_functional_not_blocked(model, joint_dirs, pose)
-    _check_massless(model, joint_dirs, pose)
+    _check_massless(model, joint_dirs, pose, method)
     elements, bonds = ex.elements, ex.bonds
     ports: dict[str, list[int]] = {name: [] for name in elements}
     for i, b in enumerate(bonds):

@@ -15,7 +15,10 @@ the multipliers, which form one numeric block: the KKT matrix ``J M^-1 J^T`` is 
 written down symbolically; the generated code forms it as K B (B: the multipliers' rows
 on the momenta's rates, ``equations._kkt_block``) and solves it by SVD, keeping the rank
 found at the initial state, so redundant constraints (hyperstatic mechanisms) share their
-load by least squares.
+load by least squares. A body of negligible mass has no momentum: its twist is a state
+and its rate an unknown of the same block, defined by the balance of the forces on it
+(``equations._Builder._massless_lagrange``), which makes the block the saddle point
+``[J M^-1 J^T, J_U; J_U^T, 0]`` (rank: the constraints' plus 6 per such body).
 
 Why Baumgarte rather than projection or GGL: the result is one explicit ODE, so every
 integrator (scipy's BDF/Radau/LSODA, the native one) runs it unchanged with the analytic

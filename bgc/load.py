@@ -261,7 +261,8 @@ class _Loader:
                          "t1: end of the ramp-up, t2/t3: start/end of the sweep")
         expr, bps = bsignals.build(kind, vals, len(tables) - 1)
         numbers = {k: float(x) for k, x in vals.items() if k in bsignals.NUMBER_FIELDS}
-        return Signal(name, kind, sp.sympify(expr), v.loc, bps, numbers), vals
+        return Signal(name, kind, sp.sympify(expr), v.loc, bps, numbers,
+                      bsignals.frequency(kind, vals)), vals
 
     def number_list(self, v, loc, key) -> list[float]:
         if not isinstance(v, YList):
@@ -790,7 +791,7 @@ class _Loader:
         names = {n: symbols.param(n) for n in params}
         ks = self.mapping(sec["kinds"], sec.val_locs["kinds"], "excitation.kinds",
                           "a mapping kind -> signal (constant, sine, chirp, ...)")
-        kinds, freq, g, bps = {}, None, sp.S.Zero, set()
+        kinds, freq, g, bps, freqs = {}, None, sp.S.Zero, set(), []
         for kind, v in ks.items():
             key = f"excitation.kinds.{kind}"
             if not isinstance(kind, str) or not _IDENT.match(kind) or "__" in kind:
@@ -805,15 +806,20 @@ class _Loader:
                                                          "Hz")
                 expr = bsignals.build("sine", {**vals, "frequency":
                                                symbols.param(Excitation.FREQUENCY)}, -1)[0]
-                sig = Signal(kind, "sine", sp.sympify(expr), sig.loc)
+                sig = Signal(kind, "sine", sp.sympify(expr), sig.loc,
+                             frequency=symbols.param(Excitation.FREQUENCY))
             w = Excitation.param(kind)
             params[w] = Parameter(w, 0.0, sig.loc)
             g += symbols.param(w) * sig.expr
+            if sig.frequency is not None:      # only the selected kind limits the step
+                freqs.append(sp.Piecewise((sig.frequency, sp.Ne(symbols.param(w), 0)),
+                                          (0, True)))
             bps.update(sig.breakpoints)
             kinds[kind] = sig
         self.declare(Excitation.SIGNAL, "the excitation signal", sec.loc, "excitation")
         signals[Excitation.SIGNAL] = Signal(Excitation.SIGNAL, "excitation", g, sec.loc,
-                                            tuple(sorted(bps)))
+                                            tuple(sorted(bps)),
+                                            frequency=sp.Max(*freqs) if freqs else None)
         ds = self.mapping(sec["directions"], sec.val_locs["directions"],
                           "excitation.directions", "a mapping name -> {joint, amplitude}")
         directions = {}

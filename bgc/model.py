@@ -82,6 +82,9 @@ class Signal:
     loc: Loc
     breakpoints: tuple[float, ...] = ()
     numbers: dict = field(default_factory=dict)    # its plain-number fields (chirp: t1..f_end)
+    # the highest frequency it contains (Hz, may use parameters), None if not periodic:
+    # the integrator's step stays below a fraction of its period so it cannot alias
+    frequency: sp.Expr | None = None
 
 
 @dataclass

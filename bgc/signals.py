@@ -74,6 +74,15 @@ def chirp_frequency(t, t2: float, t3: float, f_start: float, f_end: float):
                    min(f_start, f_end), max(f_start, f_end))
 
 
+def frequency(kind: str, v: dict) -> sp.Expr | None:
+    """The highest frequency (Hz) a signal contains: a sine's, a chirp's larger end."""
+    if kind == "sine":
+        return sp.sympify(v["frequency"])
+    if kind == "chirp":
+        return sp.Max(sp.sympify(v["f_start"]), sp.sympify(v["f_end"]))
+    return None
+
+
 def build(kind: str, v: dict, table_index: int) -> tuple[sp.Expr, tuple[float, ...]]:
     """The expression and breakpoints of a signal whose numeric fields are ``v``."""
     t = symbols.t

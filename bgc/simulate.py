@@ -27,6 +27,7 @@ class Stats:
     lu_decompositions: int | None = 0
     rejected_steps: int | None = None     # scipy's solve_ivp does not report them
     wall_time: float = 0.0                # integration only
+    max_step: float | None = None         # the step limit the input signals set
     compile_time: float = 0.0             # numba JIT / cache load of the module's functions
     # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
     drift_position: float | None = None
@@ -73,9 +74,10 @@ class Solver(abc.ABC):
 
     @abc.abstractmethod
     def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats: Stats,
-                  events=()) -> Segment:
+                  events=(), max_step=np.inf) -> Segment:
         """Integrate from t0 to t1, recording the states at ``t_eval``; stop early where
-        one of ``events`` (functions of (t, x)) falls through zero."""
+        one of ``events`` (functions of (t, x)) falls through zero; no step longer than
+        ``max_step``."""
 
 
 class ScipySolver(Solver):
@@ -84,10 +86,12 @@ class ScipySolver(Solver):
     def __init__(self, name: str, method: str, description: str):
         self.name, self.method, self.description = name, method, description
 
-    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats, events=()):
+    def integrate(self, rhs, jac, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
+                  max_step=np.inf):
         kw = {"jac": jac} if self.method in ("BDF", "Radau", "LSODA") else {}
         sol = solve_ivp(rhs, (t0, t1), x0, method=self.method, rtol=rtol, atol=atol,
-                        dense_output=True, events=list(events) or None, **kw)
+                        dense_output=True, events=list(events) or None,
+                        max_step=max_step, **kw)
         stats.steps += max(len(sol.t) - 1, 0)
         stats.rhs_calls += int(sol.nfev)
         stats.jac_calls += int(sol.njev)
@@ -206,6 +210,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     def jac(t, xx):
         return module.jac(t, xx, p)
 
+    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
+    stats.max_step = max_step if np.isfinite(max_step) else None
     grid = np.linspace(0.0, t_end, int(points))
     ts, xs = [], []
     ok, message = True, ""
@@ -222,7 +228,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             ts.append(sel)
             xs.append(np.zeros((len(sel), 0)))
             continue
-        seg = method.integrate(rhs, jac, a, b, x, sel, rtol, atol, stats, events)
+        seg = method.integrate(rhs, jac, a, b, x, sel, rtol, atol, stats, events, max_step)
         ts.append(sel[:len(seg.x_eval)])
         xs.append(seg.x_eval)
         done = ts[-1][-1] if len(ts[-1]) else done

@@ -53,6 +53,12 @@ def unknown(element: str, comp: int) -> sp.Symbol:
     return _sym(f"W_{element}__{AXES[comp]}")
 
 
+def acceleration(element: str, comp: int) -> sp.Symbol:
+    """Method lagrange: the rate of the twist of a body of negligible mass, an unknown of
+    the constraint block next to the multipliers."""
+    return _sym(f"ACC_{element}__{AXES[comp]}")
+
+
 def multiplier(joint: str, label: str) -> sp.Symbol:
     """The Lagrange multiplier of a joint's blocked direction (method ``lagrange``): the
     effort of its constraint element L."""

@@ -73,6 +73,8 @@ class KinematicLoop:
 class Plan:
     tree: list[TreeJoint] = field(default_factory=list)
     loops: list[KinematicLoop] = field(default_factory=list)
+    # joints of bodies of negligible mass: break variables, not flow sources
+    relays: list[str] = field(default_factory=list)
 
     @property
     def dependent(self) -> list[tuple[str, int]]:
@@ -115,12 +117,17 @@ class Path:
 
 
 def _spanning_tree(graph: BondGraph):
-    """(tree edges (joint, parent, child), chords) by breadth-first search from the
-    fixed frame, then from any body no joint connects to it; joints in file order."""
+    """(tree edges (joint, parent, child), chords, relays) by breadth-first search from
+    the fixed frame, then from any body no joint connects to it; joints in file order.
+    A body of negligible mass has no inertia to take derivative causality, so it stays
+    out of the tree: its joints are *relays*, opened with break variables like chords,
+    and its twist is a state (as under lagrange)."""
+    bodies = graph.model.bodies
+    massless = {n for n, b in bodies.items() if b.mass == 0}
     edges = [(name, graph.model.joints[name]) for name, dirs in graph.joints.items()
              if any(d.blocked for d in dirs)]
     seen, tree, chords, used = {None}, [], [], set()
-    for root in [None] + list(graph.model.bodies):
+    for root in [None] + [n for n in bodies if n not in massless]:
         if root is not None:
             if root in seen:
                 continue
@@ -132,6 +139,8 @@ def _spanning_tree(graph: BondGraph):
                 if name in used or node not in (j.body1, j.body2):
                     continue
                 other = j.body2 if j.body1 == node else j.body1
+                if other in massless:
+                    continue
                 used.add(name)
                 if other in seen:
                     chords.append(name)
@@ -139,7 +148,8 @@ def _spanning_tree(graph: BondGraph):
                     seen.add(other)
                     tree.append((name, node, other))
                     queue.append(other)
-    return tree, chords
+    relays = [name for name, _ in edges if name not in used]
+    return tree, chords, relays
 
 
 def _loop(cut: str, graph: BondGraph, parent: dict) -> KinematicLoop:
@@ -167,9 +177,9 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
     dependent velocity components; return the graph with its ``zcp`` plan and its
     constraints marked ``imposed`` where L is a flow source."""
     model = graph.model
-    tree, chords = _spanning_tree(graph)
+    tree, chords, relays = _spanning_tree(graph)
     parent = {child: (name, par) for name, par, child in tree}
-    plan = Plan(loops=[_loop(c, graph, parent) for c in chords])
+    plan = Plan(loops=[_loop(c, graph, parent) for c in chords], relays=relays)
     if plan.loops and not open_loops:
         lp = plan.loops[0]
         j = model.joints[lp.cut]
@@ -181,16 +191,19 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
             loc=j.loc, key=f"joints.{lp.cut}",
             hint="let zcp open it with break variables (the default), or use --method "
                  "lagrange or parasitic")
+    if plan.relays and not open_loops:
+        j = model.joints[plan.relays[0]]
+        light = [n for n in (j.body1, j.body2) if n and model.bodies[n].mass == 0]
+        raise EquationError(
+            f"class-4 zero-order causal path: joint '{j.name}' meets body '{light[0]}' of "
+            "negligible mass, where flow sources from its joints would impose one twist "
+            "twice; kept closed it is an index-2 DAE, which no integrator of bgc takes, so "
+            "nothing was run (t = 0)", loc=j.loc, key=f"joints.{j.name}",
+            hint="let zcp open it with break variables (the default), or use --method "
+                 "lagrange or parasitic")
     pose = _initial_pose(model)
     for name, par, child in tree:
         j = model.joints[name]
-        body = model.bodies[child]
-        if body.mass == 0:
-            raise EquationError(
-                f"method zcp: joint '{name}' imposes the velocity of body '{child}', which "
-                "has negligible mass (no inertia can take derivative causality)",
-                loc=j.loc, key=f"joints.{name}",
-                hint="give the body a small mass, or use --method parasitic")
         rows = np.array([_twist_row(model, j, d, {child: 0}, pose, 6)
                          for d in graph.joints[name] if d.blocked])
         weights = np.array([1.0] * 3 + [_ROTATION_WEIGHT] * 3)
@@ -303,6 +316,20 @@ def paths(graph: BondGraph, system) -> list[Path]:
         out.append(Path(cls, f"{what}: {lp.describe()}", lp.elements, lp.bonds,
                         lines(lp.elements)))
     if plan is not None:
+        for name in plan.relays:
+            j = graph.model.joints[name]
+            light = [n for n in (j.body1, j.body2) if n and graph.model.bodies[n].mass == 0]
+            cut = [c for c in graph.constraints if c.joint == name]
+            names = {c.element for c in cut}
+            names |= {n for n in els if any(n.startswith(f"{b}__M0") for b in light)}
+            what = (f"joint '{name}' of the bod{'ies' if len(light) > 1 else 'y'} of "
+                    f"negligible mass {', '.join(light)}: flow sources would meet at a "
+                    f"junction with no inertia; opened with {len(cut)} break variable(s) "
+                    f"({', '.join(c.name + '.break' for c in cut)}) solved with the "
+                    "body's twist rates")
+            out.append(Path(4, what, sorted(names), bonds_among(names),
+                            sorted(set(lines(names)) | {j.loc.line}),
+                            [c.element for c in cut]))
         for kl in plan.loops:
             names = {c.element for c in graph.constraints if c.joint in kl.joints}
             names |= {n for n in els if any(n.startswith(f"{b}__") for b in kl.bodies if b)}

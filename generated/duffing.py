@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "dd0ad488aa848788462af9adc3097403"
+MODEL_HASH = "7d2ae7a91928af1058b010653359dfa0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -42,6 +42,18 @@ def initial_state(p):
 
 
 X0 = initial_state(PARAMS)
+
+# the integrator samples the fastest input signal at least this often per period
+STEPS_PER_PERIOD = 8
+
+
+def max_step(p):
+    """The largest step an integrator may take for parameter values p: a fraction of
+    the period of the fastest input signal in use (inf without one), so an adaptive
+    step cannot stride over an excitation it has not seen (a sine that is zero at both
+    ends of a long step looks like no input at all)."""
+    f = 0.0
+    return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
 @njit(cache=True)

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "33f70b03bd7ee7b09c0fd6a16c1ad49a"
+MODEL_HASH = "144a25501ee5dc19606de4ec83f2c140"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -41,6 +41,19 @@ def initial_state(p):
 
 
 X0 = initial_state(PARAMS)
+
+# the integrator samples the fastest input signal at least this often per period
+STEPS_PER_PERIOD = 8
+
+
+def max_step(p):
+    """The largest step an integrator may take for parameter values p: a fraction of
+    the period of the fastest input signal in use (inf without one), so an adaptive
+    step cannot stride over an excitation it has not seen (a sine that is zero at both
+    ends of a long step looks like no input at all)."""
+    P_f_line = p[1]
+    f = max(0.0, P_f_line)
+    return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
 @njit(cache=True)

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "0a35b70126430d94bcece993aac9a57c"
+MODEL_HASH = "a998e7c802ce9ddc581ba789147e61b0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -41,6 +41,18 @@ def initial_state(p):
 
 
 X0 = initial_state(PARAMS)
+
+# the integrator samples the fastest input signal at least this often per period
+STEPS_PER_PERIOD = 8
+
+
+def max_step(p):
+    """The largest step an integrator may take for parameter values p: a fraction of
+    the period of the fastest input signal in use (inf without one), so an adaptive
+    step cannot stride over an excitation it has not seen (a sine that is zero at both
+    ends of a long step looks like no input at all)."""
+    f = 0.0
+    return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
 @njit(cache=True)

@@ -161,6 +161,30 @@ def test_sine_dwell_matches_the_frequency_response(absorber):
             assert dwell_amplitude(r.t, r.column(out), f) == pytest.approx(h, rel=0.01)
 
 
+def test_step_limit_keeps_the_integrator_from_striding_over_the_excitation(absorber):
+    """At rest, a 20 Hz sine is zero at t = 0 and after each half period: an adaptive step
+    that samples it only there sees no input at all (under lagrange the SARIB's BDF took
+    one 0.5 s step). The module limits the step to 1/8 of the fastest selected input's
+    period; a constant input leaves it free."""
+    from bgc.simulate import simulate
+    mod, model = absorber
+    names = list(mod.PARAM_NAMES)
+    for kind, f, limit in (("sine", 20.0, 1 / 160), ("chirp", None, 1 / 112),
+                           ("constant", None, np.inf)):
+        q = np.array(mod.PARAMS)
+        for name, value in model.excitation.select(kind, "push", frequency=f).items():
+            q[names.index(name)] = value
+        assert mod.max_step(q) == pytest.approx(limit)
+    r = simulate(mod, t_end=0.5, rtol=1e-5, atol=1e-5, solver="bdf", params=q)
+    assert r.stats.max_step is None
+    q = np.array(mod.PARAMS)
+    for name, value in model.excitation.select("sine", "push", frequency=20.0).items():
+        q[names.index(name)] = value
+    r = simulate(mod, t_end=0.5, rtol=1e-5, atol=1e-5, solver="bdf", params=q, points=2001)
+    assert r.stats.max_step == pytest.approx(1 / 160) and r.stats.steps >= 80
+    assert np.abs(r.column("a_z")).max() > 1.0          # 10 N on 2.5 kg, off resonance
+
+
 def test_cli_chirp_run_and_frf_report_the_anti_resonance(absorber, tmp_path):
     """The main job's path on a small model: a chirp through the absorber's 10 Hz
     anti-resonance (CSV without states, plots, envelope minima) and `bgc frf --json`."""

@@ -79,9 +79,9 @@ def test_linear_model_anti_resonances_near_the_papers(sarib):
     anti_a, _ = frf.extrema(lin, "a_OF_z", 15.0, 20.0)
     anti_z, _ = frf.extrema(lin, "F_A1_z", 15.0, 20.0)
     anti_x, _ = frf.extrema(lin, "F_A1_x", 15.0, 20.0)
-    assert anti_a == [pytest.approx(18.05, abs=0.02)]      # paper: 18 Hz
-    assert anti_z == [pytest.approx(18.03, abs=0.02)]
-    assert anti_x == [pytest.approx(17.09, abs=0.02)]      # paper: 16.8 Hz
+    assert anti_a == [pytest.approx(18.055, abs=0.01)]      # paper: 18 Hz
+    assert anti_z == [pytest.approx(18.033, abs=0.01)]
+    assert anti_x == [pytest.approx(17.103, abs=0.01)]      # paper: 16.8 Hz
 
 
 def test_short_sine_run_follows_the_linear_model(sarib):
@@ -112,3 +112,49 @@ def test_sine_dwell_matches_the_frequency_response(sarib):
         for out in ("a_OF_z", "F_A1_z", "F_A1_x"):
             h = abs(lin.response([f], out)[0]) * 200.0
             assert dwell_amplitude(r.t, r.column(out), f) == pytest.approx(h, rel=0.01)
+
+
+# (direction, output) pairs whose anti-resonances issue 5 compares across methods
+ANTI = (("pumping", "a_OF_z"), ("pumping", "F_A1_z"), ("pumping", "F_A1_x"),
+        ("roll", "F_A1_z"), ("pitch", "F_A1_z"))
+
+
+def _stiffer(mod, p, factor):
+    """``p`` with every parasitic stiffness x factor, damping x sqrt(factor) (the same
+    damping ratio)."""
+    q = np.array(p)
+    for i, n in enumerate(mod.PARAM_NAMES):
+        if n.endswith(("__stiffness", "__rot_stiffness")):
+            q[i] *= factor
+        elif n.endswith(("__damping", "__rot_damping")):
+            q[i] *= np.sqrt(factor)
+    return q
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_ideal_joints_agree_with_parasitic_within_its_modelling_error(sarib, compiled,
+                                                                    method):
+    """The SARIB under lagrange and zcp (the four bodies of negligible mass: twist states
+    whose rates the constraint block solves). Anti-resonances within 0.05 Hz of parasitic
+    (measured <= 0.012 Hz); 1 s of an 18 Hz pumping sine: the outputs differ from
+    parasitic by what parasitic itself moves when its stiffness is raised tenfold (its
+    modelling error falls as 1/k: the distance to the limit is 10/9 of that move)."""
+    mod, model = sarib
+    ideal = compiled("sarib", method)
+    assert sum(".M0" in n for n in ideal.STATE_NAMES) == 24      # 4 bodies' twists
+    for direction, out in ANTI:
+        a = frf.extrema(frf.linearize(mod, model, direction), out, 15.0, 22.0)[0]
+        b = frf.extrema(frf.linearize(ideal, model, direction), out, 15.0, 22.0)[0]
+        assert b == [pytest.approx(x, abs=0.05) for x in a], (direction, out)
+    runs = {}
+    for name, m, factor in (("ideal", ideal, None), ("k", mod, 1.0), ("10k", mod, 10.0)):
+        p = _params(m, model, "sine", "pumping", frequency=18.0)
+        p = p if factor is None else _stiffer(m, p, factor)
+        runs[name] = simulate(m, t_end=1.0, rtol=1e-8, atol=1e-10, params=p, points=2001)
+    assert runs["ideal"].stats.drift_position < 1e-7
+    for out in ("a_OF_z", "F_A1_z", "F_A1_x"):
+        y, yk, y10 = (runs[n].column(out) for n in ("ideal", "k", "10k"))
+        scale = np.ptp(yk)
+        err, model_err = np.abs(yk - y).max(), np.abs(yk - y10).max()
+        assert err <= 1.5 * model_err + 1e-4 * scale, (out, err, model_err)

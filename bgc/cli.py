@@ -199,7 +199,10 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @click.option("--t-end", type=float, help="end time [s] (default: the model's)")
 @click.option("--rtol", type=float, help="relative tolerance (default: the model's or 1e-6)")
 @click.option("--atol", type=float, help="absolute tolerance (default: the model's or 1e-8)")
-@click.option("--solver", help="integrator: bdf, radau, lsoda, rk45 (default: bdf)")
+@click.option("--solver", help="integrator (default: the model's, else bdf): native "
+                                "(Radau IIA 5 in numba), rk4 (fixed --step), bdf, radau, "
+                                "lsoda, rk45 (scipy)")
+@click.option("--step", type=float, help="fixed-step solvers (rk4): the step [s]")
 @click.option("--points", type=int, help="number of output times (default 1001)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
               help="override a parameter (no recompilation)")
@@ -228,7 +231,8 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @_loops_opt
 @_json_opt
 @_user_errors
-def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, states, out_dir,
+def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, states,
+             out_dir,
              parasitic_mode, separation, exc_kind, exc_dir, amplitude, frequency, zoom,
              method, keep_loops, as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
@@ -257,7 +261,7 @@ def simulate(model, t_end, rtol, atol, solver, points, params, out, plot, states
         p = _parse_params(module, params, base=p)     # explicit -p values still win
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                  atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
-                 params=p)
+                 params=p, step=step)
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out, states))

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "7f59319d28a8c798428488d9f97d3446"
+MODEL_HASH = "0b572059f381f888f7519653e0e9984b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -206,3 +206,295 @@ def guards(t, x, p):
     g = np.empty(1)
     g[0] = np.cos(X_box__ay)
     return g
+
+# --- native integrators (bgc/templates/radau5.py.j2) ------------------------------------
+# The step loops run here, in numba, next to the right-hand side and Jacobian they call:
+# no return to Python per step. Statistics: _ST_STEPS, _ST_RHS, _ST_JAC, _ST_LU (matrix
+# factorizations), _ST_REJECTED. Status: 0 reached t1, 1 step size too small, 2 a guard
+# margin fell to the tolerance (event index and time returned), 3 non-finite state.
+_ST_STEPS, _ST_RHS, _ST_JAC, _ST_LU, _ST_REJECTED = 0, 1, 2, 3, 4
+
+# Radau IIA order 5 (Hairer & Wanner, Solving ODEs II, IV.8; the constants as in scipy's
+# integrate/_ivp/radau.py): three stages, the collocation system in the transformed
+# variables (one real and one complex linear system per Newton iteration)
+_S6 = 6.0 ** 0.5
+_RC = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
+_RE = np.array([-13.0 - 7.0 * _S6, -13.0 + 7.0 * _S6, -1.0]) / 3.0
+_MU_REAL = 3.0 + 3.0 ** (2.0 / 3.0) - 3.0 ** (1.0 / 3.0)
+_MU_COMPLEX = (3.0 + 0.5 * (3.0 ** (1.0 / 3.0) - 3.0 ** (2.0 / 3.0))
+               - 0.5j * (3.0 ** (5.0 / 6.0) + 3.0 ** (7.0 / 6.0)))
+_RT = np.array([[0.09443876248897524, -0.14125529502095421, 0.03002919410514742],
+                [0.25021312296533332, 0.20412935229379994, -0.38294211275726192],
+                [1.0, 1.0, 0.0]])
+_RTI = np.array([[4.17871859155190428, 0.32768282076106237, 0.52337644549944951],
+                 [-4.17871859155190428, -0.32768282076106237, 0.47662355450055044],
+                 [0.50287263494578682, -2.57192694985560522, 0.59603920482822492]])
+_RP = np.array([[13.0 / 3.0 + 7.0 * _S6 / 3.0, -23.0 / 3.0 - 22.0 * _S6 / 3.0,
+                 10.0 / 3.0 + 5.0 * _S6],
+                [13.0 / 3.0 - 7.0 * _S6 / 3.0, -23.0 / 3.0 + 22.0 * _S6 / 3.0,
+                 10.0 / 3.0 - 5.0 * _S6],
+                [1.0 / 3.0, -8.0 / 3.0, 10.0 / 3.0]])
+_NEWTON_MAXITER = 6
+
+
+@njit(cache=True)
+def _rms(v):
+    return np.sqrt(np.mean(v * v))
+
+
+@njit(cache=True)
+def _radau_dense(t_old, h, y_old, Q, t):
+    """The collocation polynomial of the last step at t."""
+    x = (t - t_old) / h
+    return y_old + Q[:, 0] * x + Q[:, 1] * x * x + Q[:, 2] * x * x * x
+
+
+@njit(cache=True)
+def _guard_min(t, x, p, tol):
+    g = guards(t, x, p)
+    k, low = -1, np.inf
+    for i in range(g.shape[0]):
+        if g[i] - tol < low:
+            k, low = i, g[i] - tol
+    return k, low
+
+
+@njit(cache=True)
+def radau5(t0, t1, x0, t_eval, p, rtol, atol, max_step, guard_tol, stats):
+    """Integrate from t0 to t1 with Radau IIA order 5 (adaptive, stiff, L-stable): states
+    at ``t_eval`` from the collocation polynomial, the simplified Newton matrices reused
+    until convergence slows, the Jacobian recomputed only then. Returns (states at
+    t_eval, how many were reached, t reached, state there, status, guard index)."""
+    n = x0.shape[0]
+    out = np.empty((t_eval.shape[0], n))
+    k_out = 0
+    while k_out < t_eval.shape[0] and t_eval[k_out] <= t0:
+        out[k_out] = x0
+        k_out += 1
+    t, y = t0, x0.copy()
+    if t1 <= t0:
+        return out, k_out, t, y, 0, -1
+    f = rhs(t, y, p)
+    stats[_ST_RHS] += 1
+    # the initial step (Hairer, Norsett & Wanner I, II.4; error estimator order 3)
+    scale = atol + np.abs(y) * rtol
+    d0, d1 = _rms(y / scale), _rms(f / scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t1 - t0)
+    f1 = rhs(t + h0, y + h0 * f, p)
+    stats[_ST_RHS] += 1
+    d2 = _rms((f1 - f) / scale) / h0
+    h1 = max(1e-6, h0 * 1e-3) if (d1 <= 1e-15 and d2 <= 1e-15) else \
+        (0.01 / max(d1, d2)) ** 0.25
+    h_abs = min(100.0 * h0, h1, t1 - t0, max_step)
+    h_abs_old, err_old = -1.0, -1.0
+    newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
+    J = jac(t, y, p)
+    stats[_ST_JAC] += 1
+    current_jac = True
+    eye = np.eye(n)
+    inv_real = np.empty((n, n))
+    inv_complex = np.empty((n, n), dtype=np.complex128)
+    have_lu = False
+    Q = np.zeros((n, 3))
+    have_sol = False
+    t_old, h_last, y_old = t, 0.0, y.copy()
+    while t < t1:
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        if h_abs > max_step:
+            h_abs, h_abs_old, err_old = max_step, -1.0, -1.0
+        elif h_abs < min_step:
+            h_abs, h_abs_old, err_old = min_step, -1.0, -1.0
+        rejected = False
+        accepted = False
+        Z = np.zeros((3, n))
+        n_iter, rate, err_norm, safety = 0, 0.0, 0.0, 0.9
+        y_new = y
+        t_new = t
+        while not accepted:
+            if h_abs < min_step:
+                return out, k_out, t, y, 1, -1
+            t_new = min(t + h_abs, t1)
+            h = t_new - t
+            h_abs = h
+            Z0 = np.zeros((3, n))
+            if have_sol:
+                for i in range(3):
+                    Z0[i] = _radau_dense(t_old, h_last, y_old, Q, t + h * _RC[i]) - y
+            scale = atol + np.abs(y) * rtol
+            converged = False
+            while not converged:
+                if not have_lu:
+                    inv_real = np.ascontiguousarray(np.linalg.inv(_MU_REAL / h * eye - J))
+                    inv_complex = np.ascontiguousarray(
+                        np.linalg.inv(_MU_COMPLEX / h * eye - J.astype(np.complex128)))
+                    stats[_ST_LU] += 2
+                    have_lu = True
+                # simplified Newton iterations on the collocation system
+                W = _RTI @ Z0
+                Z = Z0.copy()
+                F = np.empty((3, n))
+                dW = np.empty((3, n))
+                norm_old = -1.0
+                rate = -1.0
+                converged = False
+                n_iter = 0
+                finite = True
+                for it in range(_NEWTON_MAXITER):
+                    n_iter = it + 1
+                    for i in range(3):
+                        F[i] = rhs(t + h * _RC[i], y + Z[i], p)
+                    stats[_ST_RHS] += 3
+                    if not np.all(np.isfinite(F)):
+                        finite = False
+                        break
+                    FT = np.ascontiguousarray(F.T)
+                    f_real = FT @ _RTI[0] - _MU_REAL / h * W[0]
+                    f_cplx = (FT @ _RTI[1] + 1j * (FT @ _RTI[2])
+                              - _MU_COMPLEX / h * (W[1] + 1j * W[2]))
+                    dW[0] = inv_real @ f_real
+                    dc = inv_complex @ f_cplx
+                    dW[1] = dc.real
+                    dW[2] = dc.imag
+                    dnorm = 0.0
+                    for i in range(3):
+                        dnorm += np.sum((dW[i] / scale) ** 2)
+                    dnorm = np.sqrt(dnorm / (3 * n))
+                    if norm_old >= 0.0:
+                        rate = dnorm / norm_old
+                    if rate >= 0.0 and (rate >= 1.0 or rate ** (_NEWTON_MAXITER - it)
+                                        / (1.0 - rate) * dnorm > newton_tol):
+                        break
+                    W += dW
+                    Z = _RT @ W
+                    if dnorm == 0.0 or (rate >= 0.0 and rate / (1.0 - rate) * dnorm
+                                        < newton_tol):
+                        converged = True
+                        break
+                    norm_old = dnorm
+                if not converged and finite:
+                    if current_jac:
+                        break
+                    J = jac(t, y, p)
+                    stats[_ST_JAC] += 1
+                    current_jac = True
+                    have_lu = False
+                elif not finite:
+                    break
+            if not converged:
+                h_abs *= 0.5
+                have_lu = False
+                stats[_ST_REJECTED] += 1
+                continue
+            y_new = y + Z[2]
+            ZE = (np.ascontiguousarray(Z.T) @ _RE) / h
+            error = inv_real @ (f + ZE)
+            scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+            err_norm = _rms(error / scale)
+            safety = 0.9 * (2 * _NEWTON_MAXITER + 1) / (2 * _NEWTON_MAXITER + n_iter)
+            if rejected and err_norm > 1.0:
+                error = inv_real @ (rhs(t, y + error, p) + ZE)
+                stats[_ST_RHS] += 1
+                err_norm = _rms(error / scale)
+            if err_norm > 1.0:
+                mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
+                    h_abs / h_abs_old * (err_old / err_norm) ** 0.25
+                factor = min(1.0, mult) * err_norm ** -0.25
+                h_abs *= max(0.2, safety * factor)
+                have_lu = False
+                rejected = True
+                stats[_ST_REJECTED] += 1
+            else:
+                accepted = True
+        stats[_ST_STEPS] += 1
+        recompute_jac = n_iter > 2 and rate > 1e-3
+        if err_norm == 0.0:
+            factor = 10.0
+        else:
+            mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
+                h_abs / h_abs_old * (err_old / err_norm) ** 0.25
+            factor = min(10.0, safety * min(1.0, mult) * err_norm ** -0.25)
+        if not recompute_jac and factor < 1.2:
+            factor = 1.0
+        else:
+            have_lu = False
+        f_new = rhs(t_new, y_new, p)
+        stats[_ST_RHS] += 1
+        if not np.all(np.isfinite(y_new)):
+            return out, k_out, t, y, 3, -1
+        if recompute_jac:
+            J = jac(t_new, y_new, p)
+            stats[_ST_JAC] += 1
+            current_jac = True
+        else:
+            current_jac = False
+        h_abs_old, err_old = h_abs, err_norm
+        Q = np.ascontiguousarray(Z.T) @ _RP
+        have_sol = True
+        t_old, h_last, y_old = t, t_new - t, y
+        t, y, f = t_new, y_new, f_new
+        h_abs = h_abs * factor
+        # a guard margin reaching its tolerance: locate it on the polynomial (bisection)
+        if guard_tol > 0.0 and 1 > 0:
+            kg, low = _guard_min(t, y, p, guard_tol)
+            if low <= 0.0:
+                a, b = t_old, t
+                for _ in range(60):
+                    m = 0.5 * (a + b)
+                    km, lm = _guard_min(m, _radau_dense(t_old, h_last, y_old, Q, m), p,
+                                        guard_tol)
+                    if lm <= 0.0:
+                        b, kg = m, km
+                    else:
+                        a = m
+                while k_out < t_eval.shape[0] and t_eval[k_out] <= b:
+                    out[k_out] = _radau_dense(t_old, h_last, y_old, Q, t_eval[k_out])
+                    k_out += 1
+                return out, k_out, b, _radau_dense(t_old, h_last, y_old, Q, b), 2, kg
+        while k_out < t_eval.shape[0] and t_eval[k_out] <= t:
+            out[k_out] = _radau_dense(t_old, h_last, y_old, Q, t_eval[k_out])
+            k_out += 1
+    return out, k_out, t, y, 0, -1
+
+
+@njit(cache=True)
+def rk4(t0, t1, x0, t_eval, p, step, guard_tol, stats):
+    """The classical fixed-step Runge-Kutta method (the paper's explicit alternative):
+    steps of ``step`` (the last one shortened to land on t1), states at ``t_eval`` by
+    cubic Hermite interpolation; stops where the state becomes non-finite (status 3:
+    beyond its stability limit) or a guard margin reaches its tolerance (status 2)."""
+    n = x0.shape[0]
+    out = np.empty((t_eval.shape[0], n))
+    k_out = 0
+    while k_out < t_eval.shape[0] and t_eval[k_out] <= t0:
+        out[k_out] = x0
+        k_out += 1
+    t, y = t0, x0.copy()
+    f = rhs(t, y, p)
+    stats[_ST_RHS] += 1
+    while t < t1:
+        h = min(step, t1 - t)
+        if t1 - (t + h) < 1e-9 * step:
+            h = t1 - t
+        k2 = rhs(t + 0.5 * h, y + 0.5 * h * f, p)
+        k3 = rhs(t + 0.5 * h, y + 0.5 * h * k2, p)
+        k4 = rhs(t + h, y + h * k3, p)
+        y_new = y + h / 6.0 * (f + 2.0 * k2 + 2.0 * k3 + k4)
+        t_new = t + h if t1 - (t + h) >= 1e-9 * step else t1
+        stats[_ST_STEPS] += 1
+        stats[_ST_RHS] += 3
+        if not np.all(np.isfinite(y_new)):
+            return out, k_out, t, y, 3, -1
+        f_new = rhs(t_new, y_new, p)
+        stats[_ST_RHS] += 1
+        while k_out < t_eval.shape[0] and t_eval[k_out] <= t_new:
+            s = (t_eval[k_out] - t) / h
+            out[k_out] = ((1.0 + 2.0 * s) * (1.0 - s) ** 2 * y + s * s * (3.0 - 2.0 * s)
+                          * y_new + s * (1.0 - s) ** 2 * h * f - s * s * (1.0 - s) * h * f_new)
+            k_out += 1
+        t, y, f = t_new, y_new, f_new
+        if guard_tol > 0.0 and 1 > 0:
+            kg, low = _guard_min(t, y, p, guard_tol)
+            if low <= 0.0:
+                return out, k_out, t, y, 2, kg
+    return out, k_out, t, y, 0, -1

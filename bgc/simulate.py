@@ -184,20 +184,21 @@ class NativeSolver(Solver):
         cuts = np.linspace(t0, t1, self.CHUNKS + 1) if watched else np.array([t0, t1])
         x = np.array(x0, dtype=np.float64)
         xs = []
+        before = [e(t0, x) for _, e in watched]
         for a, b in zip(cuts[:-1], cuts[1:]):
             sel = t_eval[(t_eval >= a) & ((t_eval < b) | (b == t1))]
             out, k, t_r, x_r, status, guard = self._run(problem, a, b, x, sel, rtol, atol,
                                                         max_step, stats)
             xs.append(out[:k])
-            before = [e(a, x) for _, e in watched]
             if status == 0:
-                hit = [j for j, (_, e) in enumerate(watched)
-                       if np.sign(e(b, x_r)) != np.sign(before[j]) and before[j] != 0]
+                after = [e(b, x_r) for _, e in watched]
+                hit = [j for j in range(len(watched))
+                       if np.sign(after[j]) != np.sign(before[j]) and before[j] != 0]
                 if hit:
                     xs.pop()
                     return self._locate(problem, a, b, x, sel, rtol, atol, max_step, stats,
                                         watched[hit[0]], before[hit[0]], xs)
-                x = np.array(x_r)
+                x, before = np.array(x_r), after
                 continue
             x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
             if status == 2:

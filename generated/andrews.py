@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "7f838f7b4d044b3b80fb5e635825570e"
+MODEL_HASH = "b26956407229c430af15290368ed3dd2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "e070da8cb1c026622ae7c8dc99dbd6aa"
+MODEL_HASH = "537eb2264128045346cc067cb238a5fc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

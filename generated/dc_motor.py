@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "924862ff154fd9188644f5436ec51005"
+MODEL_HASH = "fdc4e91b20d7dc98b39dd19259903072"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

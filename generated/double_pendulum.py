@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "00a4440ba58547e253aceae734475644"
+MODEL_HASH = "911d3689687d41542f95bd13be303f7f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

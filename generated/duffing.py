@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "1d021ded4f9d4a1cc30484e80ffd5ca1"
+MODEL_HASH = "342a439364791c1ac13c3823358dbb20"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "74735f9f4ef9cc6908bcc322f4550260"
+MODEL_HASH = "a3efd01a5b08269e34f25c0bcb8d3f0d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

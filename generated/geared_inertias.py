@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "840f85c980624fc6e7ac17a829a2bc81"
+MODEL_HASH = "ec435a3ca2ab6398cde1a99a19c43b3a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

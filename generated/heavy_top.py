@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "160bab14c836c20502768e76de949862"
+MODEL_HASH = "9fa668ed3138896ea0efd3d8a3552761"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "12b8e103806ff274fd860fc47c2dcb4c"
+MODEL_HASH = "4bdaa97a3ae36565c51659742b99121b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "e9342a6a03cb9face4225742ff2ae7e3"
+MODEL_HASH = "a0f74884490d228d6fb368db6c7856d5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "eceaa4d94b2c73472441ebf410c7c0aa"
+MODEL_HASH = "cc784e925ab55ab8687a9df738387fec"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

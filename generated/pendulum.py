@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "799fa7b3518e82418f515111f45f10c6"
+MODEL_HASH = "cbfde84c9d1c2ea2db95876dfc2df467"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "1534b7d3d59d26de74530ccae2007705"
+MODEL_HASH = "f650a97f5b06b10f39010554c9d1b90f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "c13fa35dff884a593998ca4560277f43"
+MODEL_HASH = "7adb8c75f4fd7f4e6d840db11d3eb350"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "2460af19a5e31f1ac12a3d2cafdfb77a"
+MODEL_HASH = "d206312aeb640f2e608c4cae36501aca"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

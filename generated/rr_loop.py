@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "4ba2bd68f5547c069f1abc83070abf16"
+MODEL_HASH = "4b0f5b80d500c2aa926d385c203b5a95"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

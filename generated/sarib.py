@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "e7beadf241a9ebeaee51339e0ddaf2ef"
+MODEL_HASH = "0ef2d98d5f74b535126bd6ef87ea89ca"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "03ec3e15edf0a688a3f593c92c6f41ba"
+MODEL_HASH = "2cc36e3b4593d202774af1a2ef35c0f2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

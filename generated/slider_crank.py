@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "0bd5e92f03600d018b1ab49a78cf17dc"
+MODEL_HASH = "6f01edbf5d098d329382328c43501dce"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

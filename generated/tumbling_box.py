@@ -13,7 +13,7 @@ from numba import njit
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "0b572059f381f888f7519653e0e9984b"
+MODEL_HASH = "7b2530796719f84d3b25295f8c26d93b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -137,9 +137,10 @@ def test_ideal_joints_agree_with_parasitic_within_its_modelling_error(sarib, com
                                                                     method):
     """The SARIB under lagrange and zcp (the four bodies of negligible mass: twist states
     whose rates the constraint block solves). Anti-resonances within 0.05 Hz of parasitic
-    (measured <= 0.034 Hz, roll; the parasitic joints are 3e7 N/m); 1 s of an 18 Hz pumping sine: the outputs differ from
-    parasitic by what parasitic itself moves when its stiffness is raised tenfold (its
-    modelling error falls as 1/k: the distance to the limit is 10/9 of that move)."""
+    (measured <= 0.034 Hz, roll, with the model's 3e7 N/m joints); 1 s of an 18 Hz pumping
+    sine: the outputs differ from parasitic by what parasitic itself moves when its
+    stiffness is raised tenfold (its modelling error falls as 1/k: the distance to the
+    limit is 10/9 of that move)."""
     mod, model = sarib
     ideal = compiled("sarib", method)
     assert sum(".M0" in n for n in ideal.STATE_NAMES) == 24      # 4 bodies' twists

@@ -67,6 +67,7 @@ def test_parasitic_error_against_lagrange_falls_as_one_over_stiffness(compiled):
     assert errs[0] < 2e-4 and 8 < errs[0] / errs[1] < 12, errs
 
 
+@pytest.mark.slow       # numba's cold compile of Andrews under lagrange: 4-5 min of CPU
 def test_andrews_matches_the_published_reference_to_six_digits(gen_dir, tmp_path, compiled):
     compiled("andrews", "lagrange")          # compiled once (shared with other workers)
     out = tmp_path / "F.csv"

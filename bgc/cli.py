@@ -19,6 +19,7 @@ from .errors import BgcError, SimulationError
 from .joints import JOINT_KINDS
 from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
+from .simulate import SOLVERS
 
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 _method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
@@ -199,9 +200,8 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @click.option("--t-end", type=float, help="end time [s] (default: the model's)")
 @click.option("--rtol", type=float, help="relative tolerance (default: the model's or 1e-6)")
 @click.option("--atol", type=float, help="absolute tolerance (default: the model's or 1e-8)")
-@click.option("--solver", help="integrator (default: the model's, else bdf): native "
-                                "(Radau IIA 5 in numba), rk4 (fixed --step), bdf, radau, "
-                                "lsoda, rk45 (scipy)")
+@click.option("--solver", help="integrator (default: the model's, else bdf): "
+              + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
 @click.option("--step", type=float, help="fixed-step solvers (rk4): the step [s]")
 @click.option("--points", type=int, help="number of output times (default 1001)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
@@ -238,7 +238,6 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
     """Compile MODEL if needed and integrate it; print solver statistics."""
     from .results import plot as plot_png
     from .results import write_csv
-    from .simulate import SOLVERS
     from .simulate import simulate as run
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",

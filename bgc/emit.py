@@ -14,12 +14,13 @@ import os
 import re
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import jinja2
 import sympy as sp
 
-from . import __version__
+from . import __version__, symbols
 from .equations import EquationSystem, LinearBlock
 from .jacobian import tape
 from .printer import code
@@ -100,8 +101,8 @@ def _body(assignments):
             if item.rank is None:
                 lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
             else:
-                lines.append(f"_P{k} = _kkt_pinv(_A{k}, {code(item.rank)})")
-                lines.append(f"_u{k} = _P{k} @ _b{k}")
+                lines.append(f"_u{k} = _kkt_solve(_A{k}, _b{k}.reshape(({n}, 1)), "
+                             f"{code(item.rank)})[:, 0]")
             lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
         else:
             v, e = item
@@ -116,9 +117,9 @@ def _prologue(system, used):
     return params, unpack
 
 
-def _jac_lines(jt, kkt: set) -> list[str]:
+def _jac_lines(jt, kkt: dict) -> list[str]:
     """The jac tail: run-time partials, the tape segments with block solves between
-    (``kkt``: the indices of constraint blocks, solved with their pseudo-inverse)."""
+    (``kkt``: index -> rank expression of the constraint blocks, ``_kkt_solve``)."""
     lines = [f"_pv = np.empty({len(jt.partials) + 1})", "_pv[0] = 1.0"]
     lines += [f"_pv[{k}] = {code(d)}" for k, d in jt.partials]
     lines.append(f"_d = np.zeros(({jt.n_rows}, {jt.n_colours}))")
@@ -129,18 +130,63 @@ def _jac_lines(jt, kkt: set) -> list[str]:
             b = seg[1]
             r, n = b.start, b.n
             R = f"_d[{r}:{r + n}, :]"
-            solve = (f"_P{b.index} @ np.ascontiguousarray({R})" if b.index in kkt
+            solve = (f"_kkt_solve(_A{b.index}, {R}, {code(kkt[b.index])})" if b.index in kkt
                      else f"np.linalg.solve(_A{b.index}, {R})")
             lines.append(f"_d[{r + n}:{r + 2 * n}, :] = {solve}")
     return lines
 
 
+# elementary functions of one variable that are hoisted out of the expressions
+_HOISTED = {sp.sin: "SIN", sp.cos: "COS", sp.tan: "TAN", sp.exp: "EXP", sp.log: "LOG"}
+
+
+def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
+    """Pass **hoist_calls**: every ``sin(q)``, ``cos(q)``, ... of a state, parameter or t
+    becomes one assignment ``SIN_q = sin(q)`` at the head of the causal order, and every
+    use reads the name. The SARIB's rotation matrices, Cardan rates and their partials
+    repeat 84 such calls 786 times in the rhs and 2560 times in the Jacobian; each is a
+    libm call at run time and a typed, lowered call in numba's compile. Returns the system
+    and the mapping (call -> name), which the Jacobian's partials also take."""
+    roots = {st.sym for st in system.states} | {s for s, _, _ in system.params}
+    roots.add(symbols.t)
+    exprs = []
+    for item in system.assignments:
+        if isinstance(item, LinearBlock):
+            exprs += [e for _, _, e in item.A] + [e for _, e in item.pre + item.chain]
+            exprs += list(item.b or ()) + list(item.tear_eqs)
+            if item.factors is not None:
+                exprs += [e for _, _, e in item.factors[1] + item.factors[2]]
+        else:
+            exprs.append(item[1])
+    exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
+    exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
+    calls = set()
+    for e in exprs:
+        calls |= {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
+    mapping = {f: sp.Symbol(f"{_HOISTED[f.func]}_{f.args[0].name}", real=True)
+               for f in sorted(calls, key=sp.default_sort_key)}
+    if not mapping:
+        return system, mapping
+
+    def sub(e):
+        return None if e is None else e.xreplace(mapping)
+    head = [(v, f) for f, v in mapping.items()]
+    body = [it.xreplace(mapping) if isinstance(it, LinearBlock) else (it[0], sub(it[1]))
+            for it in system.assignments]
+    return replace(system, assignments=head + body,
+                   outputs=[(n, sub(e)) for n, e in system.outputs],
+                   guards=[(w, sub(e)) for w, e in system.guards],
+                   constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints]), mapping
+
+
 def render(system: EquationSystem) -> str:
     """The module source for an equation system."""
+    system, hoisted = hoist_calls(system)
     m = system.model
     dx = [st.dsym for st in system.states]
     rhs_asg, rhs_used = _cone(system.assignments, dx)
     jt = tape(rhs_asg, system.states)
+    jt.partials = [(k, d.xreplace(hoisted)) for k, d in jt.partials]
     solved = {b.index for b in jt.blocks}
     jac_targets = [d for _, d in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
@@ -153,7 +199,7 @@ def render(system: EquationSystem) -> str:
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
     con_asg, con_used = _cone(system.assignments, con_exprs)
-    kkt = {it.index for it in system.assignments
+    kkt = {it.index: it.rank for it in system.assignments
            if isinstance(it, LinearBlock) and it.rank is not None}
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     funcs = {}

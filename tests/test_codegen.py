@@ -99,16 +99,19 @@ def test_write_is_atomic_and_leaves_no_temp_files(tmp_path):
 
 def test_generated_module_imports_standalone(tmp_path):
     """`from generated import <model>` works in a fresh interpreter that has no bgc on
-    its path, and the module imports only numpy and numba."""
+    its path, and the module imports only numpy, numba and the standard library's math;
+    its C entry points for the native integrators compile there too."""
     out = tmp_path / "generated"
     _, path = compile_model(MODELS / "dc_motor.yaml", out)
     text = path.read_text()
     imports = [ln for ln in text.splitlines() if ln.startswith(("import ", "from "))]
-    assert imports == ["import numpy as np", "from numba import njit"]
+    assert imports == ["import math", "import numpy as np",
+                       "from numba import carray, cfunc, njit, types"]
     code = ("import sys; sys.modules['bgc'] = None\n"
             "from generated import dc_motor as m\n"
             "dx = m.rhs(0.0, m.X0, m.PARAMS); J = m.jac(0.0, m.X0, m.PARAMS)\n"
             "y = m.outputs(0.5, m.X0, m.PARAMS)\n"
+            "assert all(a > 0 for a in m.native_entry_points())\n"
             "print(len(dx), J.shape, len(y), m.STATE_NAMES, m.MODEL_HASH, m.BGC_VERSION)")
     res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
                          text=True, env=dict(os.environ, PYTHONPATH=""))

@@ -203,11 +203,14 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max
         while not accepted:
             if h_abs < min_step:
                 return out, k_out, t, y, STEP_TOO_SMALL, -1, h_abs
-            t_new = min(t + h_abs, t1)
-            h = t_new - t
-            if h != h_abs:          # landing on t1: a shorter step, new factors
-                have_lu = False
-            h_abs = h
+            if t + h_abs >= t1:     # landing on t1: a shorter step, new factors
+                t_new = t1
+                if t1 - t != h_abs:
+                    have_lu = False
+                h_abs = t1 - t
+            else:                   # (t + h) - t differs from h by round-off: not a new h
+                t_new = t + h_abs
+            h = h_abs
             Z0 = np.zeros((3, n))
             if have_sol:
                 for i in range(3):

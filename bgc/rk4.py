@@ -1,7 +1,7 @@
 """The classical fixed-step Runge-Kutta method of order 4, the paper's explicit
 alternative (11.2.5.2: the parasitic method makes an explicit ODE, so RK4 can run it, as
-far as its stability region allows: h |lambda| <= 2.78 on the real axis, 2.83 on the
-imaginary). The step loop runs in numba and calls the model through its C entry points
+far as its stability region allows: |R(h lambda)| <= 1 for every eigenvalue of the
+Jacobian, ``stable_step``). The step loop runs in numba and calls the model through its C entry points
 (``bgc.native``)."""
 
 from __future__ import annotations
@@ -11,9 +11,40 @@ from numba import njit
 
 from .native import (GUARD, NOT_FINITE, REACHED, ST_RHS, ST_STEPS, evaluate, guard_min)
 
-# the stability region's reach along the negative real axis (2.785) and the imaginary
-# axis (2.828), rounded down: a step beyond h |lambda_max| = LIMIT is refused
-LIMIT = 2.78
+def amplification(z):
+    """RK4's stability function R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 (z = h lambda)."""
+    return 1.0 + z * (1.0 + z * (0.5 + z * (1.0 / 6.0 + z / 24.0)))
+
+
+def stability_radius(direction) -> np.ndarray:
+    """Where the ray from 0 along each complex ``direction`` first leaves RK4's region of
+    absolute stability |R(z)| <= 1: 2.785 on the negative real axis, 2.828 on the
+    imaginary one, as little as 2.62 between (at 125 deg), so no single bound on
+    h |lambda| is safe."""
+    d = np.atleast_1d(np.asarray(direction, dtype=complex))
+    d = d / np.abs(d)
+    r = np.linspace(0.0, 3.5, 3501)[1:]
+    outside = np.abs(amplification(r[:, None] * d[None, :])) > 1.0 + 1e-12
+    hi = np.where(outside.any(axis=0), r[np.argmax(outside, axis=0)], np.inf)
+    lo = np.where(np.isfinite(hi), hi - 1e-3, hi)
+    for _ in range(40):                      # bisection on the first crossing
+        mid = 0.5 * (lo + hi)
+        out = np.abs(amplification(mid * d)) > 1.0 + 1e-12
+        hi, lo = np.where(out, mid, hi), np.where(out, lo, mid)
+    return lo
+
+
+def stable_step(eigenvalues) -> tuple[float, complex | None]:
+    """The largest step that keeps h lambda inside the stability region for every
+    decaying or oscillating mode (Re lambda <= 0: a growing mode is the physics, not the
+    method), and the eigenvalue that sets it (inf and None if none does)."""
+    lam = np.asarray(eigenvalues, dtype=complex)
+    lam = lam[(lam.real <= 1e-12 * np.abs(lam)) & (np.abs(lam) > 0)]
+    if lam.size == 0:
+        return np.inf, None
+    h = stability_radius(lam) / np.abs(lam)
+    k = int(np.argmin(h))
+    return float(h[k]), complex(lam[k])
 
 
 @njit(cache=True)

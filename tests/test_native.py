@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from bgc import load
+from bgc import load, rk4
 from bgc.cli import main
 from bgc.errors import SimulationError
 from bgc.simulate import SOLVERS, simulate
@@ -70,19 +70,36 @@ def test_every_shipped_model_agrees_with_scipy_at_the_tolerance_asked(compiled, 
 
 def test_rk4_converges_at_fourth_order_and_fails_loudly_past_its_stability_limit(compiled):
     """msd_free (a lightly damped oscillator): halving the step divides the error by
-    about 16. A step past h |lambda_max| = 2.78 is refused before the run, naming the
-    largest stable step."""
+    about 16. A step past the stability limit (h lambda outside |R(z)| <= 1) is refused
+    before the run, naming the largest stable step; let through, it diverges and the
+    failure says so."""
     mod = compiled("msd_free")
     ref = simulate(mod, t_end=2.0, rtol=1e-12, atol=1e-14, solver="radau", points=41)
-    lam = np.abs(np.linalg.eigvals(mod.jac(0.0, mod.X0, mod.PARAMS))).max()
-    errs = [_error(simulate(mod, t_end=2.0, solver="rk4", step=h / lam, points=41), ref)
-            for h in (0.2, 0.1)]
+    eig = np.linalg.eigvals(mod.jac(0.0, mod.X0, mod.PARAMS))
+    h_max, lam = rk4.stable_step(eig)
+    errs = [_error(simulate(mod, t_end=2.0, solver="rk4", step=f * h_max, points=41), ref)
+            for f in (0.07, 0.035)]
     assert errs[0] / errs[1] == pytest.approx(16, rel=0.25)
     with pytest.raises(SimulationError, match="beyond its stability limit") as err:
-        simulate(mod, t_end=50.0, solver="rk4", step=3.0 / lam, points=101)
-    assert f"--step {2.78 / lam:.3g}" in err.value.hint
+        simulate(mod, t_end=50.0, solver="rk4", step=1.05 * h_max, points=101)
+    assert f"--step {h_max:.3g}" in err.value.hint
+    with pytest.raises(SimulationError, match="non-finite: the step .* is beyond the "
+                                              "stability limit"):
+        simulate(mod, t_end=200.0, solver="rk4", step=1.5 * h_max, points=101,
+                 check_stability=False)
     with pytest.raises(SimulationError, match="--step"):
         simulate(mod, t_end=1.0, solver="rk4")
+
+
+def test_rk4_stability_region_between_the_axes():
+    """The region reaches 2.785 on the negative real axis and 2 sqrt 2 on the imaginary,
+    but only 2.62 at 125 deg: the limit is taken per eigenvalue, on its own ray."""
+    r = rk4.stability_radius(np.exp(1j * np.radians([180, 90, 125])))
+    assert r == pytest.approx([2.7853, 2 * np.sqrt(2), 2.6197], abs=1e-3)
+    for z in r * np.exp(1j * np.radians([180, 90, 125])):
+        assert abs(rk4.amplification(0.999 * z)) <= 1 < abs(rk4.amplification(1.001 * z))
+    h, lam = rk4.stable_step([-1.0, -300.0 * np.exp(1j * np.radians(-55)), 5.0])
+    assert h == pytest.approx(2.6197 / 300, rel=1e-3) and abs(lam) == pytest.approx(300)
 
 
 def test_native_guard_stops_at_the_gimbal_lock(tmp_path):

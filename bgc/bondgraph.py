@@ -21,6 +21,9 @@ class Constraint:
     g: object             # geometric deflection (sympy, in the states), None: none
     rotational: bool
     imposed: bool = False  # method zcp: L is a flow source (tree joint), not a break variable
+    # method zcp with loops kept closed: the break variable of a loop-closing joint is an
+    # algebraic state of an index-2 DAE (0 = dg/dt + alpha g), not solved for
+    closed: bool = False
 
     @property
     def name(self) -> str:

@@ -129,6 +129,16 @@ class EquationSystem:
     constraints: list[tuple[str, sp.Expr | None, sp.Expr]] = field(default_factory=list)
     # zcp: the constraints whose flow is imposed (tree joints), not break variables
     imposed: set[str] = field(default_factory=set)
+    # a DAE M dx/dt = rhs: the states whose row of M is zero (index 2: zcp, loops kept
+    # closed); empty for an ODE
+    algebraic: list[int] = field(default_factory=list)
+    loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
+
+    @property
+    def variant(self) -> str:
+        """What the generated module is named and hashed by: the method, and for zcp
+        whether its loops were kept closed (``zcp_closed``)."""
+        return variant(self.method, not self.loops_closed)
 
     @property
     def tables(self) -> list[Table]:
@@ -137,6 +147,11 @@ class EquationSystem:
     @property
     def breakpoints(self) -> list[float]:
         return sorted({bp for s in self.model.signals.values() for bp in s.breakpoints})
+
+
+def variant(method: str, open_loops: bool = True) -> str:
+    """``method``, or ``zcp_closed`` for method zcp with its loops kept closed."""
+    return "zcp_closed" if method == "zcp" and not open_loops else method
 
 
 class Dt(sp.Function):
@@ -157,6 +172,7 @@ class _Builder:
         self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
         self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
         self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
+        self.algebraic: list = []       # states of a DAE whose row of M is zero
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):
@@ -456,6 +472,14 @@ class _Builder:
             net = symbols.state(name, f"net{AXES[k]}")
             self.kkt_rows[acc] = {net: sp.Integer(s)}
             self.kkt_rates[E[k]] = net
+
+    def algebraic_state(self, label: str, sym, dsym, residual, element: str):
+        """A state with no derivative in the equations (a zero row of the mass matrix):
+        the right-hand side's row ``dsym`` is the residual ``0 = residual``."""
+        self.define(dsym, residual, element)
+        self.states.append(State(label, sym, dsym, sp.S.Zero, element))
+        self.algebraic.append(sym)
+        self.display[sym], self.display[dsym] = label, f"0 = {label} residual"
 
     def common_flow(self, junction: str):
         return self.F(self.g.ports[junction][0])
@@ -835,7 +859,11 @@ def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> Equat
     system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
                             {n: b.display[v] for n, v in b.dependent.items()}, b.display,
                             guards=b.guards, constraints=constraints,
-                            imposed={c.name for c in cg.graph.constraints if c.imposed})
+                            imposed={c.name for c in cg.graph.constraints if c.imposed},
+                            algebraic=[i for i, st in enumerate(b.states)
+                                       if st.sym in set(b.algebraic)],
+                            loops_closed=bool(cg.graph.zcp is not None
+                                              and cg.graph.zcp.closed))
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

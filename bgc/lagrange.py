@@ -20,6 +20,11 @@ and its rate an unknown of the same block, defined by the balance of the forces 
 (``equations._Builder._massless_lagrange``), which makes the block the saddle point
 ``[J M^-1 J^T, J_U; J_U^T, 0]`` (rank: the constraints' plus 6 per such body).
 
+Method zcp with its kinematic loops kept closed (``zcp.Plan.closed``): the break
+variables of the loop-closing joints are not solved at the acceleration level but are
+algebraic states with the velocity-level equations ``0 = dg/dt + alpha g``: an index-2
+DAE for an integrator that takes one.
+
 Why Baumgarte rather than projection or GGL: the result is one explicit ODE, so every
 integrator (scipy's BDF/Radau/LSODA, the native one) runs it unchanged with the analytic
 Jacobian; the initial state is projected onto the constraints (``bgc.consistent``), so the
@@ -99,6 +104,13 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     for c in cons:
         r = rates[c]
         lam = symbols.multiplier(c.joint, c.label)
+        if c.closed:        # a kinematic loop kept closed: lam is an index-2 state
+            b.algebraic_state(f"{c.name}.lambda", lam, symbols.dstate(f"LAM_{c.joint}",
+                                                                      c.label),
+                              r + alpha * (c.g if c.g is not None else sp.S.Zero),
+                              c.element)
+            out.append((c.name, c.g, r))
+            continue
         rows = {dynamic[j][0]: d for j, d in directional(r, ksens).items()}
         b.kkt_rows[lam] = rows
         rdot = directional(r, pose).get(0, sp.S.Zero) + sum(

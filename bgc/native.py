@@ -19,8 +19,9 @@ from numba.extending import intrinsic
 ST_STEPS, ST_RHS, ST_JAC, ST_LU, ST_REJECTED = 0, 1, 2, 3, 4
 N_STATS = 5
 
-# status a loop returns
-REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR = 0, 1, 2, 3, 4
+# status a loop returns (PAUSED: after its ``max_steps`` steps, for Python to look at
+# the state before it goes on; UNSTABLE: rk4's step beyond the stability limit there)
+REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE = range(7)
 
 
 @intrinsic

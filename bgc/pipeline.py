@@ -58,11 +58,12 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                   method: str = "parasitic", open_loops: bool = True):
-    """The generated module for a model, recompiled only if missing or stale (with
-    ``open_loops=False`` always rebuilt, so that method zcp can refuse a closed loop)."""
+    """The generated module for a model, recompiled only if missing or stale (method zcp
+    with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``)."""
     model = load.load(model_path)
-    path = emit.module_path(model.name, out_dir, method)
+    kind = equations.variant(method, open_loops)
+    path = emit.module_path(model.name, out_dir, kind)
     compiled = None
-    if emit.is_stale(path, model.digest, method) or not open_loops:
+    if emit.is_stale(path, model.digest, kind):
         compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
     return emit.import_module(path), model, compiled

@@ -4,8 +4,9 @@ The scheme is Hairer & Wanner's RADAU5 (Solving ODEs II, IV.8), with the constan
 step control of scipy's ``integrate/_ivp/radau.py``: three collocation stages solved by
 simplified Newton iterations in transformed variables (one real and one complex linear
 system), predictive (Gustafsson) step control, the collocation polynomial as dense output.
-It also takes a mass matrix, ``M dx/dt = f(t, x)``, so a singular ``M`` makes it an
-index-1 DAE solver (Hairer's ESTRAD error estimate with ``M``).
+It also takes a mass matrix, ``M dx/dt = f(t, x)``, so a singular ``M`` makes it a DAE
+solver (Hairer's ESTRAD error estimate with ``M``), of index 2 too with those states'
+tolerances scaled by 1/h (``_scale``).
 
 What keeps it fast: the Newton matrices ``mu/h M - J`` are LU-factored (LAPACK getrf)
 and the factors kept while the step size stays; the Jacobian is recomputed only when
@@ -19,8 +20,9 @@ import numpy as np
 from numba import njit, types
 from numba.np.linalg import F_INT_nptype, _LAPACK
 
-from .native import (GUARD, NOT_FINITE, REACHED, SINGULAR, ST_JAC, ST_LU, ST_REJECTED,
-                     ST_RHS, ST_STEPS, STEP_TOO_SMALL, call_entry, evaluate, guard_min)
+from .native import (GUARD, NOT_FINITE, PAUSED, REACHED, SINGULAR, ST_JAC, ST_LU,
+                     ST_REJECTED, ST_RHS, ST_STEPS, STEP_TOO_SMALL, call_entry, evaluate,
+                     guard_min)
 
 _S6 = 6.0 ** 0.5
 _C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
@@ -117,6 +119,17 @@ def _times_mass(M, v):
 
 
 @njit(cache=True)
+def _scale(y, y_new, rtol, atol, index2, h):
+    """Error scale per state: atol + rtol max(|y|, |y_new|); divided by h for algebraic
+    states of index 2, whose local error is one order lower (Hairer & Wanner II, VII.8)."""
+    s = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    for i in range(index2.shape[0]):
+        if index2[i] != 0.0:
+            s[i] /= h
+    return s
+
+
+@njit(cache=True)
 def _rms(v):
     return np.sqrt(np.mean(v * v))
 
@@ -144,16 +157,19 @@ def _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats):
 
 
 @njit(cache=True)
-def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max_step,
-           h_start, guard_tol, stats):
+def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, rtol, atol,
+           max_step, h_start, guard_tol, max_steps, stats):
     """Integrate ``M dx/dt = rhs(t, x, p)`` from t0 to t1 (``M`` empty: the identity);
+    ``index2`` (empty, or 1.0 where a state is an algebraic variable of index 2) scales
+    those states' error tolerances by 1/h, as RADAU5 does for index-2 DAEs;
     ``rhs``, ``jac``, ``guards`` are C entry-point addresses. States at ``t_eval`` come
     from the collocation polynomial. ``h_start`` > 0 is the first step (a continuation
     keeps its step size), else it is estimated. Stops where a guard margin falls to
     ``guard_tol`` (located by bisection on the polynomial).
 
     Returns (states at t_eval, how many were reached, t reached, state there, status,
-    guard index, the next step size)."""
+    guard index, the next step size); status PAUSED after ``max_steps`` accepted steps
+    (0: no limit), so that Python can watch its events and go on from there."""
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
     k_out = 0
@@ -186,6 +202,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max
     t_old, h_last, y_old = t, 0.0, y.copy()
     F = np.empty((3, n))
     dW = np.empty((3, n))
+    taken = 0
     while t < t1:
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
         if h_abs > max_step:
@@ -215,7 +232,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max
             if have_sol:
                 for i in range(3):
                     Z0[i] = dense(t_old, h_last, y_old, Q, t + h * _C[i]) - y
-            scale = atol + np.abs(y) * rtol
+            scale = _scale(y, y, rtol, atol, index2, h)
             converged = False
             singular = False
             while not converged:
@@ -283,7 +300,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max
             y_new = y + Z[2]
             ZE = _times_mass(M, (np.ascontiguousarray(Z.T) @ _E) / h)
             error = _lu_solve(lu_real, piv_real, f + ZE)
-            scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+            scale = _scale(y, y_new, rtol, atol, index2, h)
             err_norm = _rms(error / scale)
             safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
             if rejected and err_norm > 1.0:
@@ -352,4 +369,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, rtol, atol, max
         while k_out < t_eval.shape[0] and t_eval[k_out] <= t:
             out[k_out] = dense(t_old, h_last, y_old, Q, t_eval[k_out])
             k_out += 1
+        taken += 1
+        if max_steps > 0 and taken >= max_steps and t < t1:
+            return out, k_out, t, y, PAUSED, -1, h_abs
     return out, k_out, t, y, REACHED, -1, h_abs

@@ -1,60 +1,83 @@
 """The classical fixed-step Runge-Kutta method of order 4, the paper's explicit
 alternative (11.2.5.2: the parasitic method makes an explicit ODE, so RK4 can run it, as
 far as its stability region allows: |R(h lambda)| <= 1 for every eigenvalue of the
-Jacobian, ``stable_step``). The step loop runs in numba and calls the model through its C entry points
-(``bgc.native``)."""
+Jacobian, ``stable_step``). The step loop runs in numba and calls the model through its C
+entry points (``bgc.native``)."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from .native import (GUARD, NOT_FINITE, REACHED, ST_RHS, ST_STEPS, evaluate, guard_min)
+from .native import (GUARD, NOT_FINITE, PAUSED, REACHED, ST_RHS, ST_STEPS, UNSTABLE,
+                     call_entry, evaluate, guard_min)
 
+@njit(cache=True)
 def amplification(z):
     """RK4's stability function R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 (z = h lambda)."""
     return 1.0 + z * (1.0 + z * (0.5 + z * (1.0 / 6.0 + z / 24.0)))
 
 
-def stability_radius(direction) -> np.ndarray:
-    """Where the ray from 0 along each complex ``direction`` first leaves RK4's region of
-    absolute stability |R(z)| <= 1: 2.785 on the negative real axis, 2.828 on the
-    imaginary one, as little as 2.62 between (at 125 deg), so no single bound on
-    h |lambda| is safe."""
-    d = np.atleast_1d(np.asarray(direction, dtype=complex))
-    d = d / np.abs(d)
-    r = np.linspace(0.0, 3.5, 3501)[1:]
-    outside = np.abs(amplification(r[:, None] * d[None, :])) > 1.0 + 1e-12
-    hi = np.where(outside.any(axis=0), r[np.argmax(outside, axis=0)], np.inf)
-    lo = np.where(np.isfinite(hi), hi - 1e-3, hi)
-    for _ in range(40):                      # bisection on the first crossing
+@njit(cache=True)
+def stability_radius(d):
+    """Where the ray from 0 along the complex direction ``d`` (Re d <= 0) leaves RK4's
+    region of absolute stability |R(z)| <= 1: 2.785 on the negative real axis, 2.828
+    on the imaginary one, as little as 2.62 between (at 125 deg), so no single bound on
+    h |lambda| is safe. In the left half-plane |R| <= 1 up to r = 2.6 and the ray
+    crosses once before 3.1 (checked on a fine grid): bisection there."""
+    d = d / abs(d)
+    lo, hi = 2.6, 3.1
+    for _ in range(50):
         mid = 0.5 * (lo + hi)
-        out = np.abs(amplification(mid * d)) > 1.0 + 1e-12
-        hi, lo = np.where(out, mid, hi), np.where(out, lo, mid)
+        if abs(amplification(mid * d)) > 1.0:
+            hi = mid
+        else:
+            lo = mid
     return lo
+
+
+@njit(cache=True)
+def _stable_step(lam):
+    h, k = np.inf, -1
+    for i in range(lam.shape[0]):
+        m = abs(lam[i])
+        if m > 0.0 and lam[i].real <= 1e-12 * m:
+            hi = stability_radius(lam[i]) / m
+            if hi < h:
+                h, k = hi, i
+    return h, k
 
 
 def stable_step(eigenvalues) -> tuple[float, complex | None]:
     """The largest step that keeps h lambda inside the stability region for every
     decaying or oscillating mode (Re lambda <= 0: a growing mode is the physics, not the
     method), and the eigenvalue that sets it (inf and None if none does)."""
-    lam = np.asarray(eigenvalues, dtype=complex)
-    lam = lam[(lam.real <= 1e-12 * np.abs(lam)) & (np.abs(lam) > 0)]
-    if lam.size == 0:
-        return np.inf, None
-    h = stability_radius(lam) / np.abs(lam)
-    k = int(np.argmin(h))
-    return float(h[k]), complex(lam[k])
+    lam = np.ascontiguousarray(np.atleast_1d(eigenvalues), dtype=np.complex128)
+    h, k = _stable_step(lam)
+    return float(h), (complex(lam[k]) if k >= 0 else None)
 
 
 @njit(cache=True)
-def rk4(rhs, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, stats):
+def _unstable(jac, t, y, p, step) -> bool:
+    """Whether ``step`` is beyond the stability limit of the Jacobian at (t, y)."""
+    n = y.shape[0]
+    J = np.empty((n, n))
+    call_entry(jac, t, y, p, J)
+    return step > _stable_step(np.linalg.eigvals(J.astype(np.complex128)))[0]
+
+
+@njit(cache=True)
+def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, check_every,
+        max_steps, stats):
     """Steps of ``step`` from t0 to t1 (the last one shortened to land on t1); states at
-    ``t_eval`` by cubic Hermite interpolation. Stops where the state becomes non-finite
-    (beyond the stability limit) or a guard margin reaches ``guard_tol``.
+    ``t_eval`` by cubic Hermite interpolation. Every ``check_every`` steps (0: never) the
+    step is checked against the stability limit of the Jacobian there, since the
+    spectrum moves with the state: a step just beyond it grows slowly, with no overflow
+    to give it away. Stops there (UNSTABLE), where the state becomes non-finite or where
+    a guard margin reaches ``guard_tol``.
 
     Returns (states at t_eval, how many were reached, t reached, state there, status,
-    guard index, the step)."""
+    guard index, the step); status PAUSED after ``max_steps`` steps (0: no limit)."""
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
     k_out = 0
@@ -64,6 +87,7 @@ def rk4(rhs, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, stats):
     t, y = t0, x0.copy()
     f = evaluate(rhs, t, y, p, n)
     stats[ST_RHS] += 1
+    taken = 0
     while t < t1:
         h = min(step, t1 - t)
         if t1 - (t + h) < 1e-9 * step:
@@ -89,4 +113,9 @@ def rk4(rhs, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, stats):
             kg, low = guard_min(guards, n_guards, t, y, p, guard_tol)
             if low <= 0.0:
                 return out, k_out, t, y, GUARD, kg, step
+        taken += 1
+        if check_every > 0 and taken % check_every == 0 and _unstable(jac, t, y, p, step):
+            return out, k_out, t, y, UNSTABLE, -1, step
+        if max_steps > 0 and taken >= max_steps and t < t1:
+            return out, k_out, t, y, PAUSED, -1, step
     return out, k_out, t, y, REACHED, -1, step

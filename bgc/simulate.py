@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from . import consistent, native, radau5, rk4
@@ -75,13 +76,14 @@ class NativeSolver(Solver):
     """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``), compiled once for every
     model, that calls the module's rhs, Jacobian and guards through their C entry points
     without returning to Python per step. Guards are checked in the loop; other events
-    (the rank monitor, Python functions) are checked between chunks of the segment and
-    located by bisection, re-integrating from the chunk's start."""
-    CHUNKS = 100            # per segment, where Python events must be watched
+    (the rank monitor, Python functions) and rk4's stability limit are checked while the
+    loop pauses every so many steps, an event located by bisection, re-integrating from
+    the last pause."""
+    STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
 
     def __init__(self, name: str, loop: str, description: str):
         self.name, self.loop, self.description = name, loop, description
-        self.takes_mass = loop == "radau5"
+        self.max_index = 2 if loop == "radau5" else 0
 
     def check(self, problem, t0, x0):
         """rk4: a step beyond the method's stability limit at the start is refused (the
@@ -117,18 +119,23 @@ class NativeSolver(Solver):
                 f"{np.degrees(np.angle(lam)):.0f} deg; the limit there is h |lambda| = "
                 f"{h_max * abs(lam):.3g}, h = {h_max:.3g} s)")
 
-    def _run(self, problem, t0, t1, x0, t_eval, rtol, atol, max_step, stats, h_start=0.0):
+    def _run(self, problem, t0, t1, x0, t_eval, rtol, atol, max_step, stats, h_start=0.0,
+             max_steps=0):
         rhs, jac, guards = problem.module.native_entry_points()
         n_guards = len(problem.module.GUARD_NAMES)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
         if self.loop == "rk4":
-            res = rk4.rk4(rhs, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                          float(problem.step), GUARD_TOLERANCE, counts)
+            # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
+            # steps (~n^2 each) it costs about what they do
+            check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
+            res = rk4.rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
+                          float(problem.step), GUARD_TOLERANCE, check, max_steps, counts)
         else:
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
+            index2 = problem.index2 if problem.index2 is not None else np.empty(0)
             res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                                mass, rtol, atol, max_step, h_start, GUARD_TOLERANCE,
-                                counts)
+                                mass, index2, rtol, atol, max_step, h_start,
+                                GUARD_TOLERANCE, max_steps, counts)
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
@@ -144,42 +151,38 @@ class NativeSolver(Solver):
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
         watched = [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)]
-        # rk4: the spectrum moves with the state, so the stability limit is checked again
-        # at every chunk boundary (a step just beyond it grows slowly, without overflow)
-        spectrum = self.loop == "rk4" and problem.check_stability
+        pause = self.STEPS_PER_CHECK if watched else 0
         t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
-        cuts = (np.linspace(t0, t1, self.CHUNKS + 1) if watched or spectrum
-                else np.array([t0, t1]))
-        x = np.array(x0, dtype=np.float64)
-        xs = []
-        h = 0.0                       # a chunk goes on with the step size its last ended on
+        t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
+        xs, done = [], 0
         before = [e(t0, x) for _, e in watched]
-        for a, b in zip(cuts[:-1], cuts[1:]):
-            sel = t_eval[(t_eval >= a) & ((t_eval < b) | (b == t1))]
+        while True:
+            sel = t_eval[done:]
             out, k, t_r, x_r, status, guard, h = self._run(
-                problem, a, b, x, sel, rtol, atol, max_step, stats, h)
+                problem, t, t1, x, sel, rtol, atol, max_step, stats, h, pause)
             xs.append(out[:k])
-            if status == native.REACHED:
-                after = [e(b, x_r) for _, e in watched]
+            if status in (native.REACHED, native.PAUSED):
+                after = [e(t_r, x_r) for _, e in watched]
                 hit = [j for j in range(len(watched))
                        if np.sign(after[j]) != np.sign(before[j]) and before[j] != 0]
                 if hit:
                     xs.pop()
-                    return self._locate(problem, a, b, x, sel, rtol, atol, max_step, stats,
-                                        watched[hit[0]], before[hit[0]], xs)
-                x, before = np.array(x_r), after
-                unstable = spectrum and self._unstable(problem, b, x)
-                if unstable:
-                    return Segment(np.vstack(xs), x, float(b), False, unstable)
+                    return self._locate(problem, t, t_r, x, sel, rtol, atol, max_step,
+                                        stats, watched[hit[0]], before[hit[0]], xs)
+                t, x, before, done = float(t_r), np.array(x_r), after, done + k
+                if status == native.REACHED:
+                    return Segment(np.vstack(xs), x, float(t1), True)
                 continue
             x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
             if status == native.GUARD:
                 return Segment(x_eval, np.array(x_r), float(t_r), False, "", event=int(guard))
+            if status == native.UNSTABLE:
+                return Segment(x_eval, np.array(x_r), float(t_r), False,
+                               self._unstable(problem, float(t_r), x_r))
             why = {native.NOT_FINITE: self._diverged(problem, float(t_r), x_r),
                    native.SINGULAR: "the Newton matrix is singular at every step size",
                    }.get(status, "step size too small")
             return Segment(x_eval, np.array(x_r), float(t_r), False, why)
-        return Segment(np.vstack(xs) if xs else np.empty((0, len(x0))), x, float(t1), True)
 
     def _diverged(self, problem, t, x) -> str:
         """Why the state became non-finite after (t, x), the last finite state: for rk4,
@@ -213,7 +216,7 @@ class NativeSolver(Solver):
 
 SOLVERS: dict[str, Solver] = {s.name: s for s in (
     NativeSolver("native", "radau5", "Radau IIA order 5, numba step loop (bgc/radau5.py), "
-                                     "stiff, mass matrices (index-1 DAEs)"),
+                                     "stiff, mass matrices (DAEs of index 1 and 2)"),
     NativeSolver("rk4", "rk4", "classical Runge-Kutta 4, fixed step (--step), explicit, "
                                "numba step loop (bgc/rk4.py)"),
     ScipySolver("bdf", "BDF", "scipy BDF (variable order 1-5), stiff"),
@@ -243,6 +246,19 @@ def _singular(monitor, seg: Segment, drop: float) -> str | None:
                      f"lost rank, joint directions {lost} became dependent")
 
 
+def _drifted(module, p, t, g, limit) -> tuple[str, str]:
+    """Message and hint for a constrained run whose position drift passed its limit."""
+    alpha = f"{module.METHOD}__alpha"
+    value = p[list(module.PARAM_NAMES).index(alpha)] if alpha in module.PARAM_NAMES else None
+    why = (f" ({alpha} = 0: no Baumgarte stabilisation)" if value == 0 else
+           f" ({alpha} = {value:g})" if value is not None else "")
+    return (f"constraint drift {g:.3g} at t = {t:.6g} exceeds {limit:.3g} "
+            f"({consistent.DRIFT_UNITS:g} tolerance units at the mechanism's size): the "
+            f"joints no longer hold{why}",
+            f"stabilise (-p {alpha}=10 or more: it must outrun the drift's own growth) or "
+            "tighten --rtol/--atol")
+
+
 def _guard_events(module, p):
     """One terminal event per guard; the integrator asks each at the same (t, x), so the
     margins are computed once per point and shared."""
@@ -263,23 +279,75 @@ def _guard_events(module, p):
     return events
 
 
+def _check_index2(module, x, p, algebraic, t):
+    """An index-2 DAE x' = f(x, z), 0 = g(x) needs g_x f_z regular (else the Newton
+    matrices of every step are singular): refuse one whose algebraic equations are
+    dependent, naming them (a planar loop modelled in 3D repeats its constraints)."""
+    J = module.jac(t, x, p)
+    diff = [i for i in range(len(x)) if i not in set(algebraic)]
+    B = J[np.ix_(algebraic, diff)] @ J[np.ix_(diff, algebraic)]
+    s = np.linalg.svd(B, compute_uv=False)
+    rank = int(np.sum(s > consistent.RANK_TOL * max(s[0], 1e-300)))
+    if rank < len(algebraic):
+        _, _, piv = scipy.linalg.qr(B, pivoting=True)
+        dep = [module.STATE_NAMES[algebraic[i]] for i in sorted(piv[rank:])]
+        raise SimulationError(
+            f"the kinematic loops kept closed give {len(algebraic)} algebraic equations of "
+            f"rank {rank} at t = {t:g}: {', '.join(dep)} depend on the others (redundant "
+            "constraints), so the index-2 DAE is singular; nothing was run",
+            hint="let zcp open the loops (drop --keep-loops: the break variables then share "
+                 "the load by least squares) or remove the redundant joint directions")
+
+
 def _segments(t_start: float, t_end: float, breakpoints) -> list[tuple[float, float]]:
     cuts = [t_start] + [float(b) for b in breakpoints if t_start < b < t_end] + [t_end]
     return list(zip(cuts[:-1], cuts[1:]))
 
 
+def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
+    """The start of a run as ``simulate`` makes it: joint loads of a model that starts at
+    rest (at t = 0), the state projected onto the constraints and the rank of the
+    constraint block set. Returns (x, p, Projection or None)."""
+    p = np.array(p, dtype=np.float64)
+    x = np.array(x, dtype=np.float64)
+    if getattr(module, "STATIC_LOADS", False) and t_start == 0:
+        p = consistent.static_loads(module, x, p)
+    projection = None
+    if len(getattr(module, "CONSTRAINT_NAMES", ())):
+        x, projection = consistent.project(module, x, p)
+        if not redundancy and projection.rank < projection.n_constraints:
+            raise SimulationError(
+                f"{projection.n_constraints - projection.rank} redundant constraint(s) "
+                f"among {', '.join(projection.redundant)}: without redundancy handling "
+                f"the constraint block is singular (rank {projection.rank} of "
+                f"{projection.n_constraints}) and the joint forces are undetermined; "
+                f"nothing was run (t = {t_start:g})",
+                hint="keep redundancy handling (the default: redundant constraints share "
+                     "the load by least squares) or remove the redundant joint directions")
+        p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
+    return x, p, projection
+
+
 def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
              solver: str = "bdf", points: int = 1001, params=None, x0=None,
              step: float | None = None, mass=None, check_stability: bool = True,
-             t_start: float = 0.0) -> Result:
+             t_start: float = 0.0, check_drift: bool = True,
+             redundancy: bool = True, check_index: bool = True) -> Result:
     """Integrate a generated module from ``t_start`` to ``t_end``; outputs on a uniform
     grid. A model that starts at rest (``STATIC_LOADS``) has its joint loads set from its
     state at t = 0; a run that continues another from ``t_start`` > 0 takes that run's
     ``x`` and ``params`` (``Result.params``: the loads and rank it used) as they are.
     ``mass``: a constant matrix M for ``M dx/dt = rhs`` (singular: an index-1 DAE, whose
-    ``x0`` must be consistent), for the solvers that take one (native, ida).
-    ``check_stability=False`` lets rk4 run past its stability limit (to map where it
-    fails).
+    ``x0`` must be consistent), for the solvers that take one (native, ida). A module
+    that is an index-2 DAE (``ALGEBRAIC``: zcp with its loops kept closed) brings its own
+    M, and only a solver that takes index 2 runs it (``check_index=False`` integrates it
+    as if it were of index 1: lets a solver that does not take index 2 try, and native
+    Radau without its index-2 error scaling, to map how they fail).
+    ``check_stability=False`` lets rk4 run past its stability limit, ``check_drift=False``
+    a constrained run past its drift limit (``consistent.drift_limit``), to map where
+    they fail. ``redundancy=False`` solves the constraint block as if its rows were
+    independent, as a tool without redundancy handling does: a model with redundant
+    constraints is then refused (its block is singular, its joint forces undetermined).
 
     A failing run raises SimulationError whose ``result`` holds everything computed up to
     the failure.
@@ -291,6 +359,21 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         raise SimulationError(f"need 0 <= t_start < t_end, got t_start = {t_start} and "
                               f"t_end = {t_end}")
     method = SOLVERS[solver]
+    algebraic = list(getattr(module, "ALGEBRAIC", ()))
+    index2 = None
+    if algebraic:
+        index2 = np.zeros(len(module.STATE_NAMES))
+        index2[algebraic] = 1.0
+        mass = np.diag(1.0 - index2) if mass is None else mass
+        if method.max_index < 2 and (check_index or not method.takes_mass):
+            loops = sorted({module.STATE_NAMES[i].split(".")[0] for i in algebraic})
+            raise SimulationError(
+                f"{module.MODEL_NAME} ({module.METHOD}, kinematic loops kept closed by joint "
+                f"{', '.join(map(repr, loops))}) is an index-2 DAE: solver {solver} "
+                + ("takes ODEs only" if not method.max_index else
+                   f"takes index {method.max_index} at most") + "; nothing was run",
+                hint="use --solver native (Radau IIA, index-2 error scaling) or let zcp "
+                     "open the loops with break variables (drop --keep-loops)")
     if mass is not None:
         mass = np.ascontiguousarray(mass, dtype=np.float64)
         n = len(module.STATE_NAMES)
@@ -306,15 +389,13 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
 
     t0 = time.perf_counter()
-    if getattr(module, "STATIC_LOADS", False) and t_start == 0:
-        p = consistent.static_loads(module, x, p)
-    projection = None
-    if len(getattr(module, "CONSTRAINT_NAMES", ())):
-        x, projection = consistent.project(module, x, p)
-        p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
+    x, p, projection = prepare(module, x, p, t_start, redundancy)
     module.rhs(t_start, x, p)
     module.jac(t_start, x, p)
-    problem = Problem(module, p, step, mass, check_stability)
+    if algebraic:
+        _check_index2(module, x, p, algebraic, t_start)
+    problem = Problem(module, p, step, mass, check_stability,
+                      index2 if check_index else None)
     method.check(problem, t_start, x)
     method.warm_up(problem, x)
     module.outputs(t_start, x, p)
@@ -378,11 +459,17 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     y_all = np.array([module.outputs(t, xi, p) for t, xi in zip(t_all, x_all)]).reshape(
         len(t_all), len(module.OUTPUT_NAMES))
     if projection is not None and len(x_all):
-        stats.drift_position, stats.drift_velocity = consistent.drift(module, x_all, p)
+        g_t, v_t = consistent.drift_history(module, x_all, p)
+        stats.drift_position, stats.drift_velocity = float(g_t.max()), float(v_t.max())
         singular = None if ok or hint == _SINGULAR_HINT or monitor is None else _singular(
             monitor, seg, consistent.LOST_RANK)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
+        limit = consistent.drift_limit(module, x_all[0], rtol, atol)
+        if ok and check_drift and g_t.max() > limit:   # joints apart: keep the run to there
+            k = int(np.argmax(g_t > limit))
+            ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
+            t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection, p)
     if not ok:

@@ -53,6 +53,8 @@ class Problem:
     step: float | None = None         # fixed-step methods: the step
     mass: np.ndarray | None = None
     check_stability: bool = True      # rk4: refuse a step beyond its stability limit
+    # a DAE: 1.0 where a state is algebraic of index 2 (its error scaled by the step)
+    index2: np.ndarray | None = None
 
     def rhs(self, t, x):
         return self.module.rhs(t, x, self.p)
@@ -65,7 +67,12 @@ class Solver(abc.ABC):
     """One integration method. ``integrate`` covers a segment with no discontinuity."""
     name = ""
     description = ""
-    takes_mass = False        # can integrate M dx/dt = f with a (singular) mass matrix
+    # the highest DAE index it integrates, M dx/dt = f with a singular M (0: ODEs only)
+    max_index = 0
+
+    @property
+    def takes_mass(self) -> bool:
+        return self.max_index > 0
 
     def check(self, problem: Problem, t0: float, x0: np.ndarray):
         """Refuse, before the run, what this method cannot integrate (SimulationError)."""

@@ -48,7 +48,7 @@ class SundialsSolver(Solver):
 
     def __init__(self, name: str, kind: str, description: str):
         self.name, self.kind, self.description = name, kind, description
-        self.takes_mass = kind == "ida"
+        self.max_index = 1 if kind == "ida" else 0
 
     @staticmethod
     def _import():

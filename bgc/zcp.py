@@ -21,8 +21,12 @@ blocked rotations on a three-component inertia):
   already fixes: a class-4 ZCP, a causal cycle whose topological loop is closed, an index-2
   DAE. It is opened with break variables: its blocked directions become effort sources
   whose efforts are solved with the others at the acceleration level (Baumgarte), so the
-  result stays an explicit ODE for any integrator. ``open_loops=False`` refuses instead,
-  naming each loop.
+  result stays an explicit ODE for any integrator. ``open_loops=False`` (``--keep-loops``)
+  keeps it closed: the break variables become algebraic states with the velocity-level
+  equations ``0 = dg/dt + alpha g``, an index-2 DAE ``M dx/dt = f(x)`` (M: zero rows
+  there) that only an integrator built for index 2 takes (native Radau, which scales
+  those states' errors by h as Hairer's RADAU5 does); bgc refuses the others, naming
+  the loop. Bodies of negligible mass cannot be kept closed (their relays are refused).
 
 Class-2 (algebraic loops of R-like elements, topologically flat) and class-3 ZCPs (causal
 cycles through one element's port, topologically open) are the algebraic loops the
@@ -75,6 +79,9 @@ class Plan:
     loops: list[KinematicLoop] = field(default_factory=list)
     # joints of bodies of negligible mass: break variables, not flow sources
     relays: list[str] = field(default_factory=list)
+    # loops kept closed (``open_loops=False``): their break variables are the algebraic
+    # states of an index-2 DAE, M dx/dt = f(x) with zero rows of M
+    closed: bool = False
 
     @property
     def dependent(self) -> list[tuple[str, int]]:
@@ -180,25 +187,16 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
     tree, chords, relays = _spanning_tree(graph)
     parent = {child: (name, par) for name, par, child in tree}
     plan = Plan(loops=[_loop(c, graph, parent) for c in chords], relays=relays)
-    if plan.loops and not open_loops:
-        lp = plan.loops[0]
-        j = model.joints[lp.cut]
-        raise EquationError(
-            f"class-4 zero-order causal path: {lp.describe()}; kept closed it is an index-2 "
-            "DAE, which no integrator of bgc takes (they need an ODE: BDF/Radau handle "
-            "index 1 at most), so nothing was run (t = 0)" + (f"; {len(plan.loops) - 1} more loop(s)"
-                                  if len(plan.loops) > 1 else ""),
-            loc=j.loc, key=f"joints.{lp.cut}",
-            hint="let zcp open it with break variables (the default), or use --method "
-                 "lagrange or parasitic")
+    plan.closed = not open_loops
     if plan.relays and not open_loops:
         j = model.joints[plan.relays[0]]
         light = [n for n in (j.body1, j.body2) if n and model.bodies[n].mass == 0]
         raise EquationError(
             f"class-4 zero-order causal path: joint '{j.name}' meets body '{light[0]}' of "
             "negligible mass, where flow sources from its joints would impose one twist "
-            "twice; kept closed it is an index-2 DAE, which no integrator of bgc takes, so "
-            "nothing was run (t = 0)", loc=j.loc, key=f"joints.{j.name}",
+            "twice; bgc keeps only kinematic loops between bodies with mass closed (the "
+            "massless body's twist has no rate to take), so nothing was run (t = 0)",
+            loc=j.loc, key=f"joints.{j.name}",
             hint="let zcp open it with break variables (the default), or use --method "
                  "lagrange or parasitic")
     pose = _initial_pose(model)
@@ -218,7 +216,9 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
         dep = [(f"{child}__m", c) if c < 3 else (f"{child}__J", c - 3) for c in cols]
         plan.tree.append(TreeJoint(name, par, child, dep))
     imposed = {tj.joint for tj in plan.tree}
-    graph.constraints = [replace(c, imposed=c.joint in imposed) for c in graph.constraints]
+    closed = {lp.cut for lp in plan.loops} if plan.closed else set()
+    graph.constraints = [replace(c, imposed=c.joint in imposed, closed=c.joint in closed)
+                         for c in graph.constraints]
     graph.zcp = plan
     return graph
 
@@ -334,7 +334,10 @@ def paths(graph: BondGraph, system) -> list[Path]:
             names = {c.element for c in graph.constraints if c.joint in kl.joints}
             names |= {n for n in els if any(n.startswith(f"{b}__") for b in kl.bodies if b)}
             cut = [c for c in graph.constraints if c.joint == kl.cut]
-            what = (f"{kl.describe()}: opened with {len(cut)} break variable(s) "
+            what = (f"{kl.describe()}: kept closed, an index-2 DAE: {len(cut)} algebraic "
+                    f"state(s) ({', '.join(c.name + '.lambda' for c in cut)}) with "
+                    "0 = dg/dt + alpha g" if plan.closed else
+                    f"{kl.describe()}: opened with {len(cut)} break variable(s) "
                     f"({', '.join(c.name + '.break' for c in cut)})")
             joints = [graph.model.joints[j] for j in kl.joints]
             out.append(Path(4, what, sorted(names), bonds_among(names),

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "10b47aa15ca89f53ad7b525dc7c4c6ff"
+MODEL_HASH = "c43f81e9e45706bdf1533e8c52a56cf4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -32,6 +32,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
+# diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
+ALGEBRAIC = np.array([], dtype=np.int64)
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False

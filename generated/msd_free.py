@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "a5337e79b8b7c2f56a451e4b2846a01a"
+MODEL_HASH = "63fa9934a67de583363c00dbbdb52cb7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -32,6 +32,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
+# diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
+ALGEBRAIC = np.array([], dtype=np.int64)
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False

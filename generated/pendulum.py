@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "019bf55768397ce9cae82eac1c91c3be"
+MODEL_HASH = "937ac5674d04f91e26ce2d4e7a155d9b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -32,6 +32,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([6, 7, 8, 9, 10, 11], dtype=np.int64)
+# a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
+# diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
+ALGEBRAIC = np.array([], dtype=np.int64)
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False

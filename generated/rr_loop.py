@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "d63b75d928009083cce9af27fbf0843d"
+MODEL_HASH = "048dfcf48ed14327089d546c4fa71b55"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -32,6 +32,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([], dtype=np.int64)
+# a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
+# diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
+ALGEBRAIC = np.array([], dtype=np.int64)
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "1fa604882768dc2dc7610165eefee348"
+MODEL_HASH = "f4b4dac00bac6e23ee23e1411e27b407"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -32,6 +32,9 @@ CONSTRAINT_NAMES = ()
 HAS_POSITION = np.array([], dtype=np.int64)
 IMPOSED = np.array([], dtype=np.int64)
 POSE_STATES = np.array([68, 69, 70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 90, 91, 92, 93, 94, 95, 96, 97, 98, 99, 100, 101, 102, 103, 104, 105, 106, 107, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119, 120, 121, 122, 123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 135, 136, 137, 138, 139, 140, 141, 142, 143, 144, 145, 146, 147, 148, 149, 150, 151], dtype=np.int64)
+# a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
+# diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
+ALGEBRAIC = np.array([], dtype=np.int64)
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = True

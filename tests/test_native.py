@@ -49,13 +49,14 @@ def test_native_radau_agrees_with_scipy(compiled, name, method, t_end):
 
 @pytest.mark.parametrize("name", model_params())
 def test_every_shipped_model_agrees_with_scipy_at_the_tolerance_asked(compiled, name):
-    """At rtol = 1e-7, atol = 1e-10, against a reference at tolerances 1000 times tighter,
+    """At rtol = 1e-7, atol = 1e-10 (over the model's run, at most 2 s), against a
+    reference at tolerances 1000 times tighter,
     error in units of the tolerance asked (|dx| / (atol + rtol max|x|), per state): native
     Radau within 20, like scipy's Radau (the same scheme), and scipy's BDF, CVODE and
     IDA on the same generated code within their usual global-error factors (< 5e4: a
     wrong Jacobian or a lost event would be far beyond)."""
     mod = compiled(name)
-    t_end = load.load(MODELS / f"{name}.yaml").settings.t_end
+    t_end = min(load.load(MODELS / f"{name}.yaml").settings.t_end, 2.0)
     rtol, atol = 1e-7, 1e-10
     ref = simulate(mod, t_end=t_end, rtol=rtol / 1000, atol=atol / 1000, solver="native",
                    points=51)
@@ -94,7 +95,7 @@ def test_rk4_converges_at_fourth_order_and_fails_loudly_past_its_stability_limit
 def test_rk4_stability_region_between_the_axes():
     """The region reaches 2.785 on the negative real axis and 2 sqrt 2 on the imaginary,
     but only 2.62 at 125 deg: the limit is taken per eigenvalue, on its own ray."""
-    r = rk4.stability_radius(np.exp(1j * np.radians([180, 90, 125])))
+    r = [rk4.stability_radius(d) for d in np.exp(1j * np.radians([180, 90, 125]))]
     assert r == pytest.approx([2.7853, 2 * np.sqrt(2), 2.6197], abs=1e-3)
     for z in r * np.exp(1j * np.radians([180, 90, 125])):
         assert abs(rk4.amplification(0.999 * z)) <= 1 < abs(rk4.amplification(1.001 * z))

@@ -16,9 +16,10 @@ from click.testing import CliRunner
 from bgc import parasitic
 from bgc.cli import main
 from bgc.emit import import_module
-from bgc.pipeline import compile_model
+from bgc.errors import SimulationError
+from bgc.pipeline import compile_model, ensure_module
 from bgc.simulate import simulate
-from conftest import MODELS, fd_jacobian
+from conftest import MODELS, fd_jacobian, rel_err
 from test_mechanisms import _slider_closure
 
 
@@ -99,17 +100,39 @@ def test_scalar_zero_order_causal_paths_are_classified():
     assert z["class"] == 1 and "J_l" in z["what"] and z["bonds"]
 
 
-def test_class4_loop_kept_closed_is_refused_naming_the_loop(gen_dir, tmp_path):
+def test_class4_loop_kept_closed_is_an_index2_dae_for_native_radau_only(compiled, tmp_path):
+    """--keep-loops: the four-bar's loop-closing joint keeps its break variables as
+    algebraic states (0 = dg/dt + alpha g), an index-2 DAE. Native Radau (index-2 error
+    scaling) matches the opened loops; a solver that does not take index 2 is refused
+    naming the loop, and, let through, fails (IDA at t = 0; Radau without the scaling
+    soon after); nothing is written. A planar loop in 3D (the slider-crank) repeats its
+    constraints: refused, naming the dependent ones."""
+    _, rep = _check("four_bar", "--keep-loops")
+    (loop,) = [z for z in rep["zcp_paths"] if z["class"] == 4]
+    assert "kept closed, an index-2 DAE" in loop["what"] and "ball_B.tx.lambda" in loop["what"]
     out = tmp_path / "r.csv"
-    res = CliRunner().invoke(main, ["simulate", str(MODELS / "slider_crank.yaml"),
-                                    "--method", "zcp", "--keep-loops", "-o", str(tmp_path),
-                                    "--out", str(out)])
-    assert res.exit_code == 2
-    msg = res.output
-    assert "class-4" in msg and "closed by 'wrist_pin'" in msg and "index-2" in msg
-    assert "slider_crank.yaml:35" in msg and "--method lagrange" in msg
-    assert "Traceback" not in msg and not out.exists()
-    assert not list(tmp_path.glob("*.py"))           # nothing half-written
+    res = CliRunner().invoke(main, ["simulate", str(MODELS / "four_bar.yaml"), "--method",
+                                    "zcp", "--keep-loops", "--solver", "bdf", "-o",
+                                    str(tmp_path), "--out", str(out)])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert "index-2 DAE" in res.output and "'ball_B'" in res.output
+    assert "--solver native" in res.output and not out.exists()
+    closed, _, _ = ensure_module(MODELS / "four_bar.yaml", tmp_path, "zcp", open_loops=False)
+    opened = compiled("four_bar", "zcp")
+    assert list(closed.ALGEBRAIC) and not list(opened.ALGEBRAIC)
+    ref = simulate(opened, t_end=0.5, rtol=1e-10, atol=1e-12, solver="native", points=51)
+    dae = simulate(closed, t_end=0.5, rtol=1e-8, atol=1e-10, solver="native", points=51)
+    assert rel_err(dae.column("rocker_angle"), ref.column("rocker_angle")) < 1e-6
+    with pytest.raises(SimulationError, match="index 1 at most"):
+        simulate(closed, t_end=0.5, solver="ida")
+    with pytest.raises(SimulationError, match="ida failed at t = 0"):
+        simulate(closed, t_end=0.5, solver="ida", check_index=False)
+    with pytest.raises(SimulationError, match="step size too small"):
+        simulate(closed, t_end=0.5, rtol=1e-6, atol=1e-8, solver="native", check_index=False)
+    sc, _, _ = ensure_module(MODELS / "slider_crank.yaml", tmp_path, "zcp", open_loops=False)
+    with pytest.raises(SimulationError, match="5 algebraic equations of rank 2") as err:
+        simulate(sc, t_end=0.5, solver="native")
+    assert "wrist_pin" in str(err.value) and "drop --keep-loops" in err.value.hint
 
 
 _SPRUNG = """\

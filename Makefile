@@ -2,7 +2,7 @@
 PYTHON ?= python3
 SARIB = bgc simulate models/sarib.yaml --excitation chirp --no-states
 
-.PHONY: install run demo test test-all generated clean
+.PHONY: install run demo test test-all bench generated clean
 
 install:
 	$(PYTHON) -m pip install -q -e ".[test]"
@@ -27,6 +27,12 @@ test:
 
 test-all:
 	$(PYTHON) -m pytest -q -n 2 -m ""
+
+# Speed against accuracy (issue 6): peers, work-precision, parasitic stiffness, stability
+# maps, compile cost; CSV + PNG + summary.md in bench/results (an hour or more; --quick:
+# minutes).
+bench: install
+	bgc bench --out bench/results
 
 # Regenerate the committed modules in generated/ (a test checks they are fresh).
 generated:

@@ -25,8 +25,9 @@ _json_opt = click.option("--json", "as_json", is_flag=True, help="print the repo
 _method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
                            show_default=True, help="how constraint elements are handled")
 _loops_opt = click.option("--keep-loops", is_flag=True,
-                          help="method zcp: leave kinematic loops (class-4 ZCPs) closed "
-                               "instead of opening them with break variables")
+                          help="method zcp: keep kinematic loops (class-4 ZCPs) closed, an "
+                               "index-2 DAE that --solver native integrates, instead of "
+                               "opening them with break variables")
 
 
 def _user_errors(fn):
@@ -359,6 +360,40 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
     click.echo(f"  resonances: {', '.join(f'{f:.2f}' for f in res) or 'none'} Hz")
     if out:
         click.echo(f"  csv: {report['files']['csv']}")
+
+
+@main.command()
+@click.option("--out", default="bench/results", show_default=True,
+              type=click.Path(file_okay=False), help="where CSV, PNG and summary.md go")
+@click.option("--part", "parts", multiple=True,
+              type=click.Choice(["peers", "precision", "stiffness", "stability", "compile"]),
+              help="run only this part (repeatable; default: all)")
+@click.option("--quick", is_flag=True,
+              help="every part at small scale (a slider-crank, a pendulum): minutes")
+@click.option("--repeats", type=int, default=3, show_default=True,
+              help="peers: runs per integrator (the median is reported)")
+@click.option("--budget", type=float, default=60.0, show_default=True,
+              help="work-precision: a series stops after a run longer than this [s]")
+@click.option("--build", type=click.Path(file_okay=False),
+              help="where the benchmarks' generated modules go (default: bench/build, "
+                   "--quick: OUT/build)")
+@_json_opt
+@_user_errors
+def bench(out, parts, quick, repeats, budget, build, as_json):
+    """Measure speed against accuracy: peers, work-precision, parasitic stiffness,
+    stability maps, compile cost (CSV + PNG + summary.md in --out)."""
+    from . import bench as bbench
+    if repeats < 1:
+        raise BgcError(f"--repeats must be >= 1, got {repeats}", key="--repeats")
+    report = bbench.run(out, parts or bbench.PARTS, quick, repeats, budget,
+                        log=lambda m: click.echo(m, err=True), build=build)
+    if as_json:
+        click.echo(json.dumps({"summary": report["summary"], "targets": report["targets"]},
+                              indent=2))
+        return
+    for t in report["targets"]:
+        click.echo(f"target: {t}")
+    click.echo(f"summary: {report['summary']}")
 
 
 if __name__ == "__main__":

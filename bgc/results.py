@@ -44,13 +44,14 @@ def read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
     return names, np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
 
 
-def _panels(n: int, height: float):
-    """A figure of ``n`` stacked panels sharing x (matplotlib without a display)."""
+def _panels(n: int, height: float, sharex: bool = True):
+    """A figure of ``n`` stacked panels, sharing x unless told (matplotlib without a
+    display)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    return plt.subplots(max(n, 1), 1, figsize=(8, height * max(n, 1) + 0.8), sharex=True,
-                        squeeze=False)
+    return plt.subplots(max(n, 1), 1, figsize=(8, height * max(n, 1) + 0.8),
+                        sharex=sharex, squeeze=False)
 
 
 def _save(fig, path: str | Path, title: str) -> Path:

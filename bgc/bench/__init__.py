@@ -1,0 +1,333 @@
+"""Stage **bench**: every speed claim as a measured chart of speed against accuracy.
+
+``bgc bench`` (``make bench``) runs the parts below on the same generated code and writes
+CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``):
+
+- ``peers``: native Radau against scipy (BDF, Radau, LSODA) and SUNDIALS (CVODE, IDA),
+  medians of repeats, ratios measured in one run (``peers.py``);
+- ``precision``: work-precision diagrams, method x integrator (``precision.py``);
+- ``stiffness``: the parasitic stiffness sweep, numerical against modelling error;
+- ``stability``: where each method fails and what bgc says (``stability.py``);
+- ``compile``: sympy, emit, numba cold and warm, module size, growth with the SARIB's
+  legs (``compile_cost.py``).
+
+``quick=True`` runs every part at small scale (a slider-crank, a pendulum, the SARIB's
+first two legs) for the tests.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import os
+import platform
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from . import charts, compile_cost, precision, stability
+from .cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
+from .peers import peers
+
+PARTS = ("peers", "precision", "stiffness", "stability", "compile")
+METHODS = ("parasitic", "lagrange", "zcp")
+
+FOUR_BAR = Scenario("four_bar", "spatial RSSR four-bar, 1 s", MODELS / "four_bar.yaml", 1.0,
+                    ("crank_angle", "rocker_angle"), points=101)
+BRICARD = Scenario("bricard", "Bricard's overconstrained mechanism, 1 s",
+                   MODELS / "bricard.yaml", 1.0, ("tip_x", "tip_y", "tip_z", "P3_x",
+                                                  "P3_y", "P3_z"), points=101)
+
+
+def write_rows(path: Path, rows: list[dict]) -> Path:
+    """Rows (dicts) as a CSV, columns in first-seen order, written atomically."""
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            w = csv.DictWriter(fh, keys)
+            w.writeheader()
+            w.writerows(rows)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def machine() -> str:
+    import numba
+    import scipy
+    cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo")
+                if ln.startswith("model name")), platform.processor()) \
+        if os.path.exists("/proc/cpuinfo") else platform.processor()
+    return (f"{cpu}, {os.cpu_count()} cores; Python {platform.python_version()}, numpy "
+            f"{np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}")
+
+
+class Run:
+    """One benchmark run: its parts write into ``out`` and add to ``summary``."""
+
+    def __init__(self, out: Path, quick: bool, repeats: int, budget: float, log,
+                 build: Path | None = None):
+        self.out, self.quick, self.repeats, self.budget, self.log = (out, quick, repeats,
+                                                                     budget, log)
+        build = build or (out / "build" if quick else out.parent / "build")
+        self.bench = Bench(Path(build), log)
+        self.summary: list[str] = []
+        self.data: dict = {}
+        self.targets: list[str] = []
+
+    def table(self, rows, cols, fmt=None) -> None:
+        fmt = fmt or {}
+        self.summary.append("| " + " | ".join(cols) + " |")
+        self.summary.append("|" + "---|" * len(cols))
+        for r in rows:
+            cells = []
+            for c in cols:
+                v = r.get(c)
+                cells.append(fmt[c](v) if c in fmt and v is not None
+                             else f"{v:.3g}" if isinstance(v, float) else str(v))
+            self.summary.append("| " + " | ".join(cells) + " |")
+        self.summary.append("")
+
+    # --- parts -----------------------------------------------------------------------
+    def peers(self):
+        cases = ([(SLIDER, "lagrange", 1e-6)] if self.quick else
+                 [(sarib("sarib_chirp"), "parasitic", 1e-5), (ANDREWS, "lagrange", 1e-6)])
+        integrators = ("native", "bdf", "cvode") if self.quick else None
+        rows = []
+        self.summary.append("## Peers: the same generated code under every integrator\n")
+        for scn, method, tol in cases:
+            self.log(f"peers: {scn.title} ({method}, rtol = atol = {tol:g})")
+            kw = {"integrators": integrators} if integrators else {}
+            rs = peers(self.bench, scn, method, tol, self.repeats, **kw)
+            rows += rs
+            _, note = self.bench.reference(scn, method)
+            self.summary.append(f"**{scn.title}**, method {method}, rtol = atol = {tol:g}; "
+                                f"median of {self.repeats} runs; error against {note}.\n")
+            self.table(rs, ["integrator", "wall_median", "time_vs_native", "error",
+                            "steps", "rhs_calls", "jac_calls", "lu", "status"],
+                       {"time_vs_native": lambda v: f"{v:.3g}x",
+                        "status": lambda v: v[:70]})
+            if scn.name == "sarib_chirp":
+                nat = next(r for r in rs if r["integrator"] == "native")
+                bdf = next(r for r in rs if r["integrator"] == "bdf")
+                speed = bdf["wall_median"] / nat["wall_median"]
+                self.targets.append(
+                    f"SARIB 28 s pumping chirp, parasitic, rtol 1e-5: native "
+                    f"{nat['wall_median']:.3g} s, scipy BDF {bdf['wall_median']:.3g} s: "
+                    f"**{speed:.1f}x** (target >= 10x) at error {nat['error']:.2g} against "
+                    f"BDF's {bdf['error']:.2g} (target: equal or better): "
+                    + ("met" if speed >= 10 and nat["error"] <= bdf["error"] else "NOT met"))
+        write_rows(self.out / "peers.csv", rows)
+        self.data["peers"] = rows
+
+    def precision(self):
+        fractions = precision.RK4_FRACTIONS
+        if self.quick:
+            cases = [(SLIDER, METHODS, ("native", "bdf", "rk4"), (1e-3, 1e-5, 1e-7))]
+            fractions = fractions[:1]
+        else:
+            cases = [(sarib("sarib_chirp_window"), METHODS, precision.INTEGRATORS,
+                      precision.TOLERANCES),
+                     (sarib("sarib_sine"), METHODS, precision.INTEGRATORS,
+                      precision.TOLERANCES),
+                     (ANDREWS, ("lagrange", "zcp", "parasitic"), precision.INTEGRATORS,
+                      precision.TOLERANCES)]
+        self.summary.append("## Work-precision\n")
+        self.summary.append("Wall time (integration only, numba compiled and warm) against "
+                            "the largest relative error of the scenario's outputs; one run "
+                            "per point; rk4 at fractions "
+                            f"{', '.join(f'{f:g}' for f in fractions)} of its "
+                            f"stability limit. A series stops after a run over "
+                            f"{self.budget:g} s.\n")
+        all_rows = []
+        for scn, methods, integrators, tols in cases:
+            self.log(f"precision: {scn.title}")
+            rows = precision.work_precision(self.bench, scn, methods, integrators, tols,
+                                            self.budget, fractions)
+            all_rows += rows
+            _, note = self.bench.reference(scn)
+            write_rows(self.out / f"precision_{scn.name}.csv", rows)
+            charts.work_precision(rows, self.out / f"precision_{scn.name}.png",
+                                  f"work-precision: {scn.title}", f"reference: {note}")
+            self.summary.append(f"**{scn.title}** (`precision_{scn.name}.png`): reference "
+                                f"{note}. {scn.note}\n")
+            self.summary += self._time_to_error(rows, methods, scn)
+        self.data["precision"] = all_rows
+
+    def _time_to_error(self, rows, methods, scn) -> list[str]:
+        """Least time to reach each error level, per method (any integrator / native)."""
+        errs = [r["error"] for r in rows if r["status"] == "ok" and np.isfinite(r["error"])]
+        if not errs:
+            return []
+        levels = [10.0 ** k for k in range(-1, int(np.floor(np.log10(min(errs)))) - 1, -1)]
+        out = ["| error <= | " + " | ".join(f"{m} (best / native)" for m in methods) + " |",
+               "|---|" + "---|" * len(methods)]
+        for lv in levels:
+            cells = []
+            for m in methods:
+                best = precision.time_to_error(rows, m, lv)
+                nat = precision.time_to_error(rows, m, lv, "native")
+                cells.append(f"{best:.3g} s / {nat:.3g} s" if best is not None and
+                             nat is not None else f"{best:.3g} s / -" if best is not None
+                             else "not reached")
+            out.append(f"| {lv:.0e} | " + " | ".join(cells) + " |")
+        out.append("")
+        par = [r for r in rows if r["method"] == "parasitic" and r["status"] == "ok"]
+        if "lagrange" in methods and par and not self.quick:
+            floor = min(r["error"] for r in par)
+            t_par = precision.time_to_error(rows, "parasitic", floor)
+            t_lag = precision.time_to_error(rows, "lagrange", floor)
+            self.targets.append(
+                f"{scn.title}: parasitic's best error {floor:.2g} in {t_par:.3g} s; "
+                f"lagrange reaches it in "
+                + (f"{t_lag:.3g} s: " + ("met" if t_lag <= t_par else "NOT met")
+                   if t_lag is not None else "no run: NOT met")
+                + " (target: no more time)")
+        return out
+
+    def stiffness(self):
+        scn = SLIDER if self.quick else sarib("sarib_chirp_window")
+        factors = (1.0, 10.0) if self.quick else precision.STIFFNESS_FACTORS
+        tols = (1e-5, 1e-8) if self.quick else precision.TOLERANCES[1:]
+        self.log(f"stiffness: {scn.title}")
+        rows = precision.stiffness_sweep(self.bench, scn, factors, tols, self.budget)
+        write_rows(self.out / "stiffness.csv", rows)
+        charts.stiffness(rows, self.out / "stiffness.png",
+                         f"parasitic stiffness sweep: {scn.title}")
+        self.summary.append("## Parasitic stiffness: numerical against modelling error\n")
+        self.summary.append(f"{scn.title}, native Radau; error against "
+                            f"{self.bench.reference(scn)[1]} (`stiffness.png`). The floor "
+                            "of each series is its modelling error:\n")
+        floors = []
+        for k in sorted({r["stiffness"] for r in rows}):
+            ok = [r for r in rows if r["stiffness"] == k and r["status"] == "ok"]
+            if ok:
+                best = min(ok, key=lambda r: r["error"])
+                floors.append({"stiffness": k, "floor": best["error"],
+                               "at_rtol": best["setting"], "wall_time": best["wall_time"]})
+        self.table(floors, ["stiffness", "floor", "at_rtol", "wall_time"])
+        self.data["stiffness"] = rows
+
+    def stability(self):
+        self.summary.append("## Stability maps: where each method fails\n")
+        # RK4 on the parasitic model
+        if self.quick:
+            scn, factors, fracs = SLIDER, (0.1, 1.0, 10.0), (0.8, 1.25, 2.0)
+        else:
+            scn, factors, fracs = (sarib("sarib_sine"), precision.STIFFNESS_FACTORS,
+                                   stability.RK4_STEP_FRACTIONS)
+        self.log(f"stability: rk4 on {scn.title}")
+        rk = stability.rk4_map(self.bench, scn, factors, fracs)
+        write_rows(self.out / "stability_rk4.csv", rk)
+        charts.rk4_map(rk, self.out / "stability_rk4.png", f"RK4 on the parasitic "
+                                                           f"model: {scn.title}")
+        wrong = [r for r in rk if r["stable"] != (r["fraction"] <= 1.0)]
+        silent = [r for r in rk if not r["stable"] and r["bgc"] == "ran"]
+        self.summary.append(
+            f"**RK4, parasitic** (`stability_rk4.png`): {len(rk)} runs over "
+            f"{len(factors)} stiffnesses; the predicted limit (every h lambda in |R| <= 1) "
+            f"classified {len(rk) - len(wrong)} of {len(rk)} runs right; bgc refused "
+            f"{sum(r['bgc'] == 'refused' for r in rk)} and let no unstable run through "
+            f"({len(silent)} silent).\n")
+        # lagrange without stabilisation
+        t_drift = 5.0 if self.quick else 10.0
+        dscn = replace(SLIDER, t_end=t_drift, points=201,
+                       title=f"slider-crank falling from rest, {t_drift:g} s")
+        self.log(f"stability: drift on {dscn.title}")
+        alphas = (0.0, 1.0, 10.0) if self.quick else stability.ALPHAS
+        hist = stability.drift_history(self.bench, dscn, "lagrange", alphas)
+        grid = stability.drift_map(self.bench, dscn, "lagrange", alphas,
+                                   (1e-4, 1e-7) if self.quick else stability.DRIFT_TOLERANCES)
+        write_rows(self.out / "stability_drift_history.csv", hist)
+        write_rows(self.out / "stability_drift.csv", grid)
+        charts.drift(hist, grid, self.out / "stability_drift.png",
+                     f"lagrange without stabilisation: slider-crank, {dscn.t_end:g} s")
+        self.summary.append(f"**lagrange, Baumgarte rate alpha** (`stability_drift.png`), "
+                            f"slider-crank over {dscn.t_end:g} s:\n")
+        self.table(grid, ["alpha", "rtol", "drift", "limit", "bgc"])
+        # redundant constraints
+        rscn = replace(BRICARD, t_end=0.5) if self.quick else BRICARD
+        self.log(f"stability: redundancy on {rscn.title}")
+        red = stability.redundancy_map(self.bench, rscn, (1e-6,) if self.quick else
+                                       stability.DRIFT_TOLERANCES)
+        write_rows(self.out / "stability_redundancy.csv", red)
+        self.summary.append("**Redundant constraints** (Bricard, 1 redundant of 30):\n")
+        self.table(red, ["rtol", "redundancy_handling", "bgc", "error_vs_parasitic",
+                         "rhs_finite_unchecked", "message"],
+                   {"message": lambda v: v[:110]})
+        # zcp, a kinematic loop kept closed
+        zscn = replace(FOUR_BAR, t_end=0.5) if self.quick else FOUR_BAR
+        self.log(f"stability: zcp with the loop kept closed, {zscn.title}")
+        zc = stability.zcp_map(self.bench, zscn, (1e-4, 1e-7) if self.quick else
+                               (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8))
+        write_rows(self.out / "stability_zcp.csv", zc)
+        charts.zcp_map(zc, self.out / "stability_zcp.png",
+                       f"zcp, loop kept closed (index-2 DAE): {zscn.title}")
+        self.summary.append("**zcp with the kinematic loop kept closed** (`stability_zcp.png`,"
+                            " an index-2 DAE; error against the opened loops):\n")
+        self.table(zc, ["rtol", "integrator", "status", "reached", "error", "steps", "bgc",
+                        "message"], {"message": lambda v: v[:90]})
+        self.data["stability"] = {"rk4": rk, "drift": grid, "redundancy": red, "zcp": zc}
+
+    def compile(self):
+        self.summary.append("## Compile cost\n")
+        model = MODELS / ("pendulum.yaml" if self.quick else "sarib.yaml")
+        methods = ("parasitic",) if self.quick else METHODS
+        rows = []
+        for m in methods:
+            self.log(f"compile: {model.stem} under {m} (cold numba in a fresh process)")
+            rows.append(compile_cost.measure(model, m, self.bench.build))
+        write_rows(self.out / "compile.csv", rows)
+        self.table(rows, ["model", "method", "states", "sympy_s", "emit_s", "module_bytes",
+                          "ops_rhs", "ops_jac", "numba_cold_model_s", "native_loop_cold_s",
+                          "warm_to_first_step_s"])
+        legs = (1, 2) if self.quick else (1, 2, 3, 4)
+        gmethods = ("parasitic",) if self.quick else METHODS
+        self.log("compile: operation count against the SARIB's legs")
+        growth = compile_cost.growth(MODELS / "sarib.yaml", gmethods, self.bench.build, legs)
+        write_rows(self.out / "compile_growth.csv", growth)
+        charts.growth(growth, self.out / "compile_growth.png",
+                      "emitted operations against the SARIB's legs")
+        self.summary.append("Operation count against the SARIB's legs "
+                            "(`compile_growth.png`):\n")
+        self.table(growth, ["legs", "method", "states", "sympy_s", "ops_rhs", "ops_jac"])
+        if not self.quick:
+            for r in rows:
+                self.targets.append(
+                    f"SARIB {r['method']}: cold numba compile of the model "
+                    f"{r['numba_cold_model_s']:.3g} s (target < 60 s: "
+                    f"{'met' if r['numba_cold_model_s'] < 60 else 'NOT met'}; the native "
+                    f"loop, once per machine, {r['native_loop_cold_s']:.3g} s more); warm "
+                    f"start to first step {r['warm_to_first_step_s']:.3g} s (target < 2 s: "
+                    f"{'met' if r['warm_to_first_step_s'] < 2 else 'NOT met'})")
+        self.data["compile"] = {"methods": rows, "growth": growth}
+
+    def write_summary(self, parts) -> Path:
+        head = [f"# bgc bench ({'quick' if self.quick else 'full'})", "",
+                f"{datetime.date.today()}; {machine()}; parts: {', '.join(parts)}.", "",
+                "Times are wall-clock seconds of one process on a shared machine: compare "
+                "the ratios within this run, not absolute times across runs.", ""]
+        if self.targets:
+            head += ["## Targets", ""] + [f"- {t}" for t in self.targets] + [""]
+        path = self.out / "summary.md"
+        path.write_text("\n".join(head + self.summary) + "\n")
+        return path
+
+
+def run(out: str | Path = "bench/results", parts=PARTS, quick: bool = False,
+        repeats: int = 3, budget: float = 60.0, log=print, build=None) -> dict:
+    """Run the chosen parts; write CSV, PNG and summary.md into ``out`` (generated
+    modules into ``build``)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    r = Run(out, quick, repeats, budget, log, build)
+    for part in parts:
+        getattr(r, part)()
+    summary = r.write_summary(parts)
+    return {"summary": str(summary), "targets": r.targets, "data": r.data}

@@ -1,0 +1,161 @@
+"""The benchmark charts (PNG, matplotlib without a display)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..results import _panels, _save
+
+_MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^"}
+_LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, (5, 1)),
+          "ida": (0, (3, 1, 1, 1)), "rk4": (0, (1, 2))}
+
+
+def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
+    """Wall time against error, log-log, one series per method x integrator."""
+    fig, axes = _panels(1, 5.2)
+    ax = axes[0, 0]
+    series = {}
+    for r in rows:
+        if r["status"] == "ok" and np.isfinite(r["error"]) and r["error"] > 0:
+            series.setdefault((r["method"], r["integrator"]), []).append(
+                (r["error"], r["wall_time"]))
+    colours = {}
+    for (method, integrator), pts in sorted(series.items()):
+        c = colours.setdefault(integrator, f"C{len(colours)}")
+        e, w = np.array(sorted(pts, key=lambda q: -q[0])).T
+        ax.loglog(e, w, marker=_MARKERS.get(method, "o"), ls=_LINES.get(integrator, "-"),
+                  color=c, ms=4, lw=1.1, label=f"{method} / {integrator}")
+    ax.set_xlabel("error against the reference (largest relative output error)")
+    ax.set_ylabel("wall time [s]")
+    ax.invert_xaxis()
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=3, loc="upper left")
+    if note:
+        ax.set_title(note, fontsize=7)
+    return _save(fig, path, title)
+
+
+def stiffness(rows, path: Path, title: str) -> Path:
+    """Parasitic stiffness sweep: error against time, one series per stiffness, each
+    point labelled with its tolerance."""
+    fig, axes = _panels(1, 5.0)
+    ax = axes[0, 0]
+    by_k = {}
+    for r in rows:
+        if r["status"] == "ok" and np.isfinite(r["error"]):
+            by_k.setdefault(r["stiffness"], []).append((r["error"], r["wall_time"],
+                                                        r["setting"]))
+    for i, (k, pts) in enumerate(sorted(by_k.items())):
+        e, w, tol = np.array(sorted(pts, key=lambda q: -q[2])).T
+        ax.loglog(e, w, marker="o", ms=4, color=f"C{i}", label=f"k = {k:.3g} N/m")
+        for ei, wi, ti in zip(e, w, tol):
+            ax.annotate(f"{ti:.0e}", (ei, wi), fontsize=6, xytext=(3, 2),
+                        textcoords="offset points")
+    ax.set_xlabel("error against the ideal-constraint reference")
+    ax.set_ylabel("wall time [s]")
+    ax.invert_xaxis()
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("each series levels off at its modelling error (falls as 1/k); the "
+                 "tolerance is written by each point", fontsize=8)
+    return _save(fig, path, title)
+
+
+def rk4_map(rows, path: Path, title: str) -> Path:
+    """Stable and unstable RK4 runs over (stiffness, step), with the predicted limits."""
+    fig, axes = _panels(1, 4.8)
+    ax = axes[0, 0]
+    k = np.array([r["stiffness"] for r in rows])
+    h = np.array([r["step"] for r in rows])
+    ok = np.array([r["stable"] for r in rows])
+    ax.loglog(k[ok], h[ok], "o", color="C2", label="stable (measured)")
+    ax.loglog(k[~ok], h[~ok], "x", color="C3", ms=7, label="unstable (measured)")
+    ks = sorted(set(k))
+    pred = [next(r["h_predicted"] for r in rows if r["stiffness"] == kk) for kk in ks]
+    crude = [next(r["h_278"] for r in rows if r["stiffness"] == kk) for kk in ks]
+    ax.loglog(ks, pred, "-", color="k", label="predicted: h lambda on |R(z)| = 1")
+    ax.loglog(ks, crude, "--", color="0.5", label="h |lambda_max| = 2.78")
+    ax.fill_between(ks, [min(h) / 2] * len(ks), pred, color="C2", alpha=0.08)
+    ax.set_xlabel("parasitic stiffness [N/m]")
+    ax.set_ylabel("RK4 step [s]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path, title)
+
+
+def drift(history, grid, path: Path, title: str) -> Path:
+    """Two panels: |g| against time for each Baumgarte rate (the drift limit, where bgc
+    stops); the largest |g| over (alpha, rtol) against the limit."""
+    fig, axes = _panels(2, 3.6, sharex=False)
+    ax = axes[0, 0]
+    for i, a in enumerate(sorted({r["alpha"] for r in history})):
+        rs = [r for r in history if r["alpha"] == a]
+        t = np.array([r["t"] for r in rs])
+        g = np.maximum([r["drift"] for r in rs], 1e-18)
+        ax.semilogy(t, g, color=f"C{i}", label=f"alpha = {a:g} 1/s")
+        stop = rs[0]["bgc_stop"]
+        if stop == stop:
+            ax.axvline(stop, color=f"C{i}", ls=":", lw=0.8)
+    ax.axhline(history[0]["limit"], color="k", ls="--", lw=0.8, label="bgc's drift limit")
+    ax.set_ylabel("position drift |g| (m, rad)")
+    ax.set_xlabel("t [s]  (dotted: where bgc stops the run)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    ax = axes[1, 0]
+    for i, tol in enumerate(sorted({r["rtol"] for r in grid})):
+        rs = sorted((r for r in grid if r["rtol"] == tol), key=lambda r: r["alpha"])
+        a = np.array([max(r["alpha"], 0.03) for r in rs])
+        ratio = np.array([r["drift"] / r["limit"] for r in rs])
+        ax.loglog(a, np.maximum(ratio, 1e-12), "o-", color=f"C{i}", label=f"rtol {tol:g}")
+    ax.axhline(1.0, color="k", ls="--", lw=0.8)
+    ax.set_xlabel("Baumgarte rate alpha [1/s] (0 drawn at 0.03)")
+    ax.set_ylabel("max |g| / drift limit")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path, title)
+
+
+def growth(rows, path: Path, title: str) -> Path:
+    """Operation counts of rhs and jac against the SARIB's legs, per method."""
+    fig, axes = _panels(1, 4.0)
+    ax = axes[0, 0]
+    for i, method in enumerate(sorted({r["method"] for r in rows})):
+        rs = sorted((r for r in rows if r["method"] == method), key=lambda r: r["legs"])
+        legs = [r["legs"] for r in rs]
+        ax.plot(legs, [r["ops_rhs"] for r in rs], "o-", color=f"C{i}",
+                label=f"{method}: rhs")
+        ax.plot(legs, [r["ops_jac"] for r in rs], "s--", color=f"C{i}",
+                label=f"{method}: jac")
+    ax.set_xlabel("SARIB legs")
+    ax.set_ylabel("operations in the generated function")
+    ax.set_xticks([1, 2, 3, 4])
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    return _save(fig, path, title)
+
+
+def zcp_map(rows, path: Path, title: str) -> Path:
+    """Two panels against the tolerance: how far each integrator got into the run, and
+    the error of those that finished."""
+    fig, axes = _panels(2, 3.2)
+    for i, name in enumerate(dict.fromkeys(r["integrator"] for r in rows)):
+        rs = [r for r in rows if r["integrator"] == name]
+        tol = [r["rtol"] for r in rs]
+        axes[0, 0].semilogx(tol, [r["fraction"] for r in rs], "o-", color=f"C{i}",
+                            label=name)
+        ok = [r for r in rs if r["status"] == "ran"]
+        if ok:
+            axes[1, 0].loglog([r["rtol"] for r in ok], [r["error"] for r in ok], "o-",
+                              color=f"C{i}", label=name)
+    axes[0, 0].set_ylabel("fraction of the run\ncompleted")
+    axes[0, 0].set_ylim(-0.05, 1.05)
+    axes[1, 0].set_ylabel("error against the\nopened loops")
+    axes[1, 0].set_xlabel("rtol (atol = rtol / 100)")
+    for ax in axes[:, 0]:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[1, 0].invert_xaxis()
+    return _save(fig, path, title)

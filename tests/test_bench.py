@@ -1,0 +1,96 @@
+"""bgc bench (issue 6) at small scale: every part writes its CSV, chart and summary, and
+what it measures holds (errors fall with the tolerance, the parasitic error floor falls
+with the stiffness, compile cost is measured in fresh processes, the emitted operations
+grow no faster than the SARIB's legs). The full benchmark is ``make bench``."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bgc.bench import compile_cost
+from bgc.cli import main
+from conftest import MODELS, ROOT
+
+
+def _rows(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def _bench(gen_dir, out, *parts, extra=()):
+    args = ["bench", "--quick", "--out", str(out), "--build", str(gen_dir), "--repeats", "2",
+            "--budget", "20", "--json"]
+    for p in parts:
+        args += ["--part", p]
+    res = CliRunner().invoke(main, args + list(extra))
+    assert res.exit_code == 0, res.output
+    return json.loads(res.output[res.output.index("{"):])
+
+
+def test_peers_precision_and_stiffness_at_small_scale(gen_dir, tmp_path):
+    rep = _bench(gen_dir, tmp_path, "peers", "precision", "stiffness")
+    summary = (tmp_path / "summary.md").read_text()
+    for head in ("## Peers", "## Work-precision", "## Parasitic stiffness"):
+        assert head in summary
+    peers = _rows(tmp_path / "peers.csv")
+    assert [r["integrator"] for r in peers] == ["native", "bdf", "cvode"]
+    for r in peers:
+        assert r["status"] == "ok" and int(r["repeats"]) == 2 and float(r["wall_median"]) > 0
+        assert float(r["error"]) < 1e-2
+    assert float(peers[0]["time_vs_native"]) == 1.0
+    # work-precision: every method x integrator series; the error falls with the tolerance
+    wp = _rows(tmp_path / "precision_slider_crank.csv")
+    assert {(r["method"], r["integrator"]) for r in wp} == {
+        (m, i) for m in ("parasitic", "lagrange", "zcp") for i in ("native", "bdf", "rk4")}
+    for m in ("lagrange", "zcp"):
+        errs = [float(r["error"]) for r in wp if r["method"] == m and r["integrator"] == "native"]
+        assert errs[0] > 10 * errs[-1], (m, errs)
+    assert (tmp_path / "precision_slider_crank.png").stat().st_size > 10000
+    # stiffness: the floor of each series (its modelling error) falls as 1/k
+    st = _rows(tmp_path / "stiffness.csv")
+    floor = {}
+    for r in st:
+        if r["status"] == "ok":
+            k = float(r["stiffness"])
+            floor[k] = min(floor.get(k, np.inf), float(r["error"]))
+    ks = sorted(floor)
+    assert floor[ks[-1]] < 0.2 * floor[ks[0]], floor
+    assert (tmp_path / "stiffness.png").exists() and rep["summary"].endswith("summary.md")
+
+
+def test_compile_cost_in_fresh_processes_and_growth_with_the_legs(tmp_path):
+    """Cold numba compile in an empty cache, then a warm start that only loads it; the
+    operation count of the SARIB with one and two legs: a second leg adds no more than
+    the first leg and the rest cost together (no expression swell)."""
+    row = compile_cost.measure(MODELS / "pendulum.yaml", "parasitic", tmp_path)
+    assert row["numba_cold_model_s"] > 0.2 and row["cold_rhs_s"] > 0
+    assert row["warm_to_first_step_s"] < row["cold_process_s"]
+    assert row["ops_rhs"] > 10 and row["ops_jac"] > 10 and row["module_bytes"] > 1000
+    growth = compile_cost.growth(MODELS / "sarib.yaml", ("parasitic",), tmp_path, (1, 2))
+    one, two = growth
+    assert two["states"] - one["states"] == 25     # beater, bar: 12 each; hinge spring
+    for f in ("ops_rhs", "ops_jac"):
+        assert two[f] < 2.0 * one[f], (f, one[f], two[f])
+    ops = compile_cost.operations(ROOT / "generated" / "pendulum.py")
+    assert set(ops) == {"rhs", "jac", "outputs"} and min(ops.values()) > 0
+
+
+@pytest.mark.slow       # 4-5 minutes: RK4, drift, redundancy and zcp maps, small scale
+def test_stability_maps_at_small_scale(gen_dir, tmp_path):
+    _bench(gen_dir, tmp_path, "stability")
+    rk = _rows(tmp_path / "stability_rk4.csv")
+    assert all(r["bgc"] == ("refused" if float(r["fraction"]) > 1 else "ran") for r in rk)
+    assert not [r for r in rk if r["stable"] == "False" and r["bgc"] == "ran"]
+    drift = _rows(tmp_path / "stability_drift.csv")
+    assert any(r["bgc"] == "failed" for r in drift if float(r["alpha"]) == 0)
+    assert all(r["bgc"] == "ran" for r in drift if float(r["alpha"]) >= 10)
+    zc = _rows(tmp_path / "stability_zcp.csv")
+    assert all(r["status"] == "ran" for r in zc if "index-2" in r["integrator"])
+    assert all(r["status"] == "failed" for r in zc if r["integrator"] == "ida")
+    for name in ("stability_rk4.png", "stability_drift.png", "stability_zcp.png"):
+        assert (tmp_path / name).exists()

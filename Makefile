@@ -1,6 +1,6 @@
 # bgc: the README's two commands are `make run` and `make test`.
 PYTHON ?= python3
-SARIB = bgc simulate models/sarib.yaml --excitation chirp --no-states
+SARIB = bgc simulate models/sarib.yaml --excitation chirp --no-states --solver native
 
 .PHONY: install run demo test test-all bench generated clean
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "be8a146f54e6aa6e80a034f7e38a0561"
+MODEL_HASH = "a2deb2696368208694c1a6f48f5d5b68"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "c43f81e9e45706bdf1533e8c52a56cf4"
+MODEL_HASH = "aea56ffbb42e8747bae316d3c846b691"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "3fc0683238f6ab1ca2325f9daeaacd04"
+MODEL_HASH = "5d9099fe0faf97cceb95b619289f0975"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "65d5f098d0af0c42704464aa1b0e4b63"
+MODEL_HASH = "f237f7a2228e6aa993cb5f1b5c54174f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "b9a3aeed344163a74bac9e63d7f20558"
+MODEL_HASH = "217ee551771288c31df33226a4cd8608"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "e5d895572b161c7ed5d13d4823bfa5df"
+MODEL_HASH = "1ac82a7a4f90b2cc1aa866006b299d70"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

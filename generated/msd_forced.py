@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "fca626d451da56acdd23dfd399ae6060"
+MODEL_HASH = "0e27d13795c4177a3b549ac331fbfc36"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

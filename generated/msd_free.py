@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "63fa9934a67de583363c00dbbdb52cb7"
+MODEL_HASH = "758490582b01bd19aaa0ce947cb5a0f7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

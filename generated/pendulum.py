@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "937ac5674d04f91e26ce2d4e7a155d9b"
+MODEL_HASH = "3c2e34ba3348839f1f7e26f2ba5a70d4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "1bf615aaa84c4de8cd9bf527798ed75b"
+MODEL_HASH = "7dab0adba46c05ff91c05335dff49445"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "ce882398d703ff0ff7b00fc7b9738701"
+MODEL_HASH = "3a0f21f82a3099408a7d73cb47a41884"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

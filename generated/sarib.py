@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "f4b4dac00bac6e23ee23e1411e27b407"
+MODEL_HASH = "9776a046ae6f4d6e07ae7897a21e16a9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "6fe0635adee2ea31a1009f731e73bcdd"
+MODEL_HASH = "06f18eb55c240cb2b5f1a55d8552de87"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

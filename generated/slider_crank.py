@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "573b1ae9cb504f76f6a68b70ffcc0584"
+MODEL_HASH = "37e4faa5b9ef82db3502b7237f357020"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

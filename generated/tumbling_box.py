@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "cfeca5d0c24d50443f443d3a6f4356a1"
+MODEL_HASH = "271381a71739f1df20185df86a920ab6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

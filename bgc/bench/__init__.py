@@ -29,7 +29,7 @@ import numpy as np
 
 from . import charts, compile_cost, precision, stability
 from .cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
-from .peers import peers
+from .peers import at_equal_error, peers
 
 PARTS = ("peers", "precision", "stiffness", "stability", "compile")
 METHODS = ("parasitic", "lagrange", "zcp")
@@ -105,26 +105,42 @@ class Run:
             self.log(f"peers: {scn.title} ({method}, rtol = atol = {tol:g})")
             kw = {"integrators": integrators} if integrators else {}
             rs = peers(self.bench, scn, method, tol, self.repeats, **kw)
+            if scn.name == "sarib_chirp":
+                self._bdf_target(scn, method, tol, rs)
             rows += rs
             _, note = self.bench.reference(scn, method)
             self.summary.append(f"**{scn.title}**, method {method}, rtol = atol = {tol:g}; "
                                 f"median of {self.repeats} runs; error against {note}.\n")
-            self.table(rs, ["integrator", "wall_median", "time_vs_native", "error",
+            self.table(rs, ["integrator", "rtol", "wall_median", "time_vs_native", "error",
                             "steps", "rhs_calls", "jac_calls", "lu", "status"],
                        {"time_vs_native": lambda v: f"{v:.3g}x",
                         "status": lambda v: v[:70]})
-            if scn.name == "sarib_chirp":
-                nat = next(r for r in rs if r["integrator"] == "native")
-                bdf = next(r for r in rs if r["integrator"] == "bdf")
-                speed = bdf["wall_median"] / nat["wall_median"]
-                self.targets.append(
-                    f"SARIB 28 s pumping chirp, parasitic, rtol 1e-5: native "
-                    f"{nat['wall_median']:.3g} s, scipy BDF {bdf['wall_median']:.3g} s: "
-                    f"**{speed:.1f}x** (target >= 10x) at error {nat['error']:.2g} against "
-                    f"BDF's {bdf['error']:.2g} (target: equal or better): "
-                    + ("met" if speed >= 10 and nat["error"] <= bdf["error"] else "NOT met"))
         write_rows(self.out / "peers.csv", rows)
         self.data["peers"] = rows
+
+    def _bdf_target(self, scn, method, tol, rs):
+        """The target: native at least 10x faster than scipy BDF at the same tolerance, at
+        equal or better error; and, since native's error there is far smaller, the speed
+        at equal error too (native at the loosest tolerance that still reaches BDF's)."""
+        nat = next(r for r in rs if r["integrator"] == "native")
+        bdf = next(r for r in rs if r["integrator"] == "bdf")
+        speed = bdf["wall_median"] / nat["wall_median"]
+        text = (f"SARIB 28 s pumping chirp, {method}, rtol {tol:g}: native "
+                f"{nat['wall_median']:.3g} s, scipy BDF {bdf['wall_median']:.3g} s: "
+                f"**{speed:.1f}x** (target >= 10x) at error {nat['error']:.2g} against "
+                f"BDF's {bdf['error']:.2g} (target: equal or better): "
+                + ("met" if speed >= 10 and nat["error"] <= bdf["error"] else "NOT met"))
+        eq = at_equal_error(self.bench, scn, method, bdf["error"],
+                            [float(f"{tol * 10 ** k:.0e}") for k in range(1, 4)],
+                            self.repeats)
+        if eq is not None:
+            eq["integrator"] = "native (equal error)"
+            eq["time_vs_native"] = eq["wall_median"] / nat["wall_median"]
+            rs.append(eq)
+            text += (f". At equal error native needs only rtol {eq['rtol']:g}: "
+                     f"{eq['wall_median']:.3g} s at error {eq['error']:.2g}, "
+                     f"**{bdf['wall_median'] / eq['wall_median']:.1f}x** faster than BDF")
+        self.targets.append(text)
 
     def precision(self):
         fractions = precision.RK4_FRACTIONS

@@ -133,12 +133,14 @@ class EquationSystem:
     # closed); empty for an ODE
     algebraic: list[int] = field(default_factory=list)
     loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
+    scene: str = ""                 # reduced for a scene (bgc/scene.py): its name
 
     @property
     def variant(self) -> str:
-        """What the generated module is named and hashed by: the method, and for zcp
-        whether its loops were kept closed (``zcp_closed``)."""
-        return variant(self.method, not self.loops_closed)
+        """What the generated module is named and hashed by: the method, for zcp whether
+        its loops were kept closed (``zcp_closed``), and the scene it was reduced for."""
+        v = variant(self.method, not self.loops_closed)
+        return f"{v}_{self.scene}" if self.scene else v
 
     @property
     def tables(self) -> list[Table]:

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "a2deb2696368208694c1a6f48f5d5b68"
+MODEL_HASH = "cd209cb3111afb1e5839548eda8f7026"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

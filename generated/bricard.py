@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "577e9e0ee8d0c359c98702dff167a3ae"
+MODEL_HASH = "d33f2d4148dd0ee43acb5de45095247c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

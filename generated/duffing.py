@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "f237f7a2228e6aa993cb5f1b5c54174f"
+MODEL_HASH = "cf63f5fecf27f0936699cb409b5eddfc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "a8eb4abd278d917bdde8fd260526dfd0"
+MODEL_HASH = "aa98816bbb506aa6d10f0bbd4a206e78"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "f517c040fae999c608bc20c0c155325a"
+MODEL_HASH = "2bd7bd4daf2918491bfdccc2d67c837b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "1ac82a7a4f90b2cc1aa866006b299d70"
+MODEL_HASH = "1657c59992b67199b7a500a6a805ad5f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "758490582b01bd19aaa0ce947cb5a0f7"
+MODEL_HASH = "fd229ce71de4812f25e61cb81ac5071a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "3c2e34ba3348839f1f7e26f2ba5a70d4"
+MODEL_HASH = "e54e1e8a9cdd5ddb3e14d3e10d13797e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

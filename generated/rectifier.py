@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "7dab0adba46c05ff91c05335dff49445"
+MODEL_HASH = "fa13b8a902efed20960ca5eb0922e392"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "3a0f21f82a3099408a7d73cb47a41884"
+MODEL_HASH = "d79f98b122a4de2c53222cc72f1edca4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

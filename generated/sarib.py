@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "9776a046ae6f4d6e07ae7897a21e16a9"
+MODEL_HASH = "7f16e4d9782c8836bafaf467db212257"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

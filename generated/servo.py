@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "06f18eb55c240cb2b5f1a55d8552de87"
+MODEL_HASH = "0e929ee4e881df7e9b1a180903b15193"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "37e4faa5b9ef82db3502b7237f357020"
+MODEL_HASH = "9e4801390543e53c74292ee150f5eba9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

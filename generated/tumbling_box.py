@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "271381a71739f1df20185df86a920ab6"
+MODEL_HASH = "dc73608004277a27efc8af7cfb678d21"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -428,7 +428,8 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
 @click.option("--out", default="bench/results", show_default=True,
               type=click.Path(file_okay=False), help="where CSV, PNG and summary.md go")
 @click.option("--part", "parts", multiple=True,
-              type=click.Choice(["peers", "precision", "stiffness", "stability", "compile"]),
+              type=click.Choice(["peers", "precision", "stiffness", "stability", "compile",
+                                 "symmetry", "scenes"]),
               help="run only this part (repeatable; default: all)")
 @click.option("--quick", is_flag=True,
               help="every part at small scale (a slider-crank, a pendulum): minutes")

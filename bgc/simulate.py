@@ -135,7 +135,7 @@ class NativeSolver(Solver):
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
             res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                                mass, index2, rtol, atol, max_step, h_start,
+                                mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
                                 GUARD_TOLERANCE, max_steps, counts)
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])

@@ -7,6 +7,7 @@ what an integrator does not report is ``None``, never a made-up 0.
 from __future__ import annotations
 
 import abc
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,13 @@ class Problem:
 
     def rhs(self, t, x):
         return self.module.rhs(t, x, self.p)
+
+    @functools.cached_property
+    def lu_plan(self):
+        """The sparse elimination plan of its Newton matrices (``sparse_lu.analyse``)."""
+        from .sparse_lu import analyse
+        return analyse(len(self.module.STATE_NAMES), self.module.JAC_I, self.module.JAC_J,
+                       self.mass)
 
     def jac(self, t, x):
         return self.module.jac(t, x, self.p)

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "cd209cb3111afb1e5839548eda8f7026"
+MODEL_HASH = "a39c3b4a9fe18424559b809eda3d939b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

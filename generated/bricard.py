@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "d33f2d4148dd0ee43acb5de45095247c"
+MODEL_HASH = "677f94a6be55f27939e81ad770dbc09e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

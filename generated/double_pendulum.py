@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "42e7f08b6ae3702502d0ea70c511e2cb"
+MODEL_HASH = "8df6a7d18dd99076826eddb8d724ea1e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

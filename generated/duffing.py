@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "cf63f5fecf27f0936699cb409b5eddfc"
+MODEL_HASH = "ea4432d4b07e55b8447b6d67d0a74ff6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "aa98816bbb506aa6d10f0bbd4a206e78"
+MODEL_HASH = "f463e27c6d5fcb9fba8b4458b0d7ce3d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

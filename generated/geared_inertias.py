@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "2bd7bd4daf2918491bfdccc2d67c837b"
+MODEL_HASH = "9c08a92feb76ac8cb67f0c87d89002fd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

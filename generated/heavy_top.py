@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "fc43d608e6a61ef54a77f18cf8e9f27f"
+MODEL_HASH = "abf3e8299311ba2ab60440e35c92fc31"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "1657c59992b67199b7a500a6a805ad5f"
+MODEL_HASH = "236caa322fd5ef1d3c16aaaaf6e74ac5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "0b266afcec557aff66893a92203e7b09"
+MODEL_HASH = "f5a475ef565eebb210e37b22bdaa9128"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "fd229ce71de4812f25e61cb81ac5071a"
+MODEL_HASH = "216127f29596c8c676bef11c8190db7f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

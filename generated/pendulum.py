@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "e54e1e8a9cdd5ddb3e14d3e10d13797e"
+MODEL_HASH = "f6700b7cc221e78128769d30d07f888c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "95c709f335bb2b8c02abaf61fa6c6412"
+MODEL_HASH = "ebe5db8db19269d54ec9882c0701df9d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

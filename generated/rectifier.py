@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "fa13b8a902efed20960ca5eb0922e392"
+MODEL_HASH = "000b7d4447d3770c15647851fb0d6cb6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "d79f98b122a4de2c53222cc72f1edca4"
+MODEL_HASH = "ef590fa2927722591c0c43ccd617e796"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

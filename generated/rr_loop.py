@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "e572af3821eae7c72ae3a2682a13e154"
+MODEL_HASH = "b311b911be5d1e816707ee9587ae2af0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

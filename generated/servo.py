@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "0e929ee4e881df7e9b1a180903b15193"
+MODEL_HASH = "daf68441a13b4299d5abc3764e38d303"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "9e4801390543e53c74292ee150f5eba9"
+MODEL_HASH = "b73eefc61ea92314f4be830c514a6b10"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

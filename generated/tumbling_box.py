@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "dc73608004277a27efc8af7cfb678d21"
+MODEL_HASH = "d0824b643f9f136d42a98e0126c8da83"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

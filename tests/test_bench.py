@@ -94,3 +94,39 @@ def test_stability_maps_at_small_scale(gen_dir, tmp_path):
     assert all(r["status"] == "failed" for r in zc if r["integrator"] == "ida")
     for name in ("stability_rk4.png", "stability_drift.png", "stability_zcp.png"):
         assert (tmp_path / name).exists()
+
+
+def test_symmetry_part_charts_the_one_leg_model_against_the_full_rig(gen_dir, compiled,
+                                                                      tmp_path):
+    """The one-leg SARIB and the full rig over the same tolerances, both measured against
+    the full rig: the one leg is faster at every tolerance, and its error falls with the
+    tolerance to its modelling error; the summary tabulates both with the speed gain."""
+    compiled("sarib")          # the full rig, compiled once for the session
+    _bench(gen_dir, tmp_path, "symmetry")
+    rows = _rows(tmp_path / "symmetry.csv")
+    assert {r["model"] for r in rows} == {"sarib", "sarib_one_leg"}
+    assert all(r["status"] == "ok" for r in rows)
+    by = {(r["model"], float(r["setting"])): r for r in rows}
+    for tol in (1e-4, 1e-6):
+        assert float(by["sarib_one_leg", tol]["wall_time"]) < \
+            float(by["sarib", tol]["wall_time"])
+    assert float(by["sarib_one_leg", 1e-6]["error"]) < \
+        0.5 * float(by["sarib_one_leg", 1e-4]["error"])
+    assert float(by["sarib_one_leg", 1e-6]["error"]) < 1e-2
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## Symmetry" in summary and "speed_gain" in summary
+    assert (tmp_path / "symmetry.png").stat().st_size > 10000
+
+
+def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp_path):
+    """A four-bar scene: the reduced module has fewer states (the coupler's spin), both
+    were derived and compiled cold and run, and they answer alike."""
+    _bench(gen_dir, tmp_path, "scenes")
+    (row,) = _rows(tmp_path / "scenes.csv")
+    assert int(row["states_reduced"]) == int(row["states_full"]) - 1
+    for k in ("derive_reduced_s", "numba_cold_full_s", "numba_cold_reduced_s",
+              "run_full_s", "run_reduced_s"):
+        assert float(row[k]) > 0, k
+    assert float(row["output_difference"]) < 1e-6
+    assert "idle_dofs 36->35" in row["passes"]
+    assert "## Scenes" in (tmp_path / "summary.md").read_text()

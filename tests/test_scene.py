@@ -132,7 +132,10 @@ def test_bad_scene_gets_one_located_line(tmp_path, body, where, key):
 def test_shipped_scenes_load():
     scenes = sorted((ROOT / "scenes").glob("*.yaml"))
     assert {p.stem for p in scenes} == {f"{d}_{k}" for d in ("pumping", "roll", "pitch")
-                                        for k in ("constant", "sine", "chirp")}
+                                        for k in ("constant", "sine", "chirp")} | \
+        {"pumping_chirp_one_leg"}
+    assert load_scene(ROOT / "scenes" / "pumping_chirp_one_leg.yaml").model.stem == \
+        "sarib_one_leg"
     for p in scenes:
         sc = load_scene(p)
         assert sc.excitation["direction"] == p.stem.split("_")[0]

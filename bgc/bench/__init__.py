@@ -9,7 +9,11 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
 - ``stiffness``: the parasitic stiffness sweep, numerical against modelling error;
 - ``stability``: where each method fails and what bgc says (``stability.py``);
 - ``compile``: sympy, emit, numba cold and warm, module size, growth with the SARIB's
-  legs (``compile_cost.py``).
+  legs (``compile_cost.py``);
+- ``symmetry``: the one-leg SARIB against the full rig under pumping, its error next to
+  its speed (``symmetry.py``);
+- ``scenes``: each shipped scene's reduced module against the full model: states,
+  compile and run time, output difference (``scenes.py``).
 
 ``quick=True`` runs every part at small scale (a slider-crank, a pendulum, the SARIB's
 first two legs) for the tests.
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import json
 import os
 import platform
 import tempfile
@@ -27,11 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import charts, compile_cost, precision, stability
+from . import charts, compile_cost, precision, scenes, stability, symmetry
 from .cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
 from .peers import at_equal_error, peers
 
-PARTS = ("peers", "precision", "stiffness", "stability", "compile")
+PARTS = ("peers", "precision", "stiffness", "stability", "compile", "symmetry", "scenes")
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 METHODS = ("parasitic", "lagrange", "zcp")
 
 FOUR_BAR = Scenario("four_bar", "spatial RSSR four-bar, 1 s", MODELS / "four_bar.yaml", 1.0,
@@ -324,16 +330,103 @@ class Run:
                     f"{'met' if r['warm_to_first_step_s'] < 2 else 'NOT met'})")
         self.data["compile"] = {"methods": rows, "growth": growth}
 
-    def write_summary(self, parts) -> Path:
+    def symmetry(self):
+        """The one-leg SARIB (issue 7): what the symmetry shortcut costs in accuracy, next
+        to what it saves in time."""
+        full = sarib("sarib_sine")
+        tols = precision.TOLERANCES[:-1]
+        if self.quick:
+            full = replace(full, t_end=0.1, points=101, title="SARIB pumping sine at 18 Hz, "
+                                                              "0.1 s from rest")
+            tols = (1e-4, 1e-6)
+        self.log(f"symmetry: one leg against the full rig, {full.title}")
+        rows = symmetry.symmetry(self.bench, full, tols, self.budget)
+        write_rows(self.out / "symmetry.csv", rows)
+        charts.work_precision([{**r, "method": r["model"]} for r in rows],
+                              self.out / "symmetry.png",
+                              f"one leg against the full rig: {full.title}",
+                              "error against the full rig (parasitic) at rtol = atol = "
+                              f"{full.ref_tol:g}; native Radau")
+        self.summary.append("## Symmetry: the one-leg SARIB against the full rig\n")
+        self.summary.append(
+            f"{full.title}, parasitic, native Radau (`symmetry.png`); outputs "
+            f"{', '.join(symmetry.OUTPUTS)}; error against the full rig at rtol = atol = "
+            f"{full.ref_tol:g}. The one-leg model's floor is what the shortcut costs; "
+            "speed gain = full rig's time / one leg's at the same tolerance.\n")
+        by_tol = {}
+        for r in rows:
+            by_tol.setdefault(r["setting"], {})[r["model"]] = r
+        table = []
+        for tol, pair in sorted(by_tol.items(), reverse=True):
+            f, o = pair.get("sarib"), pair.get("sarib_one_leg")
+            if f and o and f["status"] == o["status"] == "ok":
+                table.append({"rtol": tol, "full_error": f["error"],
+                              "one_leg_error": o["error"], "full_s": f["wall_time"],
+                              "one_leg_s": o["wall_time"],
+                              "speed_gain": f["wall_time"] / o["wall_time"]})
+        self.table(table, ["rtol", "full_error", "one_leg_error", "full_s", "one_leg_s",
+                           "speed_gain"], {"speed_gain": lambda v: f"{v:.3g}x"})
+        self.data["symmetry"] = rows
+
+    def scenes(self):
+        """Each shipped scene (quick: a four-bar scene) reduced against its full model."""
+        from ..scene import load_scene
+        if self.quick:
+            path = self.out / "build" / "four_bar_scene.yaml"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(f"model: {MODELS / 'four_bar.yaml'}\noutputs: [crank_angle, "
+                            "rocker_angle]\ntime: {end: 0.5, points: 51}\n"
+                            "tolerances: {rtol: 1.0e-8, atol: 1.0e-10}\nsolver: native\n")
+            files = [path]
+        else:
+            files = sorted(SCENES.glob("*.yaml"))
+        self.log(f"scenes: {len(files)} scenes, reduced against their full models")
+        rows = scenes.measure([load_scene(f) for f in files], self.bench.build, self.log)
+        write_rows(self.out / "scenes.csv", rows)
+        self.summary.append("## Scenes: what the reduction passes gain\n")
+        self.summary.append(
+            "Each scene's reduced module (`bgc run SCENE`) against the full model under the "
+            "scene's method, on the scene's own settings (`scenes.csv`): derivation (sympy "
+            "and emit) and cold numba compile (a fresh interpreter, empty cache), run time "
+            "(warm), and the largest difference of the scene's outputs relative to each "
+            "output's peak. The full model's compile is the model's, shared by its "
+            "scenes.\n")
+        self.table(rows, ["scene", "states_full", "states_reduced", "params_reduced",
+                          "derive_full_s", "derive_reduced_s", "numba_cold_full_s",
+                          "numba_cold_reduced_s", "run_full_s", "run_reduced_s",
+                          "run_gain", "output_difference"],
+                   {"run_gain": lambda v: f"{v:.3g}x"})
+        self.data["scenes"] = rows
+
+    def run_part(self, part: str) -> None:
+        """Run one part and keep what it says in ``out/parts/<part>.json``, so a part
+        can be run again alone (``--part``) without losing the others' summary."""
+        self.summary, self.targets = [], []
+        getattr(self, part)()
+        fragment = {"part": part, "quick": self.quick, "date": str(datetime.date.today()),
+                    "machine": machine(), "summary": self.summary, "targets": self.targets}
+        path = self.out / "parts" / f"{part}.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(fragment, indent=1) + "\n")
+
+    def write_summary(self) -> tuple[Path, list[str]]:
+        """summary.md from every part's fragment in ``out/parts`` (in PARTS order), each
+        dated with its machine; the targets first."""
+        frags = [json.loads((self.out / "parts" / f"{p}.json").read_text()) for p in PARTS
+                 if (self.out / "parts" / f"{p}.json").exists()]
+        targets = [t for f in frags for t in f["targets"]]
         head = [f"# bgc bench ({'quick' if self.quick else 'full'})", "",
-                f"{datetime.date.today()}; {machine()}; parts: {', '.join(parts)}.", "",
                 "Times are wall-clock seconds of one process on a shared machine: compare "
-                "the ratios within this run, not absolute times across runs.", ""]
-        if self.targets:
-            head += ["## Targets", ""] + [f"- {t}" for t in self.targets] + [""]
+                "the ratios within a part's run, not absolute times across runs.", ""]
+        if targets:
+            head += ["## Targets", ""] + [f"- {t}" for t in targets] + [""]
+        body = []
+        for f in frags:
+            body += f["summary"][:1] + [f"*Run {f['date']} on {f['machine']}.*", ""] \
+                + f["summary"][1:]
         path = self.out / "summary.md"
-        path.write_text("\n".join(head + self.summary) + "\n")
-        return path
+        path.write_text("\n".join(head + body) + "\n")
+        return path, targets
 
 
 def run(out: str | Path = "bench/results", parts=PARTS, quick: bool = False,
@@ -344,6 +437,6 @@ def run(out: str | Path = "bench/results", parts=PARTS, quick: bool = False,
     out.mkdir(parents=True, exist_ok=True)
     r = Run(out, quick, repeats, budget, log, build)
     for part in parts:
-        getattr(r, part)()
-    summary = r.write_summary(parts)
-    return {"summary": str(summary), "targets": r.targets, "data": r.data}
+        r.run_part(part)
+    summary, targets = r.write_summary()
+    return {"summary": str(summary), "targets": targets, "data": r.data}

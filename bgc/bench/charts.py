@@ -23,8 +23,10 @@ def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
             series.setdefault((r["method"], r["integrator"]), []).append(
                 (r["error"], r["wall_time"]))
     colours = {}
+    # colour by integrator; by method where there is only one integrator
+    by_method = len({i for _, i in series}) == 1
     for (method, integrator), pts in sorted(series.items()):
-        c = colours.setdefault(integrator, f"C{len(colours)}")
+        c = colours.setdefault(method if by_method else integrator, f"C{len(colours)}")
         e, w = np.array(sorted(pts, key=lambda q: -q[0])).T
         ax.loglog(e, w, marker=_MARKERS.get(method, "o"), ls=_LINES.get(integrator, "-"),
                   color=c, ms=4, lw=1.1, label=f"{method} / {integrator}")

@@ -15,8 +15,10 @@ from bgc.pipeline import compile_model
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
-# models whose numba compilation and runs take minutes: their tests are marked slow
-SLOW_MODELS = {"sarib"}
+# models whose numba compilation and runs take minutes: their tests are marked slow (the
+# one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
+# CI scale)
+SLOW_MODELS = {"sarib", "sarib_one_leg"}
 
 
 def model_params(names=None):

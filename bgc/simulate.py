@@ -190,7 +190,11 @@ class NativeSolver(Solver):
         the step against the stability limit there (the spectrum moves with the state)."""
         if self.loop != "rk4":
             return "the state became non-finite"
-        h_max, lam = rk4.stable_step(np.linalg.eigvals(problem.jac(t, x)))
+        J = problem.jac(t, x)
+        if not np.all(np.isfinite(J)):     # a singular configuration: no spectrum there
+            return (f"the state became non-finite after t = {t:.6g}, where the Jacobian "
+                    "already is not (a singular configuration, or beyond the model's range)")
+        h_max, lam = rk4.stable_step(np.linalg.eigvals(J))
         if problem.step > h_max:
             return (f"the state became non-finite: the step {problem.step:.3g} s is beyond "
                     f"the stability limit {h_max:.3g} s there (lambda = {lam:.4g} 1/s)")

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "a39c3b4a9fe18424559b809eda3d939b"
+MODEL_HASH = "9bbe986f47fcbb2303b16fca65b4108a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

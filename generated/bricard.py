@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "677f94a6be55f27939e81ad770dbc09e"
+MODEL_HASH = "fba16e3b6e9395ac808895e2edcfd58a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "8d9e9746221dc242e4252d09be6bfcda"
+MODEL_HASH = "be4d325c3164c35fae3096c7278d34aa"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

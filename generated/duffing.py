@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "ea4432d4b07e55b8447b6d67d0a74ff6"
+MODEL_HASH = "76b0c84d00045aea0dee2f1523810a13"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

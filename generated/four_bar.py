@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "f463e27c6d5fcb9fba8b4458b0d7ce3d"
+MODEL_HASH = "8033b5345bbb97954ee1363c33f2763f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

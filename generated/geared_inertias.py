@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "9c08a92feb76ac8cb67f0c87d89002fd"
+MODEL_HASH = "0e2d0ced122215aa994b29b3d4304afc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "abf3e8299311ba2ab60440e35c92fc31"
+MODEL_HASH = "3786f055970b992575067008d5f6b193"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

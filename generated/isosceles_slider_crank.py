@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "236caa322fd5ef1d3c16aaaaf6e74ac5"
+MODEL_HASH = "a42236ac5c99c05db5f808516d703b75"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "216127f29596c8c676bef11c8190db7f"
+MODEL_HASH = "9a7a6df341913ce5152df8a751ef7725"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

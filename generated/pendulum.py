@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "f6700b7cc221e78128769d30d07f888c"
+MODEL_HASH = "691260ce3abcb1fd6763350a06bfb1cf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "ebe5db8db19269d54ec9882c0701df9d"
+MODEL_HASH = "38a1eed4aaec20a5ad7a1e5f453c369c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "000b7d4447d3770c15647851fb0d6cb6"
+MODEL_HASH = "9ba4ad588a698927d8b524602f31c58d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

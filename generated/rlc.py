@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "ef590fa2927722591c0c43ccd617e796"
+MODEL_HASH = "658423b0a7c7831103723fdfd84510db"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

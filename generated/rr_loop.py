@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "b311b911be5d1e816707ee9587ae2af0"
+MODEL_HASH = "8adc3698b5ba7aee5b6062e7900c1bcf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

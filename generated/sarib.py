@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "0fdbe05845e2e34b5c6a602964b0aeb1"
+MODEL_HASH = "306bb3765b36a580bfe2f5da448262e7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

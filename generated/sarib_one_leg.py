@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "cb8e93d5d07d3dec82f69b9eadd749c7"
+MODEL_HASH = "84b6492abfac17a035f992592dcaed82"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

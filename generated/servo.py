@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "daf68441a13b4299d5abc3764e38d303"
+MODEL_HASH = "121963bf0acf803629764a2cb7ae8248"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

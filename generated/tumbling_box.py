@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "d0824b643f9f136d42a98e0126c8da83"
+MODEL_HASH = "9cb2a3cda544cacb1900013923554a1b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

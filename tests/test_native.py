@@ -133,3 +133,16 @@ def test_cli_lists_the_solvers_and_reports_native_statistics(compiled, gen_dir):
     st = json.loads(r.output)["stats"]
     assert st["steps"] > 0 and st["rhs_calls"] > 0 and st["lu_decompositions"] > 0
     assert st["rejected_steps"] is not None and st["wall_time"] > 0
+
+
+def test_rk4_divergence_at_a_singular_configuration_is_reported_not_raised():
+    """The last finite state of a diverging rk4 run can sit where the Jacobian itself is
+    not finite (Andrews' mechanism past a singular configuration under lagrange): bgc says
+    so instead of failing in the eigenvalue check of its stability limit."""
+    from types import SimpleNamespace
+
+    from bgc.solver import Problem
+    module = SimpleNamespace(jac=lambda t, x, p: np.full((2, 2), np.nan))
+    why = SOLVERS["rk4"]._diverged(Problem(module, np.zeros(0), step=1e-3), 0.25,
+                                   np.zeros(2))
+    assert "non-finite after t = 0.25" in why and "Jacobian" in why

@@ -202,19 +202,25 @@ class NativeSolver(Solver):
                 f"stability limit {h_max:.3g} s there: the model itself diverges")
 
     def _locate(self, problem, a, b, x, sel, rtol, atol, max_step, stats, event, before, xs):
-        """An event changed sign on [a, b] (from ``x`` at a): bisect by re-integrating."""
+        """An event changed sign on [a, b] (from ``x`` at a): bisect by re-integrating
+        each half from the last point where the sign had not changed (so the search
+        costs about twice the interval, not a run from ``a`` per halving), keeping the
+        requested outputs on the way."""
         k, fun = event
-        lo, hi = a, b
-        empty = np.empty(0)
+        lo, x_lo, hi, done = a, x, b, 0
         while hi - lo > 1e-12 * max(1.0, abs(hi)):
             mid = 0.5 * (lo + hi)
-            x_mid = self._run(problem, a, mid, x, empty, rtol, atol, max_step, stats)[3]
+            pts = sel[done:]
+            out, n, _, x_mid, _, _, _ = self._run(problem, lo, mid, x_lo, pts[pts <= mid],
+                                                  rtol, atol, max_step, stats)
             if np.sign(fun(mid, x_mid)) == np.sign(before):
-                lo = mid
+                xs.append(out[:n])
+                lo, x_lo, done = mid, x_mid, done + n
             else:
                 hi = mid
-        out, n, t_r, x_r, _, _, _ = self._run(problem, a, hi, x, sel[sel <= hi], rtol, atol,
-                                              max_step, stats)
+        pts = sel[done:]
+        out, n, t_r, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], rtol,
+                                              atol, max_step, stats)
         xs.append(out[:n])
         return Segment(np.vstack(xs), np.array(x_r), float(hi), False, "", event=k)
 

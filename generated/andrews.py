@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "9bbe986f47fcbb2303b16fca65b4108a"
+MODEL_HASH = "5067f62045247e9eeb95dda6d119860b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "fba16e3b6e9395ac808895e2edcfd58a"
+MODEL_HASH = "7c83e4f4f3811a5a81088c1824cc1bcc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

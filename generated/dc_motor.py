@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "be4d325c3164c35fae3096c7278d34aa"
+MODEL_HASH = "4683fecec32f1949e7617fed2e2c0fa7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "e0dfe0a5d9a1ad582f95a7dfa7b1008b"
+MODEL_HASH = "676dbf88efd14e9031ea7ba4a4a8f381"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "76b0c84d00045aea0dee2f1523810a13"
+MODEL_HASH = "5bdf60044473dd2da13b0b81642d2eed"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

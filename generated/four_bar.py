@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "8033b5345bbb97954ee1363c33f2763f"
+MODEL_HASH = "76a388e20d60a202af36fee160f73c81"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "3786f055970b992575067008d5f6b193"
+MODEL_HASH = "11aac5a825b5a3c4b5c45cdf7e4e82b8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "a42236ac5c99c05db5f808516d703b75"
+MODEL_HASH = "cdce8d56c768512bfb7840d0d52fa560"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

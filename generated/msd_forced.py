@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "5e5c264f2c7fd624dfc4b184a01b7a24"
+MODEL_HASH = "df61aba8190d071d6abe194873be1047"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "691260ce3abcb1fd6763350a06bfb1cf"
+MODEL_HASH = "fa5845c065412bd68a024e7898ca78bf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "38a1eed4aaec20a5ad7a1e5f453c369c"
+MODEL_HASH = "ce88313e8f8e9d11094624c2747e01ab"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

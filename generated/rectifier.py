@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "9ba4ad588a698927d8b524602f31c58d"
+MODEL_HASH = "dfbebfa054f3a1ebeb807552583afcd9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "8adc3698b5ba7aee5b6062e7900c1bcf"
+MODEL_HASH = "75ee3f4c8be420e35ef06616d882a238"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "306bb3765b36a580bfe2f5da448262e7"
+MODEL_HASH = "5b8b7234d36e65757e802b892b9fd9ac"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "84b6492abfac17a035f992592dcaed82"
+MODEL_HASH = "c45fa17a69f244cad245f05b417d3f32"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "121963bf0acf803629764a2cb7ae8248"
+MODEL_HASH = "2733255a3e810e24cc296a92f00e0aaf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "f045f664d0472d03c0dec47f7ba6a833"
+MODEL_HASH = "4966d08a380e96bcc6cebc02b1f94860"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

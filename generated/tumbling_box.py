@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "9cb2a3cda544cacb1900013923554a1b"
+MODEL_HASH = "d08bbbe76bf44acab66df6a7688696ab"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -402,9 +402,14 @@ class Run:
         """Run one part and keep what it says in ``out/parts/<part>.json``, so a part
         can be run again alone (``--part``) without losing the others' summary."""
         self.summary, self.targets = [], []
+        # the machine's load over the part: times taken beside other work are not
+        # comparable with times taken alone, and the summary says which these are
+        load0 = os.getloadavg()[0]
         getattr(self, part)()
+        load = f"load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         fragment = {"part": part, "quick": self.quick, "date": str(datetime.date.today()),
-                    "machine": machine(), "summary": self.summary, "targets": self.targets}
+                    "machine": f"{machine()}; {load}", "summary": self.summary,
+                    "targets": self.targets}
         path = self.out / "parts" / f"{part}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(fragment, indent=1) + "\n")

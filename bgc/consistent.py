@@ -228,7 +228,7 @@ def drift_history(module, xs, p) -> tuple[np.ndarray, np.ndarray]:
 def drift(module, xs, p) -> tuple[float, float]:
     """Largest |g| and |dg/dt| over the states ``xs`` (rows)."""
     g_t, v_t = drift_history(module, xs, p)
-    return float(g_t.max(initial=0.0)), float(v_t.max(initial=0.0))
+    return float(np.nanmax(g_t, initial=0.0)), float(np.nanmax(v_t, initial=0.0))
 
 
 def drift_limit(module, x, rtol: float, atol: float) -> float:

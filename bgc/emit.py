@@ -98,11 +98,8 @@ def _body(assignments):
                 lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.tear_eqs)]
             else:
                 lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
-            if item.rank is None:
-                lines.append(f"_u{k} = np.linalg.solve(_A{k}, _b{k})")
-            else:
-                lines.append(f"_u{k} = _kkt_solve(_A{k}, _b{k}.reshape(({n}, 1)), "
-                             f"{code(item.rank)})[:, 0]")
+            rank = str(n) if item.rank is None else code(item.rank)
+            lines.append(f"_u{k} = _block_solve(_A{k}, _b{k}.reshape(({n}, 1)), {rank})[:, 0]")
             lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
         else:
             v, e = item
@@ -117,9 +114,10 @@ def _prologue(system, used):
     return params, unpack
 
 
-def _jac_lines(jt, kkt: dict) -> list[str]:
+def _jac_lines(jt, ranks: dict) -> list[str]:
     """The jac tail: run-time partials, the tape segments with block solves between
-    (``kkt``: index -> rank expression of the constraint blocks, ``_kkt_solve``)."""
+    (``ranks``: index -> rank expression of the constraint blocks; an algebraic loop's
+    block has full rank)."""
     lines = [f"_pv = np.empty({len(jt.partials) + 1})", "_pv[0] = 1.0"]
     lines += [f"_pv[{k}] = {code(d)}" for k, d in jt.partials]
     lines.append(f"_d = np.zeros(({jt.n_rows}, {jt.n_colours}))")
@@ -130,9 +128,8 @@ def _jac_lines(jt, kkt: dict) -> list[str]:
             b = seg[1]
             r, n = b.start, b.n
             R = f"_d[{r}:{r + n}, :]"
-            solve = (f"_kkt_solve(_A{b.index}, {R}, {code(kkt[b.index])})" if b.index in kkt
-                     else f"np.linalg.solve(_A{b.index}, {R})")
-            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = {solve}")
+            rank = code(ranks[b.index]) if b.index in ranks else str(n)
+            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = _block_solve(_A{b.index}, {R}, {rank})")
     return lines
 
 
@@ -199,8 +196,9 @@ def render(system: EquationSystem) -> str:
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
     con_asg, con_used = _cone(system.assignments, con_exprs)
-    kkt = {it.index: it.rank for it in system.assignments
-           if isinstance(it, LinearBlock) and it.rank is not None}
+    ranks = {it.index: it.rank for it in system.assignments
+             if isinstance(it, LinearBlock) and it.rank is not None}
+    blocks = any(isinstance(it, LinearBlock) for it in system.assignments)
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     funcs = {}
     for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
@@ -229,8 +227,8 @@ def render(system: EquationSystem) -> str:
                 for tb in system.tables],
         n=len(system.states),
         rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
-        jac_out=_jac_lines(jt, kkt),
-        kkt=bool(kkt),
+        jac_out=_jac_lines(jt, ranks),
+        blocks=blocks,
         constraint_names=[n for n, _, _ in system.constraints],
         has_position=[int(g is not None) for _, g, _ in system.constraints],
         imposed=[int(n in system.imposed) for n, _, _ in system.constraints],

@@ -479,13 +479,15 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         len(t_all), len(module.OUTPUT_NAMES))
     if projection is not None and len(x_all):
         g_t, v_t = consistent.drift_history(module, x_all, p)
-        stats.drift_position, stats.drift_velocity = float(g_t.max()), float(v_t.max())
+        # a state gone non-finite has no drift: NaN there, the run's message says why
+        stats.drift_position = float(np.nanmax(g_t, initial=0.0))
+        stats.drift_velocity = float(np.nanmax(v_t, initial=0.0))
         singular = None if ok or hint == _SINGULAR_HINT or monitor is None else _singular(
             monitor, seg, consistent.LOST_RANK)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
         limit = consistent.drift_limit(module, x_all[0], rtol, atol)
-        if ok and check_drift and g_t.max() > limit:   # joints apart: keep the run to there
+        if ok and check_drift and stats.drift_position > limit:   # joints apart: keep the run
             k = int(np.argmax(g_t > limit))
             ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]

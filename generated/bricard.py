@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "7c83e4f4f3811a5a81088c1824cc1bcc"
+MODEL_HASH = "2ebac00efe18829783ba9dc06f6e04a0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

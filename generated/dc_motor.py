@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "4683fecec32f1949e7617fed2e2c0fa7"
+MODEL_HASH = "dfcafa4ce3bccdee22c3d96dece362f9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "676dbf88efd14e9031ea7ba4a4a8f381"
+MODEL_HASH = "f4611bc7442ead5ab30d3ea9dbb3e1ec"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -120,22 +120,22 @@ def rhs(t, x, p):
     ROT_rod1__02 = 0.4999999999932617*COS_X_rod1__ax*COS_X_rod1__ay - 0.866025403788329*COS_X_rod1__ay*SIN_X_rod1__ax
     ROT_rod2__01 = -1.0*COS_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__02 = 1.0*SIN_X_rod2__ay
-    E_b__elbow__tx__1__elbow__tx__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__01 - 0.3999999999880701*ROT_rod1__02 + 4.1767330002248373e-10*ROT_rod2__01 - 0.199999999336709*ROT_rod2__02 - X_rod1__x + X_rod2__x) - P_elbow__tx_load
+    E_b__elbow__tx__1__elbow__tx__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__01 - 0.39999999998807007*ROT_rod1__02 + 4.1767329872488546e-10*ROT_rod2__01 - 0.19999999933670898*ROT_rod2__02 - X_rod1__x + X_rod2__x) - P_elbow__tx_load
     F_b__rod1__w__rod1__J__y = 75.01875468867217*X_rod1__J__py
     F_b__rod1__w__rod1__J__z = 2000.0*X_rod1__J__pz
-    F_b__rod1__elbow__x__rod1__elbow__R__x = 0.3999999999880701*F_b__rod1__w__rod1__J__y - 1.0000047671256895e-11*F_b__rod1__w__rod1__J__z
+    F_b__rod1__elbow__x__rod1__elbow__R__x = 0.39999999998807007*F_b__rod1__w__rod1__J__y - 1.0000056338554941e-11*F_b__rod1__w__rod1__J__z
     F_b__rod1__w__rod1__J__x = 75.01875468867217*X_rod1__J__px
-    F_b__rod1__elbow__x__rod1__elbow__R__y = -0.3999999999880701*F_b__rod1__w__rod1__J__x
-    F_b__rod1__elbow__x__rod1__elbow__R__z = 1.0000047671256895e-11*F_b__rod1__w__rod1__J__x
+    F_b__rod1__elbow__x__rod1__elbow__R__y = -0.39999999998807007*F_b__rod1__w__rod1__J__x
+    F_b__rod1__elbow__x__rod1__elbow__R__z = 1.0000056338554941e-11*F_b__rod1__w__rod1__J__x
     ROT_rod1__00 = -0.4999999999932617*COS_X_rod1__ax*COS_X_rod1__az*SIN_X_rod1__ay + 0.866025403788329*COS_X_rod1__ax*SIN_X_rod1__az + 0.866025403788329*COS_X_rod1__az*SIN_X_rod1__ax*SIN_X_rod1__ay + 0.4999999999932617*SIN_X_rod1__ax*SIN_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__x = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__00 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__01 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__02
     F_b__rod1__elbow__0__rod1__elbow__x = F_b__rod1__elbow__R__rod1__elbow__0__x + F_b__rod1__v__rod1__m__x
     F_b__rod2__w__rod2__J__y = 149.99250037498123*X_rod2__J__py
     F_b__rod2__w__rod2__J__z = 4000.0*X_rod2__J__pz
-    F_b__rod2__elbow__x__rod2__elbow__R__x = -0.199999999336709*F_b__rod2__w__rod2__J__y - 4.1767330002248373e-10*F_b__rod2__w__rod2__J__z
+    F_b__rod2__elbow__x__rod2__elbow__R__x = -0.19999999933670898*F_b__rod2__w__rod2__J__y - 4.1767329872488546e-10*F_b__rod2__w__rod2__J__z
     F_b__rod2__w__rod2__J__x = 149.99250037498123*X_rod2__J__px
-    F_b__rod2__elbow__x__rod2__elbow__R__y = 0.199999999336709*F_b__rod2__w__rod2__J__x
-    F_b__rod2__elbow__x__rod2__elbow__R__z = 4.1767330002248373e-10*F_b__rod2__w__rod2__J__x
+    F_b__rod2__elbow__x__rod2__elbow__R__y = 0.19999999933670898*F_b__rod2__w__rod2__J__x
+    F_b__rod2__elbow__x__rod2__elbow__R__z = 4.1767329872488546e-10*F_b__rod2__w__rod2__J__x
     ROT_rod2__00 = 1.0*COS_X_rod2__ay*COS_X_rod2__az
     F_b__rod2__elbow__R__rod2__elbow__0__x = F_b__rod2__elbow__x__rod2__elbow__R__x*ROT_rod2__00 + F_b__rod2__elbow__x__rod2__elbow__R__y*ROT_rod2__01 + F_b__rod2__elbow__x__rod2__elbow__R__z*ROT_rod2__02
     F_b__rod2__v__rod2__m__x = 2.0*X_rod2__m__px
@@ -143,10 +143,10 @@ def rhs(t, x, p):
     F_b__elbow__tx__elbow__tx__1 = -F_b__rod1__elbow__0__rod1__elbow__x + F_b__rod2__elbow__0__rod2__elbow__x
     E_b__elbow__tx__1__elbow__tx__Lc = F_b__elbow__tx__elbow__tx__1*P_elbow__damping
     E_b__elbow__tx__elbow__tx__1 = E_b__elbow__tx__1__elbow__tx__L + E_b__elbow__tx__1__elbow__tx__Lc
-    E_b__shoulder__tx__1__shoulder__tx__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__01 - 0.3999999999880701*ROT_rod1__02 + X_rod1__x) - P_shoulder__tx_load
-    F_b__rod1__shoulder__x__rod1__shoulder__R__x = -0.3999999999880701*F_b__rod1__w__rod1__J__y + 1.0000047671256895e-11*F_b__rod1__w__rod1__J__z
-    F_b__rod1__shoulder__x__rod1__shoulder__R__y = 0.3999999999880701*F_b__rod1__w__rod1__J__x
-    F_b__rod1__shoulder__x__rod1__shoulder__R__z = -1.0000047671256895e-11*F_b__rod1__w__rod1__J__x
+    E_b__shoulder__tx__1__shoulder__tx__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__01 - 0.39999999998807007*ROT_rod1__02 + X_rod1__x) - P_shoulder__tx_load
+    F_b__rod1__shoulder__x__rod1__shoulder__R__x = -0.39999999998807007*F_b__rod1__w__rod1__J__y + 1.0000056338554941e-11*F_b__rod1__w__rod1__J__z
+    F_b__rod1__shoulder__x__rod1__shoulder__R__y = 0.39999999998807007*F_b__rod1__w__rod1__J__x
+    F_b__rod1__shoulder__x__rod1__shoulder__R__z = -1.0000056338554941e-11*F_b__rod1__w__rod1__J__x
     F_b__rod1__shoulder__R__rod1__shoulder__0__x = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__00 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__01 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__02
     F_b__rod1__shoulder__0__rod1__shoulder__x = F_b__rod1__shoulder__R__rod1__shoulder__0__x + F_b__rod1__v__rod1__m__x
     E_b__shoulder__tx__1__shoulder__tx__Lc = F_b__rod1__shoulder__0__rod1__shoulder__x*P_shoulder__damping
@@ -156,7 +156,7 @@ def rhs(t, x, p):
     ROT_rod1__12 = 1.0*SIN_X_rod1__ay
     ROT_rod2__11 = -0.8164965809135936*COS_X_rod2__ax*COS_X_rod2__az + 0.5773502692096121*COS_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az + 0.5773502692096121*COS_X_rod2__az*SIN_X_rod2__ax + 0.8164965809135936*SIN_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__12 = 0.5773502692096121*COS_X_rod2__ax*COS_X_rod2__ay + 0.8164965809135936*COS_X_rod2__ay*SIN_X_rod2__ax
-    E_b__elbow__ty__1__elbow__ty__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__11 - 0.3999999999880701*ROT_rod1__12 + 4.1767330002248373e-10*ROT_rod2__11 - 0.199999999336709*ROT_rod2__12 - X_rod1__y + X_rod2__y) - P_elbow__ty_load
+    E_b__elbow__ty__1__elbow__ty__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__11 - 0.39999999998807007*ROT_rod1__12 + 4.1767329872488546e-10*ROT_rod2__11 - 0.19999999933670898*ROT_rod2__12 - X_rod1__y + X_rod2__y) - P_elbow__ty_load
     ROT_rod1__10 = 1.0*COS_X_rod1__ay*COS_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__y = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__10 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__11 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__12
     F_b__rod1__elbow__0__rod1__elbow__y = F_b__rod1__elbow__R__rod1__elbow__0__y + F_b__rod1__v__rod1__m__y
@@ -167,7 +167,7 @@ def rhs(t, x, p):
     F_b__elbow__ty__elbow__ty__1 = -F_b__rod1__elbow__0__rod1__elbow__y + F_b__rod2__elbow__0__rod2__elbow__y
     E_b__elbow__ty__1__elbow__ty__Lc = F_b__elbow__ty__elbow__ty__1*P_elbow__damping
     E_b__elbow__ty__elbow__ty__1 = E_b__elbow__ty__1__elbow__ty__L + E_b__elbow__ty__1__elbow__ty__Lc
-    E_b__shoulder__ty__1__shoulder__ty__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__11 - 0.3999999999880701*ROT_rod1__12 + X_rod1__y) - P_shoulder__ty_load
+    E_b__shoulder__ty__1__shoulder__ty__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__11 - 0.39999999998807007*ROT_rod1__12 + X_rod1__y) - P_shoulder__ty_load
     F_b__rod1__shoulder__R__rod1__shoulder__0__y = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__10 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__11 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__12
     F_b__rod1__shoulder__0__rod1__shoulder__y = F_b__rod1__shoulder__R__rod1__shoulder__0__y + F_b__rod1__v__rod1__m__y
     E_b__shoulder__ty__1__shoulder__ty__Lc = F_b__rod1__shoulder__0__rod1__shoulder__y*P_shoulder__damping
@@ -177,7 +177,7 @@ def rhs(t, x, p):
     ROT_rod1__22 = -0.866025403788329*COS_X_rod1__ax*COS_X_rod1__ay - 0.4999999999932617*COS_X_rod1__ay*SIN_X_rod1__ax
     ROT_rod2__21 = -0.5773502692096121*COS_X_rod2__ax*COS_X_rod2__az - 0.8164965809135936*COS_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az - 0.8164965809135936*COS_X_rod2__az*SIN_X_rod2__ax + 0.5773502692096121*SIN_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__22 = -0.8164965809135936*COS_X_rod2__ax*COS_X_rod2__ay + 0.5773502692096121*COS_X_rod2__ay*SIN_X_rod2__ax
-    E_b__elbow__tz__1__elbow__tz__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__21 - 0.3999999999880701*ROT_rod1__22 + 4.1767330002248373e-10*ROT_rod2__21 - 0.199999999336709*ROT_rod2__22 - X_rod1__z + X_rod2__z) - P_elbow__tz_load
+    E_b__elbow__tz__1__elbow__tz__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__21 - 0.39999999998807007*ROT_rod1__22 + 4.1767329872488546e-10*ROT_rod2__21 - 0.19999999933670898*ROT_rod2__22 - X_rod1__z + X_rod2__z) - P_elbow__tz_load
     ROT_rod1__20 = 0.866025403788329*COS_X_rod1__ax*COS_X_rod1__az*SIN_X_rod1__ay + 0.4999999999932617*COS_X_rod1__ax*SIN_X_rod1__az + 0.4999999999932617*COS_X_rod1__az*SIN_X_rod1__ax*SIN_X_rod1__ay - 0.866025403788329*SIN_X_rod1__ax*SIN_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__z = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__20 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__21 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__22
     F_b__rod1__elbow__0__rod1__elbow__z = F_b__rod1__elbow__R__rod1__elbow__0__z + F_b__rod1__v__rod1__m__z
@@ -188,7 +188,7 @@ def rhs(t, x, p):
     F_b__elbow__tz__elbow__tz__1 = -F_b__rod1__elbow__0__rod1__elbow__z + F_b__rod2__elbow__0__rod2__elbow__z
     E_b__elbow__tz__1__elbow__tz__Lc = F_b__elbow__tz__elbow__tz__1*P_elbow__damping
     E_b__elbow__tz__elbow__tz__1 = E_b__elbow__tz__1__elbow__tz__L + E_b__elbow__tz__1__elbow__tz__Lc
-    E_b__shoulder__tz__1__shoulder__tz__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__21 - 0.3999999999880701*ROT_rod1__22 + X_rod1__z) - P_shoulder__tz_load
+    E_b__shoulder__tz__1__shoulder__tz__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__21 - 0.39999999998807007*ROT_rod1__22 + X_rod1__z) - P_shoulder__tz_load
     F_b__rod1__shoulder__R__rod1__shoulder__0__z = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__20 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__21 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__22
     F_b__rod1__shoulder__0__rod1__shoulder__z = F_b__rod1__shoulder__R__rod1__shoulder__0__z + F_b__rod1__v__rod1__m__z
     E_b__shoulder__tz__1__shoulder__tz__Lc = F_b__rod1__shoulder__0__rod1__shoulder__z*P_shoulder__damping
@@ -218,21 +218,21 @@ def rhs(t, x, p):
     E_b__rod1__w__rod1__Rw__x = E_b__rod1__Rw__rod1__W__y*ROT_rod1__10 + E_b__rod1__W__shoulder__ry__w2__x*ROT_rod1__00 + E_b__rod1__W__shoulder__rz__w2__z*ROT_rod1__20
     E_b__rod1__elbow__x__rod1__elbow__R__y = -E_b__elbow__tx__elbow__tx__1*ROT_rod1__01 - E_b__elbow__ty__elbow__ty__1*ROT_rod1__11 - E_b__elbow__tz__elbow__tz__1*ROT_rod1__21
     E_b__rod1__elbow__x__rod1__elbow__R__z = -E_b__elbow__tx__elbow__tx__1*ROT_rod1__02 - E_b__elbow__ty__elbow__ty__1*ROT_rod1__12 - E_b__elbow__tz__elbow__tz__1*ROT_rod1__22
-    E_b__rod1__w__rod1__elbow__x__x = -0.3999999999880701*E_b__rod1__elbow__x__rod1__elbow__R__y + 1.0000047671256895e-11*E_b__rod1__elbow__x__rod1__elbow__R__z
+    E_b__rod1__w__rod1__elbow__x__x = -0.39999999998807007*E_b__rod1__elbow__x__rod1__elbow__R__y + 1.0000056338554941e-11*E_b__rod1__elbow__x__rod1__elbow__R__z
     E_b__rod1__shoulder__x__rod1__shoulder__R__y = E_b__shoulder__tx__shoulder__tx__1*ROT_rod1__01 + E_b__shoulder__ty__shoulder__ty__1*ROT_rod1__11 + E_b__shoulder__tz__shoulder__tz__1*ROT_rod1__21
     E_b__rod1__shoulder__x__rod1__shoulder__R__z = E_b__shoulder__tx__shoulder__tx__1*ROT_rod1__02 + E_b__shoulder__ty__shoulder__ty__1*ROT_rod1__12 + E_b__shoulder__tz__shoulder__tz__1*ROT_rod1__22
-    E_b__rod1__w__rod1__shoulder__x__x = 0.3999999999880701*E_b__rod1__shoulder__x__rod1__shoulder__R__y - 1.0000047671256895e-11*E_b__rod1__shoulder__x__rod1__shoulder__R__z
+    E_b__rod1__w__rod1__shoulder__x__x = 0.39999999998807007*E_b__rod1__shoulder__x__rod1__shoulder__R__y - 1.0000056338554941e-11*E_b__rod1__shoulder__x__rod1__shoulder__R__z
     E_b__rod1__w__rod1__J__x = -E_b__rod1__w__rod1__EJS__x - E_b__rod1__w__rod1__Rw__x - E_b__rod1__w__rod1__elbow__x__x - E_b__rod1__w__rod1__shoulder__x__x
     E_b__rod1__w__rod1__EJS__y = 0.01283*F_b__rod1__w__rod1__J__x*F_b__rod1__w__rod1__J__z
     E_b__rod1__w__rod1__Rw__y = E_b__rod1__Rw__rod1__W__y*ROT_rod1__11 + E_b__rod1__W__shoulder__ry__w2__x*ROT_rod1__01 + E_b__rod1__W__shoulder__rz__w2__z*ROT_rod1__21
     E_b__rod1__elbow__x__rod1__elbow__R__x = -E_b__elbow__tx__elbow__tx__1*ROT_rod1__00 - E_b__elbow__ty__elbow__ty__1*ROT_rod1__10 - E_b__elbow__tz__elbow__tz__1*ROT_rod1__20
-    E_b__rod1__w__rod1__elbow__x__y = 0.3999999999880701*E_b__rod1__elbow__x__rod1__elbow__R__x
+    E_b__rod1__w__rod1__elbow__x__y = 0.39999999998807007*E_b__rod1__elbow__x__rod1__elbow__R__x
     E_b__rod1__shoulder__x__rod1__shoulder__R__x = E_b__shoulder__tx__shoulder__tx__1*ROT_rod1__00 + E_b__shoulder__ty__shoulder__ty__1*ROT_rod1__10 + E_b__shoulder__tz__shoulder__tz__1*ROT_rod1__20
-    E_b__rod1__w__rod1__shoulder__x__y = -0.3999999999880701*E_b__rod1__shoulder__x__rod1__shoulder__R__x
+    E_b__rod1__w__rod1__shoulder__x__y = -0.39999999998807007*E_b__rod1__shoulder__x__rod1__shoulder__R__x
     E_b__rod1__w__rod1__J__y = -E_b__rod1__w__rod1__EJS__y - E_b__rod1__w__rod1__Rw__y - E_b__rod1__w__rod1__elbow__x__y - E_b__rod1__w__rod1__shoulder__x__y
     E_b__rod1__w__rod1__Rw__z = E_b__rod1__Rw__rod1__W__y*ROT_rod1__12 + E_b__rod1__W__shoulder__ry__w2__x*ROT_rod1__02 + E_b__rod1__W__shoulder__rz__w2__z*ROT_rod1__22
-    E_b__rod1__w__rod1__elbow__x__z = -1.0000047671256895e-11*E_b__rod1__elbow__x__rod1__elbow__R__x
-    E_b__rod1__w__rod1__shoulder__x__z = 1.0000047671256895e-11*E_b__rod1__shoulder__x__rod1__shoulder__R__x
+    E_b__rod1__w__rod1__elbow__x__z = -1.0000056338554941e-11*E_b__rod1__elbow__x__rod1__elbow__R__x
+    E_b__rod1__w__rod1__shoulder__x__z = 1.0000056338554941e-11*E_b__rod1__shoulder__x__rod1__shoulder__R__x
     E_b__rod1__w__rod1__J__z = -E_b__rod1__w__rod1__Rw__z - E_b__rod1__w__rod1__elbow__x__z - E_b__rod1__w__rod1__shoulder__x__z
     DX_rod1__m__px = E_b__rod1__v__rod1__m__x
     DX_rod1__m__py = E_b__rod1__v__rod1__m__y
@@ -244,13 +244,13 @@ def rhs(t, x, p):
     E_b__rod2__w__rod2__EJS__x = -0.006417*F_b__rod2__w__rod2__J__y*F_b__rod2__w__rod2__J__z
     E_b__rod2__elbow__x__rod2__elbow__R__y = E_b__elbow__tx__elbow__tx__1*ROT_rod2__01 + E_b__elbow__ty__elbow__ty__1*ROT_rod2__11 + E_b__elbow__tz__elbow__tz__1*ROT_rod2__21
     E_b__rod2__elbow__x__rod2__elbow__R__z = E_b__elbow__tx__elbow__tx__1*ROT_rod2__02 + E_b__elbow__ty__elbow__ty__1*ROT_rod2__12 + E_b__elbow__tz__elbow__tz__1*ROT_rod2__22
-    E_b__rod2__w__rod2__elbow__x__x = 0.199999999336709*E_b__rod2__elbow__x__rod2__elbow__R__y + 4.1767330002248373e-10*E_b__rod2__elbow__x__rod2__elbow__R__z
+    E_b__rod2__w__rod2__elbow__x__x = 0.19999999933670898*E_b__rod2__elbow__x__rod2__elbow__R__y + 4.1767329872488546e-10*E_b__rod2__elbow__x__rod2__elbow__R__z
     E_b__rod2__w__rod2__J__x = -E_b__rod2__w__rod2__EJS__x - E_b__rod2__w__rod2__elbow__x__x
     E_b__rod2__w__rod2__EJS__y = 0.006417*F_b__rod2__w__rod2__J__x*F_b__rod2__w__rod2__J__z
     E_b__rod2__elbow__x__rod2__elbow__R__x = E_b__elbow__tx__elbow__tx__1*ROT_rod2__00 + E_b__elbow__ty__elbow__ty__1*ROT_rod2__10 + E_b__elbow__tz__elbow__tz__1*ROT_rod2__20
-    E_b__rod2__w__rod2__elbow__x__y = -0.199999999336709*E_b__rod2__elbow__x__rod2__elbow__R__x
+    E_b__rod2__w__rod2__elbow__x__y = -0.19999999933670898*E_b__rod2__elbow__x__rod2__elbow__R__x
     E_b__rod2__w__rod2__J__y = -E_b__rod2__w__rod2__EJS__y - E_b__rod2__w__rod2__elbow__x__y
-    E_b__rod2__w__rod2__elbow__x__z = -4.1767330002248373e-10*E_b__rod2__elbow__x__rod2__elbow__R__x
+    E_b__rod2__w__rod2__elbow__x__z = -4.1767329872488546e-10*E_b__rod2__elbow__x__rod2__elbow__R__x
     DX_rod2__m__px = -E_b__elbow__tx__elbow__tx__1
     DX_rod2__m__py = -E_b__elbow__ty__elbow__ty__1
     DX_rod2__m__pz = E_b__rod2__v__rod2__m__z
@@ -304,7 +304,7 @@ def rhs(t, x, p):
 TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 20, 23, 25, 26, 32, 33, 34, 36, 37, 38, 39, 44, 50, 52, 53, 54, 56, 57, 58, 59, 61, 67, 68, 70, 72, 73, 75, 78, 80, 81, 82, 88, 90, 91, 93, 95, 97, 98, 103, 106, 112, 114, 120, 122, 127, 133, 134, 136, 138, 139, 141, 144, 150, 152, 153, 155, 157, 162, 165, 170, 173, 179, 184, 190, 192, 197, 203, 204, 206, 208, 209, 211, 214, 220, 222, 223, 225, 227, 229, 230, 236, 242, 243, 244, 248, 249, 251, 253, 255, 256, 262, 263, 264, 268, 269, 271, 273, 275, 277, 283, 289, 295, 297, 303, 309, 311, 315, 317, 323, 329, 330, 336, 337, 341, 347, 348, 349, 352, 353, 354, 355, 356, 357, 358, 359, 361, 367, 373, 375, 377, 379, 385, 386, 388, 389, 390, 391, 392, 393, 394, 395, 396, 401, 402, 406, 407, 414, 415, 420, 421, 425, 426, 433], dtype=np.int64)
 TAPE_SRC = np.array([-11, -7, -5, -12, -8, -6, -11, -7, -5, -12, -8, -6, -13, -14, -15, 6, 8, 0, 1, 2, 6, 7, 0, 10, 5, 4, 15, 16, 17, 18, -19, -22, -2, -9, 20, 21, -1, 23, 23, 6, 8, 0, 1, 2, 22, 24, 25, 26, 15, 16, 27, 12, -4, -10, 29, 30, -3, 32, 32, 10, 11, 31, 33, 34, 35, 17, 18, -16, 36, 37, 28, 38, 39, 19, 40, 15, 16, -19, 20, 21, 23, 23, 43, 44, 45, 26, 15, 16, 46, 12, 47, 42, 48, 41, 49, 7, 2, 1, 9, 11, 3, 4, 5, 9, 10, 3, 51, 52, 53, 54, -20, -23, 7, 8, 22, 24, 25, 56, 51, 52, 57, 13, 9, 11, 3, 4, 5, 31, 33, 34, 59, 53, 54, -17, 60, 61, 58, 62, 63, 55, 64, 51, 52, -20, 43, 44, 45, 56, 51, 52, 67, 13, 68, 66, 69, 65, 70, 6, 8, 0, 1, 2, 6, 7, 0, 9, 11, 3, 4, 5, 9, 10, 3, 72, 73, 74, 75, -21, -24, 6, 8, 0, 1, 2, 22, 24, 25, 77, 72, 73, 78, 14, 9, 11, 3, 4, 5, 31, 33, 34, 80, 74, 75, -18, 81, 82, 79, 83, 84, 76, 85, 72, 73, -21, 43, 44, 45, 77, 72, 73, 88, 14, 89, 87, 90, 86, 91, 20, 21, 77, 23, 20, 21, 26, 15, 16, 23, 20, 21, 56, 51, 52, 56, 26, 95, 96, 97, 98, 99, 94, 100, 101, 97, 101, 98, 26, 23, 20, 21, 77, 72, 73, 77, 56, 96, 105, 106, 107, 108, 104, 109, 110, 106, 103, 111, 110, 107, 112, 102, 113, 26, 56, 77, 41, 65, 86, 15, 51, 72, 41, 65, 86, 16, 52, 73, 115, 116, 49, 70, 91, 15, 51, 72, 49, 70, 91, 16, 52, 73, 118, 119, 93, 114, 117, 120, 23, 21, 112, 102, 113, 15, 51, 72, 41, 65, 86, 26, 56, 77, 124, 49, 70, 91, 26, 56, 77, 126, 122, 123, 125, 127, 112, 102, 113, 16, 52, 73, 124, 126, 129, 130, 131, 50, 71, 92, 121, 128, 132, 86, 29, 30, 41, 65, 86, 17, 53, 74, 41, 65, 86, 18, 54, 75, 141, 142, 140, 143, 32, 30, 41, 65, 86, 35, 59, 80, 146, 145, 147, 146, 41, 65, 139, 144, 148, 149, 12, 7, 8, 23, 20, 2, 13, 8, 23, 20, 2, 14, 7, 8, 23, 20, 21, 1, 2, 37, 10, 11, 32, 29, 5, 61, 11, 32, 29, 5, 82, 10, 11, 32, 29, 30, 4, 5], dtype=np.int64)
 TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 0, 0, 0, 13, 14, 15, 16, 17, 18, 19, 18, 20, 21, 0, 22, 22, 22, 22, 22, 22, 0, 0, 0, 0, 0, 0, 0, 23, 24, 25, 26, 14, 27, 28, 29, 30, 31, 32, 0, 0, 0, 0, 0, 0, 0, 0, 0, 33, 21, 34, 35, 36, 37, 38, 39, 0, 0, 0, 0, 0, 40, 0, 0, 41, 41, 41, 0, 0, 0, 0, 27, 28, 29, 42, 43, 44, 0, 0, 45, 0, 0, 0, 0, 46, 18, 0, 47, 48, 49, 50, 51, 21, 52, 21, 22, 22, 22, 22, 22, 22, 53, 18, 54, 55, 56, 30, 31, 32, 0, 0, 57, 58, 59, 60, 48, 61, 62, 63, 37, 38, 39, 0, 0, 0, 0, 0, 40, 0, 0, 41, 41, 41, 54, 55, 56, 42, 43, 44, 0, 0, 45, 0, 0, 0, 0, 15, 19, 64, 65, 66, 18, 67, 18, 68, 69, 47, 70, 71, 21, 48, 21, 22, 22, 22, 22, 22, 22, 25, 72, 73, 74, 19, 75, 76, 77, 30, 31, 32, 0, 0, 78, 79, 57, 80, 69, 81, 82, 83, 37, 38, 39, 0, 0, 0, 0, 0, 40, 0, 0, 41, 41, 41, 75, 76, 77, 42, 43, 44, 0, 0, 45, 0, 0, 0, 0, 84, 85, 86, 27, 28, 29, 87, 85, 84, 54, 55, 56, 87, 85, 84, 0, 0, 88, 89, 90, 91, 92, 0, 0, 88, 93, 89, 93, 86, 75, 76, 77, 87, 85, 84, 0, 0, 94, 95, 91, 96, 92, 0, 0, 94, 97, 0, 0, 95, 97, 54, 27, 75, 98, 99, 100, 28, 55, 76, 101, 102, 103, 29, 56, 77, 101, 102, 103, 0, 0, 28, 55, 76, 104, 105, 106, 29, 56, 77, 104, 105, 106, 0, 0, 0, 0, 0, 0, 84, 87, 55, 28, 76, 98, 99, 100, 27, 54, 75, 101, 102, 103, 0, 27, 54, 75, 104, 105, 106, 0, 0, 0, 0, 0, 56, 29, 77, 98, 99, 100, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 107, 108, 35, 62, 82, 101, 102, 103, 36, 63, 83, 101, 102, 103, 0, 0, 0, 0, 107, 109, 34, 61, 81, 101, 102, 103, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 110, 111, 112, 113, 114, 0, 85, 46, 53, 87, 0, 115, 116, 117, 118, 0, 119, 120, 0, 121, 122, 123, 124, 125, 0, 108, 20, 33, 109, 0, 126, 127, 128, 129, 0, 130, 131], dtype=np.int64)
-TAPE_SCALE = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.4999999999932617, 1.0, -0.866025403788329, -1.0, -1.0, 1.0, -1.0000047671256895e-11, -0.3999999999880701, 4.1767330002248373e-10, -0.199999999336709, -1.0, 1.0, 75.01875468867217, 2000.0, 0.3999999999880701, -1.0000047671256895e-11, 75.01875468867217, -0.3999999999880701, 1.0000047671256895e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 149.99250037498123, 4000.0, -0.199999999336709, -4.1767330002248373e-10, 149.99250037498123, 0.199999999336709, 4.1767330002248373e-10, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000047671256895e-11, -0.3999999999880701, 1.0, -0.3999999999880701, 1.0000047671256895e-11, 0.3999999999880701, -1.0000047671256895e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5773502692096121, 1.0, 0.8164965809135936, -1.0000047671256895e-11, -0.3999999999880701, 4.1767330002248373e-10, -0.199999999336709, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000047671256895e-11, -0.3999999999880701, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.866025403788329, 1.0, -0.4999999999932617, 1.0, 1.0, 1.0, 1.0, 1.0, -0.8164965809135936, 1.0, 0.5773502692096121, -1.0000047671256895e-11, -0.3999999999880701, 4.1767330002248373e-10, -0.199999999336709, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000047671256895e-11, -0.3999999999880701, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.01283, -0.01283, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -0.3999999999880701, 1.0000047671256895e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.3999999999880701, -1.0000047671256895e-11, -1.0, -1.0, -1.0, -1.0, 0.01283, 0.01283, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 0.3999999999880701, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.3999999999880701, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0000047671256895e-11, 1.0000047671256895e-11, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.006417, -0.006417, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.199999999336709, 4.1767330002248373e-10, -1.0, -1.0, 0.006417, 0.006417, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.199999999336709, -1.0, -1.0, -4.1767330002248373e-10, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.4999999999932617, 1.0, -0.866025403788329, -1.0, -1.0, 1.0, -1.0000056338554941e-11, -0.39999999998807007, 4.1767329872488546e-10, -0.19999999933670898, -1.0, 1.0, 75.01875468867217, 2000.0, 0.39999999998807007, -1.0000056338554941e-11, 75.01875468867217, -0.39999999998807007, 1.0000056338554941e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 149.99250037498123, 4000.0, -0.19999999933670898, -4.1767329872488546e-10, 149.99250037498123, 0.19999999933670898, 4.1767329872488546e-10, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000056338554941e-11, -0.39999999998807007, 1.0, -0.39999999998807007, 1.0000056338554941e-11, 0.39999999998807007, -1.0000056338554941e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5773502692096121, 1.0, 0.8164965809135936, -1.0000056338554941e-11, -0.39999999998807007, 4.1767329872488546e-10, -0.19999999933670898, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000056338554941e-11, -0.39999999998807007, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.866025403788329, 1.0, -0.4999999999932617, 1.0, 1.0, 1.0, 1.0, 1.0, -0.8164965809135936, 1.0, 0.5773502692096121, -1.0000056338554941e-11, -0.39999999998807007, 4.1767329872488546e-10, -0.19999999933670898, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0000056338554941e-11, -0.39999999998807007, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.01283, -0.01283, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -0.39999999998807007, 1.0000056338554941e-11, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.39999999998807007, -1.0000056338554941e-11, -1.0, -1.0, -1.0, -1.0, 0.01283, 0.01283, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 0.39999999998807007, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.39999999998807007, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0000056338554941e-11, 1.0000056338554941e-11, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.006417, -0.006417, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.19999999933670898, 4.1767329872488546e-10, -1.0, -1.0, 0.006417, 0.006417, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.19999999933670898, -1.0, -1.0, -4.1767329872488546e-10, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
 JAC_I = np.array([0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 9, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 12, 13, 13, 13, 13, 14, 15, 15, 15, 16, 17, 17, 17, 17, 17, 18, 19, 19, 19, 19, 20, 21, 21, 21, 22, 23, 23, 23, 23, 23], dtype=np.int64)
 JAC_J = np.array([0, 3, 4, 5, 6, 9, 10, 11, 12, 13, 15, 17, 18, 21, 23, 1, 3, 4, 5, 7, 9, 10, 11, 14, 15, 17, 19, 20, 21, 23, 2, 3, 4, 5, 8, 9, 10, 11, 13, 15, 16, 17, 19, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 3, 4, 5, 6, 9, 10, 11, 12, 13, 15, 17, 18, 21, 23, 1, 3, 4, 5, 7, 9, 10, 11, 14, 15, 17, 19, 20, 21, 23, 2, 3, 4, 5, 8, 9, 10, 11, 13, 15, 16, 17, 19, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 0, 3, 4, 15, 17, 1, 3, 4, 17, 2, 3, 4, 5, 15, 17, 6, 9, 10, 21, 23, 7, 9, 10, 23, 8, 9, 10, 11, 21, 23], dtype=np.int64)
 JAC_ROW = np.array([133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 133, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 134, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 135, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 136, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 137, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 138, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 150, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 151, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 152, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 153, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 154, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 155, 156, 157, 157, 157, 157, 158, 159, 159, 159, 160, 161, 161, 161, 161, 161, 162, 163, 163, 163, 163, 164, 165, 165, 165, 166, 167, 167, 167, 167, 167], dtype=np.int64)
@@ -385,22 +385,22 @@ def jac(t, x, p):
     ROT_rod1__02 = 0.4999999999932617*COS_X_rod1__ax*COS_X_rod1__ay - 0.866025403788329*COS_X_rod1__ay*SIN_X_rod1__ax
     ROT_rod2__01 = -1.0*COS_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__02 = 1.0*SIN_X_rod2__ay
-    E_b__elbow__tx__1__elbow__tx__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__01 - 0.3999999999880701*ROT_rod1__02 + 4.1767330002248373e-10*ROT_rod2__01 - 0.199999999336709*ROT_rod2__02 - X_rod1__x + X_rod2__x) - P_elbow__tx_load
+    E_b__elbow__tx__1__elbow__tx__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__01 - 0.39999999998807007*ROT_rod1__02 + 4.1767329872488546e-10*ROT_rod2__01 - 0.19999999933670898*ROT_rod2__02 - X_rod1__x + X_rod2__x) - P_elbow__tx_load
     F_b__rod1__w__rod1__J__y = 75.01875468867217*X_rod1__J__py
     F_b__rod1__w__rod1__J__z = 2000.0*X_rod1__J__pz
-    F_b__rod1__elbow__x__rod1__elbow__R__x = 0.3999999999880701*F_b__rod1__w__rod1__J__y - 1.0000047671256895e-11*F_b__rod1__w__rod1__J__z
+    F_b__rod1__elbow__x__rod1__elbow__R__x = 0.39999999998807007*F_b__rod1__w__rod1__J__y - 1.0000056338554941e-11*F_b__rod1__w__rod1__J__z
     F_b__rod1__w__rod1__J__x = 75.01875468867217*X_rod1__J__px
-    F_b__rod1__elbow__x__rod1__elbow__R__y = -0.3999999999880701*F_b__rod1__w__rod1__J__x
-    F_b__rod1__elbow__x__rod1__elbow__R__z = 1.0000047671256895e-11*F_b__rod1__w__rod1__J__x
+    F_b__rod1__elbow__x__rod1__elbow__R__y = -0.39999999998807007*F_b__rod1__w__rod1__J__x
+    F_b__rod1__elbow__x__rod1__elbow__R__z = 1.0000056338554941e-11*F_b__rod1__w__rod1__J__x
     ROT_rod1__00 = -0.4999999999932617*COS_X_rod1__ax*COS_X_rod1__az*SIN_X_rod1__ay + 0.866025403788329*COS_X_rod1__ax*SIN_X_rod1__az + 0.866025403788329*COS_X_rod1__az*SIN_X_rod1__ax*SIN_X_rod1__ay + 0.4999999999932617*SIN_X_rod1__ax*SIN_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__x = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__00 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__01 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__02
     F_b__rod1__elbow__0__rod1__elbow__x = F_b__rod1__elbow__R__rod1__elbow__0__x + F_b__rod1__v__rod1__m__x
     F_b__rod2__w__rod2__J__y = 149.99250037498123*X_rod2__J__py
     F_b__rod2__w__rod2__J__z = 4000.0*X_rod2__J__pz
-    F_b__rod2__elbow__x__rod2__elbow__R__x = -0.199999999336709*F_b__rod2__w__rod2__J__y - 4.1767330002248373e-10*F_b__rod2__w__rod2__J__z
+    F_b__rod2__elbow__x__rod2__elbow__R__x = -0.19999999933670898*F_b__rod2__w__rod2__J__y - 4.1767329872488546e-10*F_b__rod2__w__rod2__J__z
     F_b__rod2__w__rod2__J__x = 149.99250037498123*X_rod2__J__px
-    F_b__rod2__elbow__x__rod2__elbow__R__y = 0.199999999336709*F_b__rod2__w__rod2__J__x
-    F_b__rod2__elbow__x__rod2__elbow__R__z = 4.1767330002248373e-10*F_b__rod2__w__rod2__J__x
+    F_b__rod2__elbow__x__rod2__elbow__R__y = 0.19999999933670898*F_b__rod2__w__rod2__J__x
+    F_b__rod2__elbow__x__rod2__elbow__R__z = 4.1767329872488546e-10*F_b__rod2__w__rod2__J__x
     ROT_rod2__00 = 1.0*COS_X_rod2__ay*COS_X_rod2__az
     F_b__rod2__elbow__R__rod2__elbow__0__x = F_b__rod2__elbow__x__rod2__elbow__R__x*ROT_rod2__00 + F_b__rod2__elbow__x__rod2__elbow__R__y*ROT_rod2__01 + F_b__rod2__elbow__x__rod2__elbow__R__z*ROT_rod2__02
     F_b__rod2__v__rod2__m__x = 2.0*X_rod2__m__px
@@ -408,10 +408,10 @@ def jac(t, x, p):
     F_b__elbow__tx__elbow__tx__1 = -F_b__rod1__elbow__0__rod1__elbow__x + F_b__rod2__elbow__0__rod2__elbow__x
     E_b__elbow__tx__1__elbow__tx__Lc = F_b__elbow__tx__elbow__tx__1*P_elbow__damping
     E_b__elbow__tx__elbow__tx__1 = E_b__elbow__tx__1__elbow__tx__L + E_b__elbow__tx__1__elbow__tx__Lc
-    E_b__shoulder__tx__1__shoulder__tx__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__01 - 0.3999999999880701*ROT_rod1__02 + X_rod1__x) - P_shoulder__tx_load
-    F_b__rod1__shoulder__x__rod1__shoulder__R__x = -0.3999999999880701*F_b__rod1__w__rod1__J__y + 1.0000047671256895e-11*F_b__rod1__w__rod1__J__z
-    F_b__rod1__shoulder__x__rod1__shoulder__R__y = 0.3999999999880701*F_b__rod1__w__rod1__J__x
-    F_b__rod1__shoulder__x__rod1__shoulder__R__z = -1.0000047671256895e-11*F_b__rod1__w__rod1__J__x
+    E_b__shoulder__tx__1__shoulder__tx__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__01 - 0.39999999998807007*ROT_rod1__02 + X_rod1__x) - P_shoulder__tx_load
+    F_b__rod1__shoulder__x__rod1__shoulder__R__x = -0.39999999998807007*F_b__rod1__w__rod1__J__y + 1.0000056338554941e-11*F_b__rod1__w__rod1__J__z
+    F_b__rod1__shoulder__x__rod1__shoulder__R__y = 0.39999999998807007*F_b__rod1__w__rod1__J__x
+    F_b__rod1__shoulder__x__rod1__shoulder__R__z = -1.0000056338554941e-11*F_b__rod1__w__rod1__J__x
     F_b__rod1__shoulder__R__rod1__shoulder__0__x = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__00 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__01 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__02
     F_b__rod1__shoulder__0__rod1__shoulder__x = F_b__rod1__shoulder__R__rod1__shoulder__0__x + F_b__rod1__v__rod1__m__x
     E_b__shoulder__tx__1__shoulder__tx__Lc = F_b__rod1__shoulder__0__rod1__shoulder__x*P_shoulder__damping
@@ -420,7 +420,7 @@ def jac(t, x, p):
     ROT_rod1__12 = 1.0*SIN_X_rod1__ay
     ROT_rod2__11 = -0.8164965809135936*COS_X_rod2__ax*COS_X_rod2__az + 0.5773502692096121*COS_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az + 0.5773502692096121*COS_X_rod2__az*SIN_X_rod2__ax + 0.8164965809135936*SIN_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__12 = 0.5773502692096121*COS_X_rod2__ax*COS_X_rod2__ay + 0.8164965809135936*COS_X_rod2__ay*SIN_X_rod2__ax
-    E_b__elbow__ty__1__elbow__ty__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__11 - 0.3999999999880701*ROT_rod1__12 + 4.1767330002248373e-10*ROT_rod2__11 - 0.199999999336709*ROT_rod2__12 - X_rod1__y + X_rod2__y) - P_elbow__ty_load
+    E_b__elbow__ty__1__elbow__ty__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__11 - 0.39999999998807007*ROT_rod1__12 + 4.1767329872488546e-10*ROT_rod2__11 - 0.19999999933670898*ROT_rod2__12 - X_rod1__y + X_rod2__y) - P_elbow__ty_load
     ROT_rod1__10 = 1.0*COS_X_rod1__ay*COS_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__y = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__10 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__11 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__12
     F_b__rod1__elbow__0__rod1__elbow__y = F_b__rod1__elbow__R__rod1__elbow__0__y + F_b__rod1__v__rod1__m__y
@@ -431,7 +431,7 @@ def jac(t, x, p):
     F_b__elbow__ty__elbow__ty__1 = -F_b__rod1__elbow__0__rod1__elbow__y + F_b__rod2__elbow__0__rod2__elbow__y
     E_b__elbow__ty__1__elbow__ty__Lc = F_b__elbow__ty__elbow__ty__1*P_elbow__damping
     E_b__elbow__ty__elbow__ty__1 = E_b__elbow__ty__1__elbow__ty__L + E_b__elbow__ty__1__elbow__ty__Lc
-    E_b__shoulder__ty__1__shoulder__ty__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__11 - 0.3999999999880701*ROT_rod1__12 + X_rod1__y) - P_shoulder__ty_load
+    E_b__shoulder__ty__1__shoulder__ty__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__11 - 0.39999999998807007*ROT_rod1__12 + X_rod1__y) - P_shoulder__ty_load
     F_b__rod1__shoulder__R__rod1__shoulder__0__y = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__10 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__11 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__12
     F_b__rod1__shoulder__0__rod1__shoulder__y = F_b__rod1__shoulder__R__rod1__shoulder__0__y + F_b__rod1__v__rod1__m__y
     E_b__shoulder__ty__1__shoulder__ty__Lc = F_b__rod1__shoulder__0__rod1__shoulder__y*P_shoulder__damping
@@ -440,7 +440,7 @@ def jac(t, x, p):
     ROT_rod1__22 = -0.866025403788329*COS_X_rod1__ax*COS_X_rod1__ay - 0.4999999999932617*COS_X_rod1__ay*SIN_X_rod1__ax
     ROT_rod2__21 = -0.5773502692096121*COS_X_rod2__ax*COS_X_rod2__az - 0.8164965809135936*COS_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az - 0.8164965809135936*COS_X_rod2__az*SIN_X_rod2__ax + 0.5773502692096121*SIN_X_rod2__ax*SIN_X_rod2__ay*SIN_X_rod2__az
     ROT_rod2__22 = -0.8164965809135936*COS_X_rod2__ax*COS_X_rod2__ay + 0.5773502692096121*COS_X_rod2__ay*SIN_X_rod2__ax
-    E_b__elbow__tz__1__elbow__tz__L = P_elbow__stiffness*(-1.0000047671256895e-11*ROT_rod1__21 - 0.3999999999880701*ROT_rod1__22 + 4.1767330002248373e-10*ROT_rod2__21 - 0.199999999336709*ROT_rod2__22 - X_rod1__z + X_rod2__z) - P_elbow__tz_load
+    E_b__elbow__tz__1__elbow__tz__L = P_elbow__stiffness*(-1.0000056338554941e-11*ROT_rod1__21 - 0.39999999998807007*ROT_rod1__22 + 4.1767329872488546e-10*ROT_rod2__21 - 0.19999999933670898*ROT_rod2__22 - X_rod1__z + X_rod2__z) - P_elbow__tz_load
     ROT_rod1__20 = 0.866025403788329*COS_X_rod1__ax*COS_X_rod1__az*SIN_X_rod1__ay + 0.4999999999932617*COS_X_rod1__ax*SIN_X_rod1__az + 0.4999999999932617*COS_X_rod1__az*SIN_X_rod1__ax*SIN_X_rod1__ay - 0.866025403788329*SIN_X_rod1__ax*SIN_X_rod1__az
     F_b__rod1__elbow__R__rod1__elbow__0__z = F_b__rod1__elbow__x__rod1__elbow__R__x*ROT_rod1__20 + F_b__rod1__elbow__x__rod1__elbow__R__y*ROT_rod1__21 + F_b__rod1__elbow__x__rod1__elbow__R__z*ROT_rod1__22
     F_b__rod1__elbow__0__rod1__elbow__z = F_b__rod1__elbow__R__rod1__elbow__0__z + F_b__rod1__v__rod1__m__z
@@ -451,7 +451,7 @@ def jac(t, x, p):
     F_b__elbow__tz__elbow__tz__1 = -F_b__rod1__elbow__0__rod1__elbow__z + F_b__rod2__elbow__0__rod2__elbow__z
     E_b__elbow__tz__1__elbow__tz__Lc = F_b__elbow__tz__elbow__tz__1*P_elbow__damping
     E_b__elbow__tz__elbow__tz__1 = E_b__elbow__tz__1__elbow__tz__L + E_b__elbow__tz__1__elbow__tz__Lc
-    E_b__shoulder__tz__1__shoulder__tz__L = P_shoulder__stiffness*(-1.0000047671256895e-11*ROT_rod1__21 - 0.3999999999880701*ROT_rod1__22 + X_rod1__z) - P_shoulder__tz_load
+    E_b__shoulder__tz__1__shoulder__tz__L = P_shoulder__stiffness*(-1.0000056338554941e-11*ROT_rod1__21 - 0.39999999998807007*ROT_rod1__22 + X_rod1__z) - P_shoulder__tz_load
     F_b__rod1__shoulder__R__rod1__shoulder__0__z = F_b__rod1__shoulder__x__rod1__shoulder__R__x*ROT_rod1__20 + F_b__rod1__shoulder__x__rod1__shoulder__R__y*ROT_rod1__21 + F_b__rod1__shoulder__x__rod1__shoulder__R__z*ROT_rod1__22
     F_b__rod1__shoulder__0__rod1__shoulder__z = F_b__rod1__shoulder__R__rod1__shoulder__0__z + F_b__rod1__v__rod1__m__z
     E_b__shoulder__tz__1__shoulder__tz__Lc = F_b__rod1__shoulder__0__rod1__shoulder__z*P_shoulder__damping
@@ -682,7 +682,7 @@ def outputs(t, x, p):
     F_b__rod2__v__rod2__m__z = 2.0*X_rod2__m__pz
     y = np.empty(3)
     y[0] = X_rod2__y
-    y[1] = math.sqrt((-1.0000047671256895e-11*ROT_rod1__01 - 0.3999999999880701*ROT_rod1__02 + 4.1767330002248373e-10*ROT_rod2__01 - 0.199999999336709*ROT_rod2__02 - X_rod1__x + X_rod2__x)**2 + (-1.0000047671256895e-11*ROT_rod1__11 - 0.3999999999880701*ROT_rod1__12 + 4.1767330002248373e-10*ROT_rod2__11 - 0.199999999336709*ROT_rod2__12 - X_rod1__y + X_rod2__y)**2 + (-1.0000047671256895e-11*ROT_rod1__21 - 0.3999999999880701*ROT_rod1__22 + 4.1767330002248373e-10*ROT_rod2__21 - 0.199999999336709*ROT_rod2__22 - X_rod1__z + X_rod2__z)**2)
+    y[1] = math.sqrt((-1.0000056338554941e-11*ROT_rod1__01 - 0.39999999998807007*ROT_rod1__02 + 4.1767329872488546e-10*ROT_rod2__01 - 0.19999999933670898*ROT_rod2__02 - X_rod1__x + X_rod2__x)**2 + (-1.0000056338554941e-11*ROT_rod1__11 - 0.39999999998807007*ROT_rod1__12 + 4.1767329872488546e-10*ROT_rod2__11 - 0.19999999933670898*ROT_rod2__12 - X_rod1__y + X_rod2__y)**2 + (-1.0000056338554941e-11*ROT_rod1__21 - 0.39999999998807007*ROT_rod1__22 + 4.1767329872488546e-10*ROT_rod2__21 - 0.19999999933670898*ROT_rod2__22 - X_rod1__z + X_rod2__z)**2)
     y[2] = 0.5*F_b__rod1__v__rod1__m__x**2 + 0.5*F_b__rod1__v__rod1__m__y**2 + 0.5*F_b__rod1__v__rod1__m__z**2 + 0.006665*F_b__rod1__w__rod1__J__x**2 + 0.006665*F_b__rod1__w__rod1__J__y**2 + 0.00025*F_b__rod1__w__rod1__J__z**2 + 0.25*F_b__rod2__v__rod2__m__x**2 + 0.25*F_b__rod2__v__rod2__m__y**2 + 0.25*F_b__rod2__v__rod2__m__z**2 + 0.0033335*F_b__rod2__w__rod2__J__x**2 + 0.0033335*F_b__rod2__w__rod2__J__y**2 + 0.000125*F_b__rod2__w__rod2__J__z**2 + 9.81*X_rod1__z + 4.905*X_rod2__z
     return y
 

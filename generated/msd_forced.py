@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "df61aba8190d071d6abe194873be1047"
+MODEL_HASH = "6765def76341df98623494ad9d5133ad"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

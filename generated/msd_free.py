@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "2cfcd132dd13b0ead0e77ee6d4e52bb5"
+MODEL_HASH = "cf05695d3db7d95beaec728bba4e46cd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

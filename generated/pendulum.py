@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "fa5845c065412bd68a024e7898ca78bf"
+MODEL_HASH = "8bba86d5096684892fe62a75782b3c17"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

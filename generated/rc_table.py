@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "ce88313e8f8e9d11094624c2747e01ab"
+MODEL_HASH = "fe86e26304dfb312a11f6772c24f28ae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

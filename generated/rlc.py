@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "164fa7319c1e31029744bd584d3d5d99"
+MODEL_HASH = "e4daeb60fe536ba6549809b758f58ae2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "2733255a3e810e24cc296a92f00e0aaf"
+MODEL_HASH = "d9496256e8ebc68fd1b73519f08ef764"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "d08bbbe76bf44acab66df6a7688696ab"
+MODEL_HASH = "6415ba6cd66336bfcd70726f1217a5d3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

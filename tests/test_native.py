@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from bgc import load, rk4
 from bgc.cli import main
 from bgc.errors import SimulationError
-from bgc.simulate import SOLVERS, simulate
+from bgc.simulate import SOLVERS, prepare, simulate
 from conftest import MODELS, model_params
 from test_bodies import body_model
 from test_loud_failure import T_SINGULAR
@@ -146,3 +146,22 @@ def test_rk4_divergence_at_a_singular_configuration_is_reported_not_raised():
     why = SOLVERS["rk4"]._diverged(Problem(module, np.zeros(0), step=1e-3), 0.25,
                                    np.zeros(2))
     assert "non-finite after t = 0.25" in why and "Jacobian" in why
+
+
+@pytest.mark.parametrize("method", ["zcp", "lagrange"])
+def test_linear_blocks_give_nan_not_an_exception_at_a_non_finite_state(compiled, method):
+    """The algebraic loops (zcp) and constraint blocks (lagrange) of a closed loop are
+    solved in compiled code: at a state gone non-finite (rk4 past its limit, a dead point)
+    each generated function returns NaN, which the run reports where it happened;
+    LAPACK's exception would be lost inside the native loop and crash the drift check."""
+    mod = compiled("slider_crank", method)
+    x = np.full(len(mod.STATE_NAMES), np.nan)
+    p = np.array(mod.PARAMS, dtype=np.float64)
+    for f in (mod.rhs, mod.jac, mod.outputs, mod.constraints):
+        assert np.isnan(f(0.0, x, p)).any()
+    x0, p, _ = prepare(mod, mod.initial_state(p), p, 0.0)
+    h_max = rk4.stable_step(np.linalg.eigvals(mod.jac(0.0, x0, p)))[0]
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=0.2, solver="rk4", step=3 * h_max, check_stability=False)
+    r = err.value.result
+    assert len(r.t) and np.isfinite(r.x[0]).all() and r.t[-1] <= 0.2

@@ -62,15 +62,22 @@ class ScipySolver(Solver):
         t_ok = float(sol.t[-1]) if len(sol.t) else t0
         x_end = sol.y[:, -1] if sol.y.size else np.asarray(x0)
         if sol.status < 0 or sol.sol is None:
-            reached = t_eval[t_eval <= t_ok]
-            xs = sol.sol(reached).T if sol.sol is not None else np.empty((0, len(x0)))
-            return Segment(xs, x_end, t_ok, False, sol.message)
+            reached = t_eval[t_eval <= t_ok] if sol.sol is not None else t_eval[:0]
+            return Segment(_dense(sol, reached, len(x0)), x_end, t_ok, False, sol.message)
         if sol.status == 1:       # a guard fired: keep what lies before it
             k = next(i for i, te in enumerate(sol.t_events) if len(te))
-            reached = t_eval[t_eval <= t_ok]
-            return Segment(sol.sol(reached).T.reshape(len(reached), len(x0)), x_end, t_ok,
+            return Segment(_dense(sol, t_eval[t_eval <= t_ok], len(x0)), x_end, t_ok,
                            False, "", event=k)
-        return Segment(sol.sol(t_eval).T.reshape(len(t_eval), len(x0)), x_end, t_ok, True)
+        return Segment(_dense(sol, t_eval, len(x0)), x_end, t_ok, True)
+
+
+def _dense(sol, ts, n: int) -> np.ndarray:
+    """solve_ivp's dense output at the times ``ts`` (rows); none: an empty (0, n) array
+    (scipy's OdeSolution fails on an empty array: a segment between two of a run's
+    breakpoints may hold no output point)."""
+    if not len(ts):
+        return np.empty((0, n))
+    return sol.sol(ts).T.reshape(len(ts), n)
 
 
 class NativeSolver(Solver):

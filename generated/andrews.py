@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "f1e48c9a2da38a5d4172330b051aa613"
+MODEL_HASH = "c90854bceff7683ee385799773646b8e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

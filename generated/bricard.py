@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "2ebac00efe18829783ba9dc06f6e04a0"
+MODEL_HASH = "20fd38a427c87fac3366d083c8f32b0e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "dfcafa4ce3bccdee22c3d96dece362f9"
+MODEL_HASH = "d0ab3be31105cdb474d8622035df4331"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "f4611bc7442ead5ab30d3ea9dbb3e1ec"
+MODEL_HASH = "1f5a892ff1a96d16d726392492e67a47"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

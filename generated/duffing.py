@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "0c8efb92064230be75d25ab17cd4d1f3"
+MODEL_HASH = "ed2a6fb9baf3dcba70fa213001b930fd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "257feb40bc798eadcb6f10587f01a5ae"
+MODEL_HASH = "de64770905671a8e5af2f10de0cf7c96"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

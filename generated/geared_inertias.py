@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "546403fb7e3f35efb85a1fbd4889f407"
+MODEL_HASH = "3810c0fdef43535af9d81221c7551932"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

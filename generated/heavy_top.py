@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "dca771f4d65de403fdd407397b2a2929"
+MODEL_HASH = "36791a8cbb93cbba13c0d13c27a1df9d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "521f829d439854ecfac622a05a27cce8"
+MODEL_HASH = "fdb98cc4d6c644d98aab361cfa9bb555"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

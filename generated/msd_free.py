@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "cf05695d3db7d95beaec728bba4e46cd"
+MODEL_HASH = "5a82c961433abbfb694dd3bf3c40d1a1"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

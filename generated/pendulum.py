@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "8bba86d5096684892fe62a75782b3c17"
+MODEL_HASH = "03ad3b7cc359a0325a6cb6e70dd3da8c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

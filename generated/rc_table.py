@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "fe86e26304dfb312a11f6772c24f28ae"
+MODEL_HASH = "91b9427a0ddbb3c73d64554015c286ae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

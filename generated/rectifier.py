@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "72fc16e9bf6a75a743fc4691a90bd4f4"
+MODEL_HASH = "10ef32da00f240baef8942e247d77a86"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

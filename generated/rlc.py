@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "e4daeb60fe536ba6549809b758f58ae2"
+MODEL_HASH = "5d43e514223b118671cef1f5349dd747"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "d0d6ac4c25e10f1b555799aa257975e6"
+MODEL_HASH = "d2bfbf951fe89857ff982318912f741d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "ede4fdce1743ad2630127b865f4ed7c5"
+MODEL_HASH = "df4e0d613b09bf4861c27143192f4376"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "3685bd3374c8bdcdbf57fe7dc9dfab0d"
+MODEL_HASH = "bc9b51f7701be35db1c23949ea575c69"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "d9496256e8ebc68fd1b73519f08ef764"
+MODEL_HASH = "8364c92212d1ecad658773f7d046df4f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "c5aa1c780ccd9e375d7e1378da7f43c0"
+MODEL_HASH = "70194be3b8f9401a0a06f38d18d470e8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "6415ba6cd66336bfcd70726f1217a5d3"
+MODEL_HASH = "b12054afeb797e184fcc44540b19ae4a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

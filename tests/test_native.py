@@ -165,3 +165,19 @@ def test_linear_blocks_give_nan_not_an_exception_at_a_non_finite_state(compiled,
         simulate(mod, t_end=0.2, solver="rk4", step=3 * h_max, check_stability=False)
     r = err.value.result
     assert len(r.t) and np.isfinite(r.x[0]).all() and r.t[-1] <= 0.2
+
+
+@pytest.mark.parametrize("solver", ["native", "radau", "bdf", "lsoda", "rk45", "cvode", "ida"])
+def test_a_segment_with_no_output_point_in_it_yields_no_rows(compiled, solver):
+    """A run is split into segments (at breakpoints, where the rank monitor re-picks its
+    minor); with few output points one may hold none: the solver returns no rows and the
+    state it reached (scipy's dense output fails on an empty time array)."""
+    from bgc.solver import Problem, Stats
+    mod = compiled("msd_forced")
+    p = np.array(mod.PARAMS, dtype=np.float64)
+    x0 = np.array(mod.initial_state(p), dtype=np.float64)
+    seg = SOLVERS[solver].integrate(Problem(mod, p), 0.0, 0.5, x0, np.empty(0), 1e-8, 1e-8,
+                                    Stats())
+    assert seg.ok and seg.x_eval.shape == (0, len(x0)) and seg.t_reached == 0.5
+    ref = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-10, solver="native", points=2)
+    assert np.allclose(seg.x_end, ref.x[-1], rtol=1e-5, atol=1e-7)

@@ -80,6 +80,12 @@ def _dense(sol, ts, n: int) -> np.ndarray:
     return sol.sol(ts).T.reshape(len(ts), n)
 
 
+# an event's location: the grid its scan of the dense output takes, and at most so many
+# re-integrations of the bracket (regula falsi) down to 1e-12 of the time
+LOCATE_GRID = 32
+LOCATE_MAXITER = 60
+
+
 class NativeSolver(Solver):
     """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``), compiled once for every
     model, that calls the module's rhs, Jacobian and guards through their C entry points
@@ -175,8 +181,9 @@ class NativeSolver(Solver):
                        if np.sign(after[j]) != np.sign(before[j]) and before[j] != 0]
                 if hit:
                     xs.pop()
+                    j = hit[0]
                     return self._locate(problem, t, t_r, x, sel, rtol, atol, max_step,
-                                        stats, watched[hit[0]], before[hit[0]], xs)
+                                        stats, watched[j], before[j], after[j], h, xs)
                 t, x, before, done = float(t_r), np.array(x_r), after, done + k
                 if status == native.REACHED:
                     return Segment(np.vstack(xs), x, float(t1), True)
@@ -208,27 +215,58 @@ class NativeSolver(Solver):
         return (f"the state became non-finite with the step {problem.step:.3g} s inside the "
                 f"stability limit {h_max:.3g} s there: the model itself diverges")
 
-    def _locate(self, problem, a, b, x, sel, rtol, atol, max_step, stats, event, before, xs):
-        """An event changed sign on [a, b] (from ``x`` at a): bisect by re-integrating
-        each half from the last point where the sign had not changed (so the search
-        costs about twice the interval, not a run from ``a`` per halving), keeping the
-        requested outputs on the way."""
+    def _locate(self, problem, a, b, x, sel, rtol, atol, max_step, stats, event, before,
+                after, h, xs):
+        """An event changed sign on [a, b] (from ``x`` at a, value ``before`` there and
+        ``after`` at b). One re-integration of [a, b] scans the event on a grid of the
+        dense output; from the integrated state at the grid point before the change,
+        regula falsi with the Illinois modification (superlinear on a smooth event, the
+        bracket always holding the change) re-integrates short intervals only. Every
+        restart takes the step size ``h`` the loop had; the requested outputs are kept."""
         k, fun = event
-        lo, x_lo, hi, done = a, x, b, 0
-        while hi - lo > 1e-12 * max(1.0, abs(hi)):
-            mid = 0.5 * (lo + hi)
+        sign = np.sign(before)
+        grid = np.linspace(a, b, LOCATE_GRID + 1)[1:-1]
+        out, n, _, _, _, _, _ = self._run(problem, a, b, x, grid, rtol, atol, max_step,
+                                          stats, h)
+        vals = [fun(t, xi) for t, xi in zip(grid[:n], out[:n])]
+        first = next((j for j, v in enumerate(vals) if v == 0 or np.sign(v) != sign), n)
+        lo, f_lo, x_lo, done = a, before, x, 0
+        hi, f_hi = (grid[first], vals[first]) if first < n else (b, after)
+        if first > 0:                  # integrate to the grid point before the change
+            t_g = grid[first - 1]
+            pts = sel[sel <= t_g]
+            o, m, _, x_g, _, _, _ = self._run(problem, a, t_g, x, pts, rtol, atol, max_step,
+                                              stats, min(h, t_g - a))
+            f_g = fun(t_g, x_g)
+            if f_g != 0 and np.sign(f_g) == sign:
+                xs.append(o[:m])
+                lo, f_lo, x_lo, done = t_g, f_g, x_g, m
+            else:                      # the integrated state disagrees with the scan
+                hi, f_hi = t_g, f_g
+        side = 0
+        for _ in range(LOCATE_MAXITER):
+            if hi - lo <= 1e-12 * max(1.0, abs(hi)) or f_hi == 0:
+                break
+            mid = hi - f_hi * (hi - lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
+            width = hi - lo                   # keep inside: round-off, a flat event
+            mid = min(max(mid, lo + 1e-3 * width), hi - 1e-3 * width)
             pts = sel[done:]
-            out, n, _, x_mid, _, _, _ = self._run(problem, lo, mid, x_lo, pts[pts <= mid],
-                                                  rtol, atol, max_step, stats)
-            if np.sign(fun(mid, x_mid)) == np.sign(before):
-                xs.append(out[:n])
-                lo, x_lo, done = mid, x_mid, done + n
+            o, m, _, x_mid, _, _, _ = self._run(problem, lo, mid, x_lo, pts[pts <= mid],
+                                                rtol, atol, max_step, stats, min(h, mid - lo))
+            f_mid = fun(mid, x_mid)
+            if f_mid == 0 or np.sign(f_mid) != sign:
+                hi, f_hi = mid, f_mid
+                f_lo = 0.5 * f_lo if side == -1 else f_lo
+                side = -1
             else:
-                hi = mid
+                xs.append(o[:m])
+                lo, f_lo, x_lo, done = mid, f_mid, x_mid, done + m
+                f_hi = 0.5 * f_hi if side == 1 else f_hi
+                side = 1
         pts = sel[done:]
-        out, n, t_r, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], rtol,
-                                              atol, max_step, stats)
-        xs.append(out[:n])
+        o, m, t_r, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], rtol,
+                                            atol, max_step, stats, min(h, hi - lo))
+        xs.append(o[:m])
         return Segment(np.vstack(xs), np.array(x_r), float(hi), False, "", event=k)
 
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "c90854bceff7683ee385799773646b8e"
+MODEL_HASH = "a15594081e0911633aec8be3e6805c90"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "20fd38a427c87fac3366d083c8f32b0e"
+MODEL_HASH = "5d0b41f419bc76235d0f5ab929038c23"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "1f5a892ff1a96d16d726392492e67a47"
+MODEL_HASH = "1da1f729bacb01b68a0c0e46de953d1e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

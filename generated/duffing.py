@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "ed2a6fb9baf3dcba70fa213001b930fd"
+MODEL_HASH = "8f22515909d254bfda55f1670afb5bd8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "3810c0fdef43535af9d81221c7551932"
+MODEL_HASH = "efb9d0b22da946035247801212550e69"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

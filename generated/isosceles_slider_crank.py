@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "fdb98cc4d6c644d98aab361cfa9bb555"
+MODEL_HASH = "fd06520a6a0d11d02e3d3918d1cb5cf5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

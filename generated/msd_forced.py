@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "e91d6e5b9f7659f617fe91fa0e17790b"
+MODEL_HASH = "a6768a8e8ffa10ead52f1bed4c4454e8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

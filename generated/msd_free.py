@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "5a82c961433abbfb694dd3bf3c40d1a1"
+MODEL_HASH = "c32a0c2471418be2dfb84ad352f012c6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

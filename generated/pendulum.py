@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "03ad3b7cc359a0325a6cb6e70dd3da8c"
+MODEL_HASH = "e0cf0c7438e8ee42b724bd665ba7c7d4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "91b9427a0ddbb3c73d64554015c286ae"
+MODEL_HASH = "c6a9592bee792a1072eaf1005cdde88f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

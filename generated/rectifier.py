@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "10ef32da00f240baef8942e247d77a86"
+MODEL_HASH = "b9839d4c3a5639be4d12efb16a04898f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

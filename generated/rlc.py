@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "5d43e514223b118671cef1f5349dd747"
+MODEL_HASH = "aca59b90514362be358ee071bc416a66"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "d2bfbf951fe89857ff982318912f741d"
+MODEL_HASH = "87e80431b17163c560741532c73440ab"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

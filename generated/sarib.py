@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "df4e0d613b09bf4861c27143192f4376"
+MODEL_HASH = "77763f00003aace8feda944a6bfe1d1b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "bc9b51f7701be35db1c23949ea575c69"
+MODEL_HASH = "15e5290b28c8ff6dc5ef1511ac1594c7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "8364c92212d1ecad658773f7d046df4f"
+MODEL_HASH = "73a4539b78d5fb6e29fe86f3a89ce98a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "70194be3b8f9401a0a06f38d18d470e8"
+MODEL_HASH = "0b5a5ea74cd174730a449d501cd8b52f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

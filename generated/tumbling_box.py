@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "b12054afeb797e184fcc44540b19ae4a"
+MODEL_HASH = "d12a5e45f4e820c35049b8dfe124fb6d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

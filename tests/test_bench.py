@@ -69,7 +69,7 @@ def test_compile_cost_in_fresh_processes_and_growth_with_the_legs(tmp_path):
     the first leg and the rest cost together (no expression swell)."""
     row = compile_cost.measure(MODELS / "pendulum.yaml", "parasitic", tmp_path)
     assert row["numba_cold_model_s"] > 0.2 and row["cold_rhs_s"] > 0
-    assert row["warm_to_first_step_s"] < row["cold_process_s"]
+    assert 0 < row["warm_to_first_step_s"] < row["warm_process_s"] < row["cold_process_s"]
     assert row["ops_rhs"] > 10 and row["ops_jac"] > 10 and row["module_bytes"] > 1000
     growth = compile_cost.growth(MODELS / "sarib.yaml", ("parasitic",), tmp_path, (1, 2))
     one, two = growth

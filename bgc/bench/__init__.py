@@ -306,6 +306,11 @@ class Run:
             self.log(f"compile: {model.stem} under {m} (cold numba in a fresh process)")
             rows.append(compile_cost.measure(model, m, self.bench.build))
         write_rows(self.out / "compile.csv", rows)
+        self.summary.append("Derivation and emitting in process; numba's cold compile in a "
+                            "fresh interpreter with an empty cache; warm start: a fresh "
+                            "interpreter with that cache, from its launch to the end of "
+                            "the first step (importing only `bgc.emit` and `bgc.simulate`, "
+                            "as a user's script would).\n")
         self.table(rows, ["model", "method", "states", "sympy_s", "emit_s", "module_bytes",
                           "ops_rhs", "ops_jac", "numba_cold_model_s", "native_loop_cold_s",
                           "warm_to_first_step_s"])

@@ -21,7 +21,10 @@ Two kinds of deflection measure everything:
 translations are blocked, ``u1`` is simply an R0 axis: same span, constant rows); and
 ``perp(u2, w1)``: ``g = u2.w1`` with ``u2`` on body 2, ``w1`` on body 1 (perpendicular at
 assembly). Labels: ``tx ty tz`` translations along, ``rx ry rz`` rotations about the
-joint-frame axes (``ry`` of a universal joint is about its second axis).
+joint-frame axes (``ry`` of a universal joint is about its second axis). A
+``prismatic_universal`` is the chain slider - universal joint with the intermediate bodies'
+mass neglected (the SARIB's attach and membrane joints): one joint instead of two bodies
+of negligible mass, whose poses would be states and whose twists an algebraic loop.
 """
 
 from __future__ import annotations
@@ -57,13 +60,19 @@ JOINT_KINDS: dict[str, JointKind] = {
                       "a cylinder (body 2, along axis2) on a plane (body 1, normal axis)"),
     "universal": JointKind(("tx", "ty", "tz", "rz"), ("rx", "ry"), 2,
                            "two revolutes: about the axis (body 1) and axis2 (body 2)"),
+    "prismatic_universal": JointKind(("tx", "ty", "rz"), ("tz", "rx", "ry"), 3,
+                                     "a universal joint on a slider: slides along "
+                                     "axis x axis2 (body 1), turns about the axis and "
+                                     "axis2 (body 2)"),
     "planar": JointKind(("tx", "ry", "rz"), ("ty", "tz", "rx"), 3,
                         "motion in the plane whose normal is the axis"),
     "fixed": JointKind(("tx", "ty", "tz", "rx", "ry", "rz"), (), 0, "a weld"),
 }
 
 # joint kinds that need a second axis (joint-frame y), body 2's
-NEEDS_AXIS2 = ("universal", "line")
+NEEDS_AXIS2 = ("universal", "prismatic_universal", "line")
+# kinds whose second rotation (ry) is about body 2's axis2: a universal joint's
+UNIVERSAL = ("universal", "prismatic_universal")
 
 
 @dataclass
@@ -147,7 +156,7 @@ def directions(kind: str, geo: Geometry, frame, pitch: float = 0.0) -> list[Dire
     for label in spec.free:
         if label in trans:
             out.append(_dist(geo, label, trans[label], blocked=False))
-        elif kind == "universal" and label == "ry":
+        elif kind in UNIVERSAL and label == "ry":
             out.append(_turn(geo, "ry", 2, y))
         else:
             out.append(_turn(geo, label, 1, {"rx": x, "ry": y, "rz": z}[label]))

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "a15594081e0911633aec8be3e6805c90"
+MODEL_HASH = "41500b8121b9fd847f3bc4f484fc2de9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "5d0b41f419bc76235d0f5ab929038c23"
+MODEL_HASH = "e61a24cf24222c6054ed6511b0fa7cb6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

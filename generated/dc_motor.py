@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "fd5f26e35b6f1cd52900f9e38fe3d8ad"
+MODEL_HASH = "79733d9dd5caefde23170c406e4cc6a4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "1da1f729bacb01b68a0c0e46de953d1e"
+MODEL_HASH = "006d0769a0a82f25366077b5067dcac1"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

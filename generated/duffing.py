@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "8f22515909d254bfda55f1670afb5bd8"
+MODEL_HASH = "1a34e3935bd28ca43fd403f4eb0098ab"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

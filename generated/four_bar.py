@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "d5e5b053b535eec7365d929730aea603"
+MODEL_HASH = "fac105adceefe2a8562c582a6a502bf6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

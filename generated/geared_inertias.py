@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "efb9d0b22da946035247801212550e69"
+MODEL_HASH = "13e1f89ecb706077fe52dd45bbe5e840"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

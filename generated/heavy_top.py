@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "d8d633732ec5c3a3d1224b9bd18d2d49"
+MODEL_HASH = "c5d78ae2819254609225a7150836bad2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

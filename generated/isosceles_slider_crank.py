@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "fd06520a6a0d11d02e3d3918d1cb5cf5"
+MODEL_HASH = "ac5a1524a93117b97af9c425af8eb87c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "a6768a8e8ffa10ead52f1bed4c4454e8"
+MODEL_HASH = "9c81f15a75253e5d46fcd5b91ca05094"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "e0cf0c7438e8ee42b724bd665ba7c7d4"
+MODEL_HASH = "b10759dfdfe3574771fd10681aa79ce4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "c6a9592bee792a1072eaf1005cdde88f"
+MODEL_HASH = "37c8988cc9fe2d95ef693e6a6e33fced"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

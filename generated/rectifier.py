@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "b9839d4c3a5639be4d12efb16a04898f"
+MODEL_HASH = "800c9a7379bb61ea430fe6a4cf97ca18"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "aca59b90514362be358ee071bc416a66"
+MODEL_HASH = "45359fe7fea70e561e41c0b5dc4d1245"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

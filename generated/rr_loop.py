@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "87e80431b17163c560741532c73440ab"
+MODEL_HASH = "35e8ea18f09f63f0cb6f75c72af4d9ae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

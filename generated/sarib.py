@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "77763f00003aace8feda944a6bfe1d1b"
+MODEL_HASH = "137a39ddba636bd06663be3ba703cc22"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "15e5290b28c8ff6dc5ef1511ac1594c7"
+MODEL_HASH = "2b2a37193f37a4317ab97928c1cc4280"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "73a4539b78d5fb6e29fe86f3a89ce98a"
+MODEL_HASH = "f536a432b356a0a0618c55364b4cff79"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

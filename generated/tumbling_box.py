@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "d12a5e45f4e820c35049b8dfe124fb6d"
+MODEL_HASH = "9cdb8b108437184dbaf08dac855f54b0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

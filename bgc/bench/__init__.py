@@ -74,6 +74,21 @@ def machine() -> str:
             f"{np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}")
 
 
+def revision() -> str:
+    """The bgc commit a run measures (``-dirty``: with uncommitted changes to bgc/), or
+    'unknown' outside a git checkout."""
+    import subprocess
+    root = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root,
+                              capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "bgc"], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("-dirty" if dirty else "")
+
+
 class Run:
     """One benchmark run: its parts write into ``out`` and add to ``summary``."""
 
@@ -86,6 +101,7 @@ class Run:
         self.summary: list[str] = []
         self.data: dict = {}
         self.targets: list[str] = []
+        self.revision = revision()       # what was imported: read at the start
 
     def table(self, rows, cols, fmt=None) -> None:
         fmt = fmt or {}
@@ -413,7 +429,7 @@ class Run:
         getattr(self, part)()
         load = f"load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         fragment = {"part": part, "quick": self.quick, "date": str(datetime.date.today()),
-                    "machine": f"{machine()}; {load}", "summary": self.summary,
+                    "revision": self.revision, "machine": f"{machine()}; {load}", "summary": self.summary,
                     "targets": self.targets}
         path = self.out / "parts" / f"{part}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -432,7 +448,8 @@ class Run:
             head += ["## Targets", ""] + [f"- {t}" for t in targets] + [""]
         body = []
         for f in frags:
-            body += f["summary"][:1] + [f"*Run {f['date']} on {f['machine']}.*", ""] \
+            at = f" at bgc {f['revision']}" if "revision" in f else ""
+            body += f["summary"][:1] + [f"*Run {f['date']}{at} on {f['machine']}.*", ""] \
                 + f["summary"][1:]
         path = self.out / "summary.md"
         path.write_text("\n".join(head + body) + "\n")

@@ -829,7 +829,7 @@ class _Loader:
                 self.err(f"'{d}' is not a valid direction name (or it names a kind)",
                          ds.key_locs[d], key)
             m = self.mapping(v, ds.val_locs[d], key, "a mapping {joint, amplitude}")
-            self.check_keys(m, ("joint", "amplitude", "description"), key)
+            self.check_keys(m, ("joint", "amplitude", "direction", "description"), key)
             for k in ("joint", "amplitude"):
                 if k not in m:
                     self.err(f"missing '{k}'", m.loc, key,
@@ -842,12 +842,17 @@ class _Loader:
             if not free:
                 self.err(f"a {j.kind} joint has no free direction to excite",
                          m.val_locs["joint"], f"{key}.joint")
+            label = m.get("direction", free[0])
+            if label not in free:
+                self.err(f"'{label}' is not a free direction of a {j.kind} joint",
+                         m.val_locs["direction"], f"{key}.direction",
+                         "free directions: " + ", ".join(free))
             amp = self.number(m["amplitude"], m.val_locs["amplitude"], f"{key}.amplitude")
             a = Excitation.param(d)
             params[a] = Parameter(a, 0.0, m.loc)
             term = symbols.param(a) * symbols.signal(Excitation.SIGNAL)
-            fun = j.functional.get(free[0], Functional(loc=m.loc))
-            j.functional[free[0]] = Functional(
+            fun = j.functional.get(label, Functional(loc=m.loc))
+            j.functional[label] = Functional(
                 fun.k, fun.c, fun.preload, term if fun.actuator is None else fun.actuator + term,
                 fun.loc)
             self.joint_params(j, params)

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "41500b8121b9fd847f3bc4f484fc2de9"
+MODEL_HASH = "b5d4fce16bd60b5f485042e5275ff995"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

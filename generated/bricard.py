@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "e61a24cf24222c6054ed6511b0fa7cb6"
+MODEL_HASH = "82ecf84977aaa021104c290b26b1517a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

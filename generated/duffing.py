@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "1a34e3935bd28ca43fd403f4eb0098ab"
+MODEL_HASH = "7d45c960b5f170e360ce2df47056f657"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "fac105adceefe2a8562c582a6a502bf6"
+MODEL_HASH = "46119d98e3ce0e677157b7c67f8edebc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "13e1f89ecb706077fe52dd45bbe5e840"
+MODEL_HASH = "9e45675176110bafa843e10cf6515849"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "c5d78ae2819254609225a7150836bad2"
+MODEL_HASH = "be5ba096df7f5daf3bd841d8aac684bf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

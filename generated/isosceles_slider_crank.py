@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "ac5a1524a93117b97af9c425af8eb87c"
+MODEL_HASH = "113aa6915173966137d5628866b2bd31"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

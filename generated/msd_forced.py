@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "9c81f15a75253e5d46fcd5b91ca05094"
+MODEL_HASH = "ad5bf17386bebd6da57a2b815c83db20"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "c58345f1b7df7a0465327f8d3ea0bce1"
+MODEL_HASH = "8b3c9522ad3b094813c44abc41869e7b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "b10759dfdfe3574771fd10681aa79ce4"
+MODEL_HASH = "452eee476981c3923a3830b9aa591996"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "37c8988cc9fe2d95ef693e6a6e33fced"
+MODEL_HASH = "0479c9558f284c39d158a8164d4e1f41"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "800c9a7379bb61ea430fe6a4cf97ca18"
+MODEL_HASH = "f005b5876ca3a5dca92a8299a1af0a57"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

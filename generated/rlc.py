@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "45359fe7fea70e561e41c0b5dc4d1245"
+MODEL_HASH = "385957991eb571754419a85fc5f86740"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "137a39ddba636bd06663be3ba703cc22"
+MODEL_HASH = "76c2d02d2e24a9fc7fbe4502f7b512cc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "2b2a37193f37a4317ab97928c1cc4280"
+MODEL_HASH = "3d752c372f81c5f338632bb8702d7ccf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

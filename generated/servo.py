@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "f536a432b356a0a0618c55364b4cff79"
+MODEL_HASH = "248a1907f3a1d27044083f042845fda5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "de6c0c120e946bc4e47242d678ae8069"
+MODEL_HASH = "2ecec12176d9dd963c7df790ddb049a7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

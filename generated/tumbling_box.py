@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "9cdb8b108437184dbaf08dac855f54b0"
+MODEL_HASH = "37d28499c567a42ced912fa885f05b4b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import load, signals
+from bgc import load, signals, symbols
 from bgc.errors import BgcError
+from bgc.simulate import simulate
 
 T1, T2, T3, F0, F1 = 3.0, 5.0, 25.0, 5.0, 25.0     # the SARIB rig's chirp
 
@@ -105,6 +106,64 @@ def test_excitation_section_is_lowered_to_parameters_and_an_actuator():
         exc.select("chirp", "push", frequency=3.0)
 
 
+GIMBAL = """
+name: gimbal
+gravity: 0.0
+bodies:
+  rod: {mass: 2.0, com: [0, 0, -0.5], inertia: [0.2, 0.2, 0.01]}
+joints:
+  pu: {type: prismatic_universal, between: [fixed_frame, rod], at: [0, 0, 0],
+       axis: [1, 0, 0], axis2: [0, 1, 0],
+       directions: {tz: {k: 200.0, c: 2.0}, rx: {k: 5.0, c: 0.1}, ry: {k: 3.0, c: 0.1}}}
+excitation:
+  directions:
+    pumping: {joint: pu, amplitude: 20.0}
+    pitch: {joint: pu, direction: ry, amplitude: 2.0}
+  kinds:
+    constant: {type: constant, value: 1.0}
+outputs:
+  x: rod.x
+  y: rod.y
+  z: rod.z
+"""
+
+
+def test_excitation_acts_on_the_free_direction_it_names(tmp_path):
+    """One joint, several free directions: a direction's excitation goes on the first
+    unless it names another (the SARIB's attach chain as one prismatic_universal: pumping
+    along tz, roll and pitch about rx and ry). A constant force along the slide lifts the
+    rod straight up (z only); a constant moment about axis2 = y swings its lower end
+    along x (x only)."""
+    from bgc.emit import import_module
+    from bgc.pipeline import compile_model
+    m = load.loads(GIMBAL, "gimbal.yaml")
+    assert m.excitation.directions == {"pumping": ("pu", 20.0), "pitch": ("pu", 2.0)}
+    fun = m.joints["pu"].functional
+    assert fun["tz"].actuator.has(symbols.param("excitation__pumping"))
+    assert fun["ry"].actuator.has(symbols.param("excitation__pitch"))
+    assert fun["rx"].actuator is None
+    f = tmp_path / "gimbal.yaml"
+    f.write_text(GIMBAL)
+    _, path = compile_model(f, tmp_path / "gen")
+    mod = import_module(path)
+    moved = {}
+    for direction in ("pumping", "pitch"):
+        p = np.array(mod.PARAMS, dtype=np.float64)
+        names = list(mod.PARAM_NAMES)
+        for k, v in m.excitation.select("constant", direction).items():
+            p[names.index(k)] = v
+        r = simulate(mod, t_end=0.5, rtol=1e-9, atol=1e-11, solver="native", params=p)
+        moved[direction] = {o: np.ptp(r.column(o)) for o in ("x", "y", "z")}
+    up, swing = moved["pumping"], moved["pitch"]
+    assert up["z"] > 0.05 and up["x"] < 1e-6 * up["z"] and up["y"] < 1e-6 * up["z"]
+    assert swing["x"] > 0.05 and swing["y"] < 1e-6 * swing["x"]
+    bad = GIMBAL.replace("direction: ry", "direction: tx")
+    line = next(i for i, ln in enumerate(bad.splitlines(), 1) if "direction: tx" in ln)
+    with pytest.raises(BgcError, match=rf"gimbal.yaml:{line}:\d+: excitation.directions.pitch"
+                                       r".direction: 'tx' is not a free direction.*tz, rx, ry"):
+        load.loads(bad, "gimbal.yaml")
+
+
 @pytest.fixture(scope="module")
 def absorber(tmp_path_factory):
     from bgc.emit import import_module
@@ -144,7 +203,6 @@ def test_sine_dwell_matches_the_frequency_response(absorber):
     """A sine dwell (nonlinear run, transients decayed) against |H(f)| within 1 %, with
     more damping (parameters, no recompilation) so the transient dies in the run."""
     from bgc import frf
-    from bgc.simulate import simulate
     mod, model = absorber
     names = list(mod.PARAM_NAMES)
     p = np.array(mod.PARAMS)
@@ -166,7 +224,6 @@ def test_step_limit_keeps_the_integrator_from_striding_over_the_excitation(absor
     that samples it only there sees no input at all (under lagrange the SARIB's BDF took
     one 0.5 s step). The module limits the step to 1/8 of the fastest selected input's
     period; a constant input leaves it free."""
-    from bgc.simulate import simulate
     mod, model = absorber
     names = list(mod.PARAM_NAMES)
     for kind, f, limit in (("sine", 20.0, 1 / 160), ("chirp", None, 1 / 112),

@@ -210,7 +210,8 @@ class Joint:
 class Excitation:
     """A run-time choice of input (``excitation:``): g(t) of one of ``kinds`` times an
     amplitude, applied along one of ``directions`` (a free direction of a joint, its first
-    unless the section names one, acting on both of its bodies). Parameters select it, so a run chooses without recompiling."""
+    unless the section names one, acting on both of its bodies). Parameters select it, so
+    a run chooses without recompiling."""
     directions: dict[str, tuple[str, float]]    # name -> (joint, nominal amplitude)
     kinds: dict[str, Signal]                    # g(t) of each kind
     frequency: float | None = None              # the sine kind's nominal frequency [Hz]

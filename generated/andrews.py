@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "b5d4fce16bd60b5f485042e5275ff995"
+MODEL_HASH = "903fa1ad71ee5d48d54b132cfaa41df7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

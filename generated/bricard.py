@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "82ecf84977aaa021104c290b26b1517a"
+MODEL_HASH = "14f337f1981ac80bc7a935c445c21d90"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "264955d7d66ca2bcc83ee3c631160480"
+MODEL_HASH = "c7f612c4dc388a6c65525984b00f3549"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "8e4efa6d837dd50c187c7f17df3fdf3b"
+MODEL_HASH = "ec63da12f3f750bc53e45f5baaf38e33"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

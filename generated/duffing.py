@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "7d45c960b5f170e360ce2df47056f657"
+MODEL_HASH = "d6ef0ef2a6d96032df136a4f2bc6aebd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "46119d98e3ce0e677157b7c67f8edebc"
+MODEL_HASH = "41c43ea83a7adb91a24841c68dc0e732"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

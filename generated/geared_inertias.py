@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "9e45675176110bafa843e10cf6515849"
+MODEL_HASH = "0095e8ecd9c08aefdd7f9fcd0e8e3e8d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "be5ba096df7f5daf3bd841d8aac684bf"
+MODEL_HASH = "74f233f5a832b332259e7873a5616e93"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "8b3c9522ad3b094813c44abc41869e7b"
+MODEL_HASH = "e63cbf483b8ef6a249b17b9feebf3952"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "0479c9558f284c39d158a8164d4e1f41"
+MODEL_HASH = "227b09849a13e4f8e6eafdbce383d562"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "f005b5876ca3a5dca92a8299a1af0a57"
+MODEL_HASH = "d271fa09d82888bd576b96ad737d34bc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

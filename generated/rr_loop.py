@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "7e3a7ad74cc0e3aa60f2b2e74d455a54"
+MODEL_HASH = "8de8c194170ff61624ff80e1106af20d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "76c2d02d2e24a9fc7fbe4502f7b512cc"
+MODEL_HASH = "870966a86fb4af773fbdc3fc89870a8c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -54,9 +54,9 @@ def _block_solve(A, B, rank):
     B = np.ascontiguousarray(B)
     n, m = B.shape
     r = int(rank)
-    if not np.all(np.isfinite(A)):     # LAPACK raises on it
-        return np.full((n, m), np.nan)
     if r < n:
+        if not np.all(np.isfinite(A)):     # LAPACK raises on it (the LU below gives NaN)
+            return np.full((n, m), np.nan)
         U, s, Vt = np.linalg.svd(A)
         if r < 1 or s[r - 1] <= 1e-10 * s[0]:
             return np.full((n, m), np.nan)

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "3d752c372f81c5f338632bb8702d7ccf"
+MODEL_HASH = "d6d3bc3759cd37dd72e80bc8602e8e82"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

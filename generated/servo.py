@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "248a1907f3a1d27044083f042845fda5"
+MODEL_HASH = "6d4b50029d30e86e51658d4b3e8b3247"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

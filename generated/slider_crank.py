@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "2ecec12176d9dd963c7df790ddb049a7"
+MODEL_HASH = "899b600290ff996b33e14d75ed0ec229"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

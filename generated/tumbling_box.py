@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "37d28499c567a42ced912fa885f05b4b"
+MODEL_HASH = "a5c42e48577929ca4bba7093f6dd2162"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -429,8 +429,8 @@ class Run:
         getattr(self, part)()
         load = f"load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         fragment = {"part": part, "quick": self.quick, "date": str(datetime.date.today()),
-                    "revision": self.revision, "machine": f"{machine()}; {load}", "summary": self.summary,
-                    "targets": self.targets}
+                    "revision": self.revision, "machine": f"{machine()}; {load}",
+                    "summary": self.summary, "targets": self.targets}
         path = self.out / "parts" / f"{part}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(fragment, indent=1) + "\n")

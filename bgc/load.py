@@ -772,7 +772,7 @@ class _Loader:
                       tuple(float(c) for c in point),
                       tuple(tuple(float(c) for c in row) for row in frame), para,
                       functional, pitch, out_frame)
-            self.joint_params(j, params)
+            joint_params(j, params)
             out[name] = j
         self.joints = out
         return out
@@ -855,20 +855,9 @@ class _Loader:
             j.functional[label] = Functional(
                 fun.k, fun.c, fun.preload, term if fun.actuator is None else fun.actuator + term,
                 fun.loc)
-            self.joint_params(j, params)
+            joint_params(j, params)
             directions[d] = (j.name, amp)
         return Excitation(directions, kinds, freq, sec.loc)
-
-    def joint_params(self, j: Joint, params: dict):
-        """A joint's stiffness, damping and preload values become parameters, so they can
-        be changed (and swept) without recompiling."""
-        vals = dict(j.parasitic.__dict__)
-        vals.update({f"{lab}_load": 0.0 for lab in JOINT_KINDS[j.kind].blocked})
-        for lab, f in j.functional.items():
-            vals.update({f"{lab}_k": f.k, f"{lab}_c": f.c, f"{lab}_preload": f.preload})
-        for role, val in vals.items():
-            pname = f"{j.name}__{role}"
-            params[pname] = Parameter(pname, float(val), j.loc)
 
     def settings(self, sec: YMap) -> Settings:
         allowed = ("t_end", "rtol", "atol", "solver", "points")
@@ -884,6 +873,18 @@ class _Loader:
                 else:
                     kw[k] = self.number(sec[k], loc, kk, positive=True)
         return Settings(**kw)
+
+
+def joint_params(j: Joint, params: dict):
+    """A joint's stiffness, damping and preload values become parameters (in ``params``),
+    so they can be changed (and swept) without recompiling."""
+    vals = dict(j.parasitic.__dict__)
+    vals.update({f"{lab}_load": 0.0 for lab in JOINT_KINDS[j.kind].blocked})
+    for lab, f in j.functional.items():
+        vals.update({f"{lab}_k": f.k, f"{lab}_c": f.c, f"{lab}_preload": f.preload})
+    for role, val in vals.items():
+        pname = f"{j.name}__{role}"
+        params[pname] = Parameter(pname, float(val), j.loc)
 
 
 def _kind_of(v) -> str:

@@ -1,8 +1,17 @@
-"""Stage **reduce** (EquationSystem -> EquationSystem): model no more than a scene needs.
+"""Stage **reduce**: model no more than a scene needs.
 
 A scene asks for some outputs under one excitation; each pass below removes what cannot
 change those outputs and reports what it did (``PassReport``), in this order:
 
+- ``merge_relays`` (Model -> Model, before the equations are derived): a chain of bodies
+  of negligible mass that only relay forces between two bodies (two revolutes with
+  perpendicular, intersecting axes; a slider and such a pair) becomes the one joint it
+  is (``universal``, ``prismatic_universal``), its springs, dampers and actuators moved
+  onto the joint's free directions. The relays' poses and twists are no states and their
+  balance no algebraic loop. Exact for ideal joints (methods lagrange, zcp); under
+  parasitic the chain's three joints' compliance becomes one joint's, which changes
+  the model by its parasitic error, so there the pass runs only where the scene asks
+  (``merge_relays: true``).
 - ``fold_parameters``: parameters the scene does not expose become constants, and the
   assignments they make constant are propagated (a zero damper, a zero preload vanish);
   the parameters bgc itself sets at run time (joint loads, the excitation's selectors,
@@ -13,20 +22,27 @@ change those outputs and reports what it did (``PassReport``), in this order:
 - ``prune``: outputs the scene does not ask for, and states that cannot reach the asked
   ones through the equations, are removed.
 
-Every pass is exact: what it removes is identically zero or cannot influence the outputs
-(``idle_dofs`` drops the moments of joint forces whose lever arm across the axis is round-
-off of the model's coordinates, below 1e-9 m).
+The passes after ``merge_relays`` work on the EquationSystem and are exact: what they
+remove is identically zero or cannot influence the outputs (``idle_dofs`` drops the
+moments of joint forces whose lever arm across the axis is round-off of the model's
+coordinates, below 1e-9 m).
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import sympy as sp
 
+from . import symbols
 from .emit import _cone
 from .equations import EquationSystem, LinearBlock
+from .joints import JOINT_KINDS
+from .load import joint_params
+from .model import Functional, Joint, Model
 
 # parameters bgc writes at run time: never folded
 RUNTIME_PARAMS = ("_load", "excitation__", "lagrange__rank")
@@ -198,3 +214,215 @@ def reduce(system: EquationSystem, outputs, values: dict, expose=()) -> tuple:
         system, rep = step(system)
         reports.append(rep)
     return system, reports
+
+
+# --- merge_relays (on the Model) --------------------------------------------------------
+AXIS_TOLERANCE = 1e-6       # perpendicular / parallel axes, as the loader checks axis2
+
+
+@dataclass
+class _Link:
+    """One joint of a relay chain, walked from end 1 to end 2 (``forward``: the joint's
+    body 1 is on end 1's side)."""
+    joint: Joint
+    forward: bool
+
+    @property
+    def axis(self) -> np.ndarray:
+        return np.array(self.joint.frame, dtype=float)[:, 0]
+
+    @property
+    def functional(self):
+        free = JOINT_KINDS[self.joint.kind].free[0]
+        return self.joint.functional.get(free)
+
+
+def _references(model: Model) -> dict[str, set]:
+    """Body or joint name -> who reads it: ``element E``, ``bond B``, ``joint J`` (its
+    actuator), ``output O``."""
+    read: dict[str, set] = {}
+
+    def scan(e, who):
+        for s in getattr(e, "free_symbols", ()):
+            if symbols.is_ref(s):
+                read.setdefault(symbols.split_ref(s)[0].split(".")[0], set()).add(who)
+    for el in model.elements.values():
+        for e in list(el.fields.values()) + [el.initial]:
+            scan(e, f"element {el.name}")
+    for b in model.bonds:
+        for end in (b.src, b.dst):
+            read.setdefault(end.split(".")[0], set()).add(f"bond {b.name}")
+    for j in model.joints.values():
+        for f in j.functional.values():
+            scan(f.actuator, f"joint {j.name}")
+    for o in model.outputs:
+        scan(o.expr, f"output {o.name}")
+    return read
+
+
+def _chains(model: Model) -> list[tuple[str | None, list[str], list[_Link], str | None]]:
+    """Maximal chains end1 -joint- relay -joint- relay ... -joint- end2, where each relay
+    is a body of negligible mass with exactly two joints."""
+    touching: dict = {}
+    for j in model.joints.values():
+        for b in (j.body1, j.body2):
+            touching.setdefault(b, []).append(j)
+    relays = {n for n, b in model.bodies.items() if b.mass == 0 and len(touching.get(n, ())) == 2}
+    seen, out = set(), []
+    for start in sorted(relays):
+        if start in seen:
+            continue
+        # walk to one end, then collect the chain from there
+        prev, body = None, start
+        while True:
+            nxt = [j for j in touching[body] if j is not prev][0]
+            other = nxt.body2 if nxt.body1 == body else nxt.body1
+            prev, body = nxt, other
+            if body not in relays or body == start:
+                break
+        if body == start:           # a ring of relays: nothing to merge into
+            seen.add(start)
+            continue
+        end1, link, bodies, links = body, prev, [], []
+        here = end1
+        while True:
+            there = link.body2 if link.body1 == here else link.body1
+            links.append(_Link(link, link.body1 == here))
+            if there not in relays:
+                break
+            bodies.append(there)
+            link = [j for j in touching[there] if j is not link][0]
+            here = there
+        seen.update(bodies)
+        out.append((end1, bodies, links, there))
+    return out
+
+
+def _universal_centre(ra: _Link, rb: _Link) -> tuple[np.ndarray | None, str]:
+    """The point where two revolute axes meet at right angles, or why they do not."""
+    a, b = ra.axis, rb.axis
+    if abs(a @ b) > AXIS_TOLERANCE:
+        return None, f"the axes of {ra.joint.name} and {rb.joint.name} are not perpendicular"
+    pa, pb = np.array(ra.joint.at), np.array(rb.joint.at)
+    qa, qb = pa + ((pb - pa) @ a) * a, pb + ((pa - pb) @ b) * b
+    scale = max(1.0, float(np.abs(pa).max()), float(np.abs(pb).max()))
+    if np.linalg.norm(qa - qb) > AXIS_TOLERANCE * scale:
+        return None, f"the axes of {ra.joint.name} and {rb.joint.name} do not meet"
+    return (qa + qb) / 2, ""
+
+
+def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, str]:
+    """The one joint a chain is (or None and why not). Its axes keep the old joints'
+    senses where they can, so that most springs keep the sign of their preload."""
+    kinds = [lk.joint.kind for lk in links]
+    if kinds == ["revolute", "revolute"]:
+        slider, (ra, rb), kind = None, links, "universal"
+    elif kinds == ["prismatic", "revolute", "revolute"]:
+        slider, ra, rb = links
+        kind = "prismatic_universal"
+    else:
+        return None, "its joints (" + ", ".join(kinds) + ") are no universal joint"
+    if len({lk.joint.parasitic for lk in links}) > 1:
+        return None, "its joints have different parasitic settings"
+    centre, why = _universal_centre(ra, rb)
+    if centre is None:
+        return None, why
+    x = ra.axis * (1 if ra.forward else -1)
+    y = rb.axis * (1 if rb.forward else -1)
+    if slider is not None:
+        p = slider.axis * (1 if slider.forward else -1)
+        z = np.cross(x, y)
+        if abs(abs(z @ p) - 1) > AXIS_TOLERANCE:
+            return None, (f"{slider.joint.name} does not slide at right angles to both "
+                          f"axes of {ra.joint.name} and {rb.joint.name}")
+        if z @ p < 0:
+            y = -y
+    y = y - (y @ x) * x
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    labels = {id(ra): ("rx", x), id(rb): ("ry", y)}
+    if slider is not None:
+        labels[id(slider)] = ("tz", z)
+    functional = {}
+    for lk in links:
+        f = lk.functional
+        if f is None:
+            continue
+        label, new = labels[id(lk)]
+        s = int(np.sign(new @ lk.axis)) * (1 if lk.forward else -1)
+        functional[label] = Functional(f.k, f.c, s * f.preload + 0.0,
+                                       None if f.actuator is None else s * f.actuator, f.loc)
+    first = links[0].joint
+    return Joint(name, first.loc, kind, end1, end2, tuple(float(c) for c in centre),
+                 tuple(tuple(float(c) for c in row) for row in np.column_stack([x, y, z])),
+                 first.parasitic, functional), ""
+
+
+def _merged_name(model: Model, joints: list[str]) -> str:
+    """The chain's joints' common prefix (attach_pumping, attach_roll -> attach), else
+    their names joined."""
+    prefix = os.path.commonprefix(joints).rstrip("_")
+    taken = set(model.joints) | set(model.bodies) | set(model.elements)
+    if prefix.isidentifier() and "__" not in prefix and prefix not in taken:
+        return prefix
+    return "_".join(joints)
+
+
+def merge_relays(model: Model, outputs=None, keep_params=()) -> tuple[Model, list, str]:
+    """The model with every mergeable relay chain replaced by its joint (see the module's
+    docstring). A chain stays when an expression, a bond or one of ``outputs`` (default
+    all; the others that read a chain are dropped) reads its bodies or joints, or when
+    it holds one of ``keep_params`` (a scene's exposed or set parameters). Returns the
+    model, what was removed, and a note that says what was merged and what was left, why."""
+    read = _references(model)
+    kept_outputs = None if outputs is None else set(outputs)
+    merged, notes, removed = [], [], []
+    for end1, relays, links, end2 in _chains(model):
+        names = [lk.joint.name for lk in links]
+        if links[-1].joint.kind == "prismatic":     # the slider sits on end 1's side
+            end1, end2 = end2, end1
+            links = [_Link(lk.joint, not lk.forward) for lk in reversed(links)]
+        readers = {w for n in relays + names for w in read.get(n, ())
+                   if not (w.startswith("output ") and kept_outputs is not None
+                           and w[7:] not in kept_outputs)}
+        held = sorted(p for p in keep_params if p.split("__")[0] in names)
+        chain = " - ".join(names)
+        if end1 == end2:
+            notes.append(f"{chain} left: it begins and ends on {end1 or 'the fixed frame'}")
+            continue
+        if readers or held:
+            notes.append(f"{chain} left: " + ", ".join(sorted(readers) + held) + " read it")
+            continue
+        joint, why = _merged_joint(_merged_name(model, names), end1, end2, links)
+        if joint is None:
+            notes.append(f"{chain} left: {why}")
+            continue
+        merged.append((joint, relays, names))
+        removed += relays + names
+        notes.append(f"{chain} -> {joint.name} ({joint.kind})")
+    if not merged:
+        return model, [], "; ".join(notes) or "no bodies of negligible mass relay forces"
+    gone_joints = {n for _, _, names in merged for n in names}
+    gone_bodies = {b for _, relays, _ in merged for b in relays}
+    joints = {n: j for n, j in model.joints.items() if n not in gone_joints}
+    params = {n: p for n, p in model.parameters.items()
+              if n.split("__")[0] not in gone_joints}
+    renamed = {}
+    for joint, _, names in merged:
+        joints[joint.name] = joint
+        joint_params(joint, params)
+        renamed.update({n: joint.name for n in names})
+    excitation = model.excitation
+    if excitation is not None:
+        excitation = replace(excitation, directions={
+            d: (renamed.get(j, j), amp) for d, (j, amp) in excitation.directions.items()})
+    dropped = [o.name for o in model.outputs
+               if any(w == f"output {o.name}" for n in gone_joints | gone_bodies
+                      for w in read.get(n, ()))]
+    removed += [f"output {n}" for n in dropped]
+    digest = hashlib.sha256((model.digest + repr(notes)).encode()).hexdigest()
+    out = replace(model, digest=digest, joints=joints, parameters=params,
+                  bodies={n: b for n, b in model.bodies.items() if n not in gone_bodies},
+                  outputs=[o for o in model.outputs if o.name not in dropped],
+                  excitation=excitation)
+    return out, removed, "; ".join(notes)

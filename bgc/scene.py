@@ -2,8 +2,10 @@
 
 A scene names a model and the method, excitation, outputs, time span, tolerances and
 solver of one run; ``expose`` lists the parameters it keeps adjustable (``-p``), every
-other is folded into the equations. ``compile_scene`` builds the model, runs the passes
-of ``reduce`` and writes ``<out_dir>/<model>_<scene>.py``; ``run_scene`` simulates it.
+other is folded into the equations; ``merge_relays: true`` lets the relay merge change a
+parasitic model (see ``reduce``). ``ensure_scene_module`` builds the model, runs the passes
+of ``reduce`` and writes ``<out_dir>/<model>_<method>_<scene>.py``; ``run_scene``
+simulates it.
 
     model: ../models/sarib.yaml
     method: parasitic
@@ -28,7 +30,7 @@ from .load import YMap, _Loader, _read_yaml
 from .pipeline import METHODS, build
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
-        "tolerances", "solver", "expose", "params")
+        "tolerances", "solver", "expose", "params", "merge_relays")
 
 
 @dataclass
@@ -48,6 +50,8 @@ class Scene:
     expose: list[str]
     params: dict[str, float]      # values the scene sets (folded unless exposed)
     digest: str
+    # merge relay chains: None = where exact (ideal joints); True also under parasitic
+    merge_relays: bool | None = None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -136,15 +140,20 @@ def load_scene(path: str | Path) -> Scene:
         for k, v in pm.items():
             params[k] = ld.number(v, at(pm, k), f"params.{k}")
     expose = list(doc.get("expose") or [])
+    merge = doc.get("merge_relays")
+    if merge is not None and not isinstance(merge, bool):
+        ld.err(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),
+               "merge_relays", "true: merge also under parasitic (changes the joints' "
+               "parasitic compliance); false: never; absent: where exact")
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name.isidentifier():
         ld.err(f"scene name {name!r} is not a valid module name", at(doc, "name"), "name",
                "letters, digits and '_'")
     digest = hashlib.sha256(json.dumps(
-        [model.digest, method, exc, outputs, params, expose], sort_keys=True,
+        [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
         default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
-                 points, rtol, atol, solver, expose, params, digest)
+                 points, rtol, atol, solver, expose, params, digest, merge)
 
 
 def scene_values(scene: Scene, model) -> dict[str, float]:
@@ -159,7 +168,8 @@ def scene_values(scene: Scene, model) -> dict[str, float]:
 
 
 def reduced_system(scene: Scene):
-    """(full Compiled, reduced EquationSystem, pass reports)."""
+    """(full Compiled, reduced EquationSystem, pass reports). ``merge_relays`` works on
+    the model, so its report compares the full model's build with the merged one's."""
     c = build(scene.model, scene.method)
     known = {name for _, name, _ in c.system.params}
     for name in list(scene.expose) + list(scene.params):
@@ -167,10 +177,24 @@ def reduced_system(scene: Scene):
             raise ModelError(f"unknown parameter '{name}' of model {c.model.name}",
                              loc=load.Loc(scene.file, 1), key="expose/params",
                              hint="see PARAM_NAMES of the generated module")
-    system, reports = reduce.reduce(c.system, scene.outputs, scene_values(scene, c.model),
-                                    scene.expose)
-    model = replace(c.model, digest=scene.digest)
-    return c, replace(system, model=model, scene=scene.name), reports
+    merged, removed, note = reduce.merge_relays(
+        c.model, scene.outputs, list(scene.expose) + list(scene.params))
+    merged_c = c
+    if removed and scene.merge_relays is None and scene.method == "parasitic":
+        removed, note = [], (f"would merge {note}; left: under parasitic each joint's "
+                             "compliance is part of the model (merge_relays: true accepts "
+                             "the change)")
+    elif removed and scene.merge_relays is not False:
+        merged_c = build(merged, scene.method)
+    elif removed:
+        removed, note = [], f"would merge {note}; left: the scene says merge_relays: false"
+    first = reduce.PassReport("merge_relays", len(c.system.states),
+                              len(merged_c.system.states), len(c.system.assignments),
+                              len(merged_c.system.assignments), removed, note)
+    system, reports = reduce.reduce(merged_c.system, scene.outputs,
+                                    scene_values(scene, merged_c.model), scene.expose)
+    model = replace(merged_c.model, digest=scene.digest)
+    return c, replace(system, model=model, scene=scene.name), [first] + reports
 
 
 def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):

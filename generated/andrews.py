@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "903fa1ad71ee5d48d54b132cfaa41df7"
+MODEL_HASH = "737e2a1fbbccb124522715c2f1a69f1f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

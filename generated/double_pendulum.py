@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "ec63da12f3f750bc53e45f5baaf38e33"
+MODEL_HASH = "3bb7988092351de81e9d978b2770a5e5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "d6ef0ef2a6d96032df136a4f2bc6aebd"
+MODEL_HASH = "a0a09d071b7151bd506f2aaffca66ddc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "41c43ea83a7adb91a24841c68dc0e732"
+MODEL_HASH = "e3c1eef28129ed5b4149b27769eced3b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "0095e8ecd9c08aefdd7f9fcd0e8e3e8d"
+MODEL_HASH = "a458daf5392ac1828bf28df0377e5bb8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

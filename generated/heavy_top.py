@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "74f233f5a832b332259e7873a5616e93"
+MODEL_HASH = "f95d4110f1fc377d4ee8a07fb8670c81"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

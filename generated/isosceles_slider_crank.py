@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "690a471370736d238b3e358ffacc5c85"
+MODEL_HASH = "2eaa1acda621cc1d15c277e7d7c42fc9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

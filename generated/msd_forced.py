@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "6d2ef42dd1430885ca78c79b5d975ee6"
+MODEL_HASH = "64f6dfa0b67b6bab7709613839d7af05"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

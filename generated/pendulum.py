@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "16c992250225ddcf34f2dd0db5a67097"
+MODEL_HASH = "fbf93160f9128d1bf0e6317062143333"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "d271fa09d82888bd576b96ad737d34bc"
+MODEL_HASH = "f29171bb1c69399578dc4077ea0e6176"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "335a055a2cc5d642ff2510075e9528f9"
+MODEL_HASH = "5910ccb05cf3173055c82771fcdb2520"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "870966a86fb4af773fbdc3fc89870a8c"
+MODEL_HASH = "f40603bc30179910c46d2857b86e392e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "d6d3bc3759cd37dd72e80bc8602e8e82"
+MODEL_HASH = "35efd3b20d679bb94c352b775cda907b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "6d4b50029d30e86e51658d4b3e8b3247"
+MODEL_HASH = "7d19ee8bcbfd3b00026c45c5aa46729e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

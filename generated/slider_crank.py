@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "899b600290ff996b33e14d75ed0ec229"
+MODEL_HASH = "aa465126c0fd1809cd51071b31c0422a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -128,5 +128,6 @@ def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp
               "run_full_s", "run_reduced_s"):
         assert float(row[k]) > 0, k
     assert float(row["output_difference"]) < 1e-6
+    assert 0 < float(row["integration_error_full"]) < 1e-4    # the run's own error, beside it
     assert "idle_dofs 36->35" in row["passes"]
     assert "## Scenes" in (tmp_path / "summary.md").read_text()

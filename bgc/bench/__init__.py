@@ -410,12 +410,13 @@ class Run:
             "scene's method, on the scene's own settings (`scenes.csv`): derivation (sympy "
             "and emit) and cold numba compile (a fresh interpreter, empty cache), run time "
             "(warm), and the largest difference of the scene's outputs relative to each "
-            "output's peak. The full model's compile is the model's, shared by its "
-            "scenes.\n")
+            "output's peak, beside the full model's own integration error on the scene's "
+            "tolerances (against a run at 1/1000 of them). The full model's compile is "
+            "the model's, shared by its scenes.\n")
         self.table(rows, ["scene", "states_full", "states_reduced", "params_reduced",
                           "derive_full_s", "derive_reduced_s", "numba_cold_full_s",
                           "numba_cold_reduced_s", "run_full_s", "run_reduced_s",
-                          "run_gain", "output_difference"],
+                          "run_gain", "output_difference", "integration_error_full"],
                    {"run_gain": lambda v: f"{v:.3g}x"})
         self.data["scenes"] = rows
 

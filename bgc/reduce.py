@@ -101,7 +101,8 @@ def _keep_states(system: EquationSystem, keep: list) -> EquationSystem:
                    algebraic=[k for k, st in enumerate(keep) if old[id(st)] in algebraic])
 
 
-def _report(name, before: EquationSystem, after: EquationSystem, removed, note=""):
+def report(name, before: EquationSystem, after: EquationSystem, removed, note=""):
+    """The PassReport of a pass that took ``before`` to ``after``."""
     return PassReport(name, len(before.states), len(after.states), len(before.assignments),
                       len(after.assignments), removed, note)
 
@@ -119,7 +120,7 @@ def fold_parameters(system: EquationSystem, values: dict, expose=()) -> tuple:
             mapping[sym] = sp.Integer(int(v)) if v.is_integer() else sp.Float(v)
     out = replace(_substitute(system, mapping), params=keep)
     folded = sorted(name for sym, name, _ in system.params if sym in mapping)
-    return out, _report("fold_parameters", system, out, folded,
+    return out, report("fold_parameters", system, out, folded,
                         f"{len(mapping)} of {len(system.params)} parameters folded, "
                         f"{len(keep)} kept")
 
@@ -129,7 +130,7 @@ def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
     one of ``outputs`` (default: all) reads it."""
     m = system.model
     if system.method != "parasitic":
-        return system, _report("idle_dofs", system, system, [],
+        return system, report("idle_dofs", system, system, [],
                                f"method {system.method}: the spin's rate is an unknown of "
                                "the constraint block, left as it is")
     by_name = {st.name: st for st in system.states}
@@ -146,11 +147,11 @@ def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
     read = [n for n, e in system.outputs if (outputs is None or n in outputs)
             and _cone(system.assignments, [e])[1] & set(zero)]
     if read:     # an output reads a spin: it is not idle for this scene
-        return system, _report("idle_dofs", system, system, [],
+        return system, report("idle_dofs", system, system, [],
                                f"outputs {', '.join(read)} read a spin: kept")
     out = _substitute(system, zero)
     out = _keep_states(out, [st for st in out.states if st.sym not in zero])
-    return out, _report("idle_dofs", system, out, notes,
+    return out, report("idle_dofs", system, out, notes,
                         f"{len(notes)} bodies spin freely about their own axis")
 
 
@@ -201,7 +202,7 @@ def prune(system: EquationSystem, outputs) -> tuple:
                                guards=[(w, e) for w, e in system.guards
                                        if not e.free_symbols & gone]), keep)
     dropped = [n for n, _ in system.outputs if n not in set(outputs)]
-    return out, _report("prune", system, out, removed + [f"output {n}" for n in dropped],
+    return out, report("prune", system, out, removed + [f"output {n}" for n in dropped],
                         f"{len(removed)} states and {len(dropped)} outputs cannot reach "
                         "the outputs asked for")
 
@@ -229,7 +230,8 @@ class _Link:
 
     @property
     def axis(self) -> np.ndarray:
-        return np.array(self.joint.frame, dtype=float)[:, 0]
+        """The joint's axis, turned so that its coordinate counts from end 1 to end 2."""
+        return np.array(self.joint.frame, dtype=float)[:, 0] * (1 if self.forward else -1)
 
     @property
     def functional(self):
@@ -237,9 +239,9 @@ class _Link:
         return self.joint.functional.get(free)
 
 
-def _references(model: Model) -> dict[str, set]:
-    """Body or joint name -> who reads it: ``element E``, ``bond B``, ``joint J`` (its
-    actuator), ``output O``."""
+def _references(model: Model) -> dict[str, set[tuple[str, str]]]:
+    """Body or joint name -> who reads it: ``("element", E)``, ``("bond", B)``,
+    ``("joint", J)`` (its actuator), ``("output", O)``."""
     read: dict[str, set] = {}
 
     def scan(e, who):
@@ -248,15 +250,15 @@ def _references(model: Model) -> dict[str, set]:
                 read.setdefault(symbols.split_ref(s)[0].split(".")[0], set()).add(who)
     for el in model.elements.values():
         for e in list(el.fields.values()) + [el.initial]:
-            scan(e, f"element {el.name}")
+            scan(e, ("element", el.name))
     for b in model.bonds:
         for end in (b.src, b.dst):
-            read.setdefault(end.split(".")[0], set()).add(f"bond {b.name}")
+            read.setdefault(end.split(".")[0], set()).add(("bond", b.name))
     for j in model.joints.values():
         for f in j.functional.values():
-            scan(f.actuator, f"joint {j.name}")
+            scan(f.actuator, ("joint", j.name))
     for o in model.outputs:
-        scan(o.expr, f"output {o.name}")
+        scan(o.expr, ("output", o.name))
     return read
 
 
@@ -267,34 +269,38 @@ def _chains(model: Model) -> list[tuple[str | None, list[str], list[_Link], str 
     for j in model.joints.values():
         for b in (j.body1, j.body2):
             touching.setdefault(b, []).append(j)
-    relays = {n for n, b in model.bodies.items() if b.mass == 0 and len(touching.get(n, ())) == 2}
+    relays = {n for n, b in model.bodies.items()
+              if b.mass == 0 and len(touching.get(n, ())) == 2}
+
+    def across(j, body):
+        return j.body2 if j.body1 == body else j.body1
+
+    def onward(relay, came_by):
+        return next(j for j in touching[relay] if j is not came_by)
+
     seen, out = set(), []
     for start in sorted(relays):
         if start in seen:
             continue
-        # walk to one end, then collect the chain from there
-        prev, body = None, start
+        link, body = None, start          # walk to one end ...
         while True:
-            nxt = [j for j in touching[body] if j is not prev][0]
-            other = nxt.body2 if nxt.body1 == body else nxt.body1
-            prev, body = nxt, other
+            link = onward(body, link)
+            body = across(link, body)
             if body not in relays or body == start:
                 break
-        if body == start:           # a ring of relays: nothing to merge into
+        if body == start:                 # a ring of relays: nothing to merge into
             seen.add(start)
             continue
-        end1, link, bodies, links = body, prev, [], []
-        here = end1
-        while True:
-            there = link.body2 if link.body1 == here else link.body1
+        end1, here, bodies, links = body, body, [], []
+        while True:                       # ... and collect the chain from there
             links.append(_Link(link, link.body1 == here))
-            if there not in relays:
+            here = across(link, here)
+            if here not in relays:
                 break
-            bodies.append(there)
-            link = [j for j in touching[there] if j is not link][0]
-            here = there
+            bodies.append(here)
+            link = onward(here, link)
         seen.update(bodies)
-        out.append((end1, bodies, links, there))
+        out.append((end1, bodies, links, here))
     return out
 
 
@@ -327,10 +333,9 @@ def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, s
     centre, why = _universal_centre(ra, rb)
     if centre is None:
         return None, why
-    x = ra.axis * (1 if ra.forward else -1)
-    y = rb.axis * (1 if rb.forward else -1)
+    x, y = ra.axis, rb.axis
     if slider is not None:
-        p = slider.axis * (1 if slider.forward else -1)
+        p = slider.axis
         z = np.cross(x, y)
         if abs(abs(z @ p) - 1) > AXIS_TOLERANCE:
             return None, (f"{slider.joint.name} does not slide at right angles to both "
@@ -349,7 +354,7 @@ def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, s
         if f is None:
             continue
         label, new = labels[id(lk)]
-        s = int(np.sign(new @ lk.axis)) * (1 if lk.forward else -1)
+        s = int(np.sign(new @ lk.axis))
         functional[label] = Functional(f.k, f.c, s * f.preload + 0.0,
                                        None if f.actuator is None else s * f.actuator, f.loc)
     first = links[0].joint
@@ -382,9 +387,8 @@ def merge_relays(model: Model, outputs=None, keep_params=()) -> tuple[Model, lis
         if links[-1].joint.kind == "prismatic":     # the slider sits on end 1's side
             end1, end2 = end2, end1
             links = [_Link(lk.joint, not lk.forward) for lk in reversed(links)]
-        readers = {w for n in relays + names for w in read.get(n, ())
-                   if not (w.startswith("output ") and kept_outputs is not None
-                           and w[7:] not in kept_outputs)}
+        readers = {f"{kind} {who}" for n in relays + names for kind, who in read.get(n, ())
+                   if kind != "output" or kept_outputs is None or who in kept_outputs}
         held = sorted(p for p in keep_params if p.split("__")[0] in names)
         chain = " - ".join(names)
         if end1 == end2:
@@ -416,9 +420,9 @@ def merge_relays(model: Model, outputs=None, keep_params=()) -> tuple[Model, lis
     if excitation is not None:
         excitation = replace(excitation, directions={
             d: (renamed.get(j, j), amp) for d, (j, amp) in excitation.directions.items()})
+    gone = gone_joints | gone_bodies
     dropped = [o.name for o in model.outputs
-               if any(w == f"output {o.name}" for n in gone_joints | gone_bodies
-                      for w in read.get(n, ()))]
+               if any(("output", o.name) in read.get(n, ()) for n in gone)]
     removed += [f"output {n}" for n in dropped]
     digest = hashlib.sha256((model.digest + repr(notes)).encode()).hexdigest()
     out = replace(model, digest=digest, joints=joints, parameters=params,

@@ -180,17 +180,15 @@ def reduced_system(scene: Scene):
     merged, removed, note = reduce.merge_relays(
         c.model, scene.outputs, list(scene.expose) + list(scene.params))
     merged_c = c
-    if removed and scene.merge_relays is None and scene.method == "parasitic":
-        removed, note = [], (f"would merge {note}; left: under parasitic each joint's "
-                             "compliance is part of the model (merge_relays: true accepts "
-                             "the change)")
-    elif removed and scene.merge_relays is not False:
+    wanted = scene.method != "parasitic" if scene.merge_relays is None else scene.merge_relays
+    if removed and wanted:
         merged_c = build(merged, scene.method)
     elif removed:
-        removed, note = [], f"would merge {note}; left: the scene says merge_relays: false"
-    first = reduce.PassReport("merge_relays", len(c.system.states),
-                              len(merged_c.system.states), len(c.system.assignments),
-                              len(merged_c.system.assignments), removed, note)
+        why = ("the scene says merge_relays: false" if scene.merge_relays is False else
+               "under parasitic each joint's compliance is part of the model "
+               "(merge_relays: true accepts the change)")
+        removed, note = [], f"would merge {note}; left: {why}"
+    first = reduce.report("merge_relays", c.system, merged_c.system, removed, note)
     system, reports = reduce.reduce(merged_c.system, scene.outputs,
                                     scene_values(scene, merged_c.model), scene.expose)
     model = replace(merged_c.model, digest=scene.digest)

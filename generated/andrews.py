@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "737e2a1fbbccb124522715c2f1a69f1f"
+MODEL_HASH = "7b8f6aaba2ff667567224e9d09b115ed"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "1af7bda74a0f1ecc7854c7d27530eb3f"
+MODEL_HASH = "332217735b40ef94aa6118302b2c590f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "77fb26f0e7383f30d0d55b4f525c3b96"
+MODEL_HASH = "995c20946d65af71e510d1fd1245a073"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "3bb7988092351de81e9d978b2770a5e5"
+MODEL_HASH = "21c8048daffa37b70d83a0a77fe47260"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "a0a09d071b7151bd506f2aaffca66ddc"
+MODEL_HASH = "4c66d3651195bfaccc432b429131341d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "e3c1eef28129ed5b4149b27769eced3b"
+MODEL_HASH = "6867fa0144ee8b283aac56444c284e92"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "a458daf5392ac1828bf28df0377e5bb8"
+MODEL_HASH = "407e43dda8c64e665eba951337642c01"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "f95d4110f1fc377d4ee8a07fb8670c81"
+MODEL_HASH = "b021865049e75669364083ac6e104ae4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "2eaa1acda621cc1d15c277e7d7c42fc9"
+MODEL_HASH = "9344edbc94078285e7e8453fdabad151"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "64f6dfa0b67b6bab7709613839d7af05"
+MODEL_HASH = "cb880664473108a0b9362cd5dea067fd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "3b2bd0cdee5e7a71f2742c24eb31f089"
+MODEL_HASH = "9265288fee7014861883205b6eebf1b3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "fbf93160f9128d1bf0e6317062143333"
+MODEL_HASH = "596f2733d1b56ec59eeb0712a7cd33ef"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "c2af1e264f1887a328635fe2e07f9595"
+MODEL_HASH = "8dd83ffe1315bd2ca0c537fb710244d8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "f29171bb1c69399578dc4077ea0e6176"
+MODEL_HASH = "d78ff006ba34f43e57f5be1ec2bf6cde"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "5910ccb05cf3173055c82771fcdb2520"
+MODEL_HASH = "fcbbbbdee7015ad173c6f2ee1533db32"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

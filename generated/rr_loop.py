@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "3e12ac4863b7cf232d3638569f243715"
+MODEL_HASH = "c442ad9e934972029fe500775b09f233"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

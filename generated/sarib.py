@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "f40603bc30179910c46d2857b86e392e"
+MODEL_HASH = "2a46220f389cc95f19fddbed759e7d83"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

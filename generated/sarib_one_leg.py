@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "35efd3b20d679bb94c352b775cda907b"
+MODEL_HASH = "f1b5f07f3e217d91a5092c42785ca1b2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

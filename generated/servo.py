@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "7d19ee8bcbfd3b00026c45c5aa46729e"
+MODEL_HASH = "0b327d8eb6d41db24b6dcc49e86a980f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

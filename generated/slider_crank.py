@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "aa465126c0fd1809cd51071b31c0422a"
+MODEL_HASH = "085fa16724b2c7a694b9f60881ea3693"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "b314349f242925e7b1ff5a87e7d5591f"
+MODEL_HASH = "b2625223f005c69aac81721ffb101bd4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

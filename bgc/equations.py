@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
-from . import cardan, lagrange, symbols, zcp
+from . import cardan, exact, lagrange, symbols, zcp
 from .causality import CausalGraph
 from .errors import EquationError
 from .expand import AXES, body_junction, position, rotation_matrix
@@ -501,7 +501,7 @@ class _Builder:
             rates = cardan.angle_rates(*ang, w)
             self.guards.append((f"Cardan singularity (gimbal lock, cos {n}.ay -> 0) of body "
                                 f"'{n}'", cardan.gimbal_margin(ang[1])))
-            F0 = sp.Matrix(body.frame).applyfunc(lambda x: sp.Float(float(x)))
+            F0 = exact.matrix(body.frame)
             C = cardan.rotation(*ang)
             self.define(rotation_matrix(n), C if F0 == sp.eye(3) else F0 * C, n)
             for k in range(3):
@@ -509,7 +509,7 @@ class _Builder:
                                            (ang[k], rates[k], 0.0, f"a{AXES[k]}")):
                     dx = symbols.dstate(n, label)
                     self.define(dx, rate, n)
-                    self.states.append(State(f"{n}.{label}", x, dx, sp.Float(x0), n))
+                    self.states.append(State(f"{n}.{label}", x, dx, exact.rational(x0), n))
                     self.display[x], self.display[dx] = f"{n}.{label}", f"d({n}.{label})/dt"
 
     # --- references, derivatives --------------------------------------------------------
@@ -522,8 +522,9 @@ class _Builder:
         w = self.common_flow(body_junction(n, "w"))
         massive = body.mass > 0
         if massive:
-            acc = sp.Matrix([symbols.dstate(f"{n}__m", f"p{a}") for a in AXES]) / body.mass
-            wdot = sp.Matrix([symbols.dstate(f"{n}__J", f"p{a}") / body.inertia[k]
+            acc = (sp.Matrix([symbols.dstate(f"{n}__m", f"p{a}") for a in AXES])
+                   / exact.rational(body.mass))
+            wdot = sp.Matrix([symbols.dstate(f"{n}__J", f"p{a}") / exact.rational(body.inertia[k])
                               for k, a in enumerate(AXES)])
         for k, a in enumerate(AXES):
             out[symbols.ref(n, a)] = x[k]
@@ -534,7 +535,7 @@ class _Builder:
             if massive:
                 out[symbols.ref(n, f"acc{a}")] = acc[k]
         for pt, r in body.points.items():
-            r = sp.Matrix([sp.Float(c) for c in r])
+            r = exact.vector(r)
             target = f"{n}__{pt}"
             xp, vp = x + R * r, v + R * w.cross(r)
             if massive:
@@ -566,11 +567,10 @@ class _Builder:
             else:       # reaction of the force on body 1 (the points coincide)
                 F += lam * d.rows.get("v1", sp.zeros(3, 1))
                 M += lam * d.rows.get("w1", sp.zeros(3, 1))
-        frame = sp.Matrix(j.output_frame or j.frame)
+        frame = exact.matrix(j.output_frame or j.frame)
         if j.body1 is not None:
             b = self.m.bodies[j.body1]
-            frame = rotation_matrix(j.body1) * (sp.Matrix(b.frame).T * frame).applyfunc(
-                lambda x: sp.Float(float(x)))
+            frame = rotation_matrix(j.body1) * exact.canonical(exact.matrix(b.frame).T * frame)
         Fj, Mj = frame.T * F, frame.T * M
         for k, a in enumerate(AXES):
             out[symbols.ref(name, f"F{a}")] = Fj[k]

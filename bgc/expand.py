@@ -27,7 +27,7 @@ import numpy as np
 import sympy as sp
 
 from . import joints as jmodels
-from . import symbols
+from . import exact, symbols
 from .bondgraph import BondGraph, Constraint
 from .errors import ModelError
 from .model import KINDS, TWO_PORTS, Body, Bond, Element, Joint, Model
@@ -50,9 +50,12 @@ def position(body: str) -> sp.Matrix:
     return sp.Matrix([symbols.state(body, a) for a in AXES])
 
 
-def joint_offset(body: Body, at) -> np.ndarray:
-    """Body-frame offset from G of the body-fixed point that is at ``at`` (R0) initially."""
-    return np.array(body.frame).T @ (np.array(at) - np.array(body.com))
+def joint_offset(body: Body, at) -> sp.Matrix:
+    """Body-frame offset from G of the body-fixed point that is at ``at`` (R0) initially:
+    computed exactly and put in canonical form (``exact``), so no rounding noise of the
+    machine reaches the equations."""
+    return exact.canonical(exact.matrix(body.frame).T
+                           * (exact.vector(at) - exact.vector(body.com)))
 
 
 def joint_param(joint: str, role: str) -> str:
@@ -84,19 +87,19 @@ class _Expander:
             self.bond(v, self.add(f"{n}__M0v", "M0", loc), loc)
             self.bond(w, self.add(f"{n}__M0w", "M0", loc), loc)
             return
-        frame = sp.Matrix(body.frame)
-        omega_body = frame.T * sp.Matrix(body.omega)
-        J = sp.Matrix(body.inertia)
-        self.bond(v, self.add(f"{n}__m", "I", loc, I=sp.Float(body.mass),
-                              initial=sp.Matrix(body.velocity) * sp.Float(body.mass)), loc)
-        self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J),
-                              initial=sp.Matrix([J[k] * omega_body[k] for k in range(3)])
-                              .applyfunc(lambda x: sp.Float(float(x)))), loc)
+        frame = exact.matrix(body.frame)
+        omega_body = frame.T * exact.vector(body.omega)
+        J = exact.vector(body.inertia)
+        mass = exact.rational(body.mass)
+        self.bond(v, self.add(f"{n}__m", "I", loc, I=mass,
+                              initial=exact.vector(body.velocity) * mass), loc)
+        self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J), initial=exact.canonical(
+            sp.Matrix([J[k] * omega_body[k] for k in range(3)]))), loc)
         self.bond(w, self.add(f"{n}__EJS", "EJS", loc, J=J), loc)
         g = self.m.gravity
         if any(g):
             self.bond(self.add(f"{n}__g", "Se", loc,
-                               effort=sp.Matrix([sp.Float(body.mass * x) for x in g])), v, loc)
+                               effort=exact.vector(g) * mass), v, loc)
 
     def omega_r0(self, n: str, loc) -> str:
         W = body_junction(n, "W")
@@ -111,7 +114,7 @@ class _Expander:
         """1-junction of the velocity (R0) of the point of body n at body-frame offset r."""
         P = f"{n}__{tag}"
         if P not in self.elements:
-            x = self.add(f"{P}__x", "XTF", loc, r=sp.Matrix([sp.Float(c) for c in r_body]))
+            x = self.add(f"{P}__x", "XTF", loc, r=sp.Matrix(r_body))
             R = self.add(f"{P}__R", "MTF", loc, orthogonal=True, ratio=rotation_matrix(n))
             zero = self.add(f"{P}__0", "0", loc)
             self.add(P, "1", loc)
@@ -127,11 +130,11 @@ class _Expander:
         rot, pos = {}, {}
         for side, n in ((1, j.body1), (2, j.body2)):
             if n is None:
-                rot[side], pos[side] = None, sp.Matrix(j.at)
+                rot[side], pos[side] = None, exact.vector(j.at)
                 continue
             b = self.m.bodies[n]
-            r = sp.Matrix([sp.Float(float(c)) for c in joint_offset(b, j.at)])
-            rot[side] = (rotation_matrix(n), sp.Matrix(b.frame))
+            r = joint_offset(b, j.at)
+            rot[side] = (rotation_matrix(n), exact.matrix(b.frame))
             pos[side] = position(n) + rotation_matrix(n) * r
         return jmodels.Geometry(rot[1], rot[2], pos[1], pos[2])
 
@@ -217,7 +220,7 @@ def _twist_row(model: Model, j, d, col: dict, subs: dict, width: int) -> np.ndar
             continue
         b = model.bodies[n]
         R = np.array(b.frame)
-        r = joint_offset(b, j.at)
+        r = np.array(joint_offset(b, j.at), dtype=float).ravel()
         rv = np.array(d.rows.get(f"v{side}", sp.zeros(3, 1)).xreplace(subs),
                       dtype=float).ravel()
         rw = np.array(d.rows.get(f"w{side}", sp.zeros(3, 1)).xreplace(subs),

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from . import exact
+
 
 @dataclass(frozen=True)
 class JointKind:
@@ -95,18 +97,18 @@ class Geometry:
         self.pos = {1: pos1, 2: pos2}     # x_P as a 3x1 Matrix
 
     def vec(self, side: int, u) -> sp.Matrix:
-        u = sp.Matrix(u)
+        u = exact.vector(u)
         rot = self.rot[side]
         if rot is None:
             return u
         R, R0 = rot
-        return R * (R0.T * u).applyfunc(lambda x: sp.Float(float(x)))
+        return R * exact.canonical(R0.T * u)
 
 
 def _dist(geo, label, u, blocked=True, in_r0=False):
     """Separation of the joint points along ``u``: fixed on body 1, or (``in_r0``, for
     joints that block all three translations: same span) an R0 axis with constant rows."""
-    u1 = sp.Matrix(u) if in_r0 else geo.vec(1, u)
+    u1 = exact.vector(u) if in_r0 else geo.vec(1, u)
     d = geo.pos[2] - geo.pos[1]
     rows = {"v1": -u1, "v2": u1} if in_r0 else {"v1": -u1, "v2": u1, "w1": u1.cross(d)}
     return Direction(label, blocked, False, rows, u1.dot(d) if blocked else None)
@@ -146,7 +148,7 @@ def directions(kind: str, geo: Geometry, frame, pitch: float = 0.0) -> list[Dire
             out.append(_perp(geo, "rz", y, x, -1))  # to the axis (line: in the plane)
         elif label == "screw":                       # tx - pitch/(2 pi) * rx, integrated
             t, r = _dist(geo, "tx", x, blocked=False), _turn(geo, "rx", 1, x)
-            k = sp.Float(pitch) / (2 * sp.pi)
+            k = exact.rational(pitch) / (2 * sp.pi)
             rows = {key: t.rows.get(key, sp.zeros(3, 1)) - k * r.rows.get(key, sp.zeros(3, 1))
                     for key in ("v1", "w1", "v2", "w2")}
             rows = {key: v for key, v in rows.items() if any(e != 0 for e in v)}

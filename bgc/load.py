@@ -18,6 +18,7 @@ from pathlib import Path
 import sympy as sp
 import yaml
 
+from . import exact
 from . import expr as bexpr
 from . import signals as bsignals
 from . import symbols
@@ -130,6 +131,7 @@ class _Loader:
         self.file = file
         self.names: dict[str, tuple[str, Loc]] = {}   # global namespace: name -> (what, loc)
         self.bodies: dict[str, Body] = {}
+        self.point_r0: dict[tuple[str, str], sp.Matrix] = {}   # (body, point) -> exact R0
         self.joints: dict[str, Joint] = {}
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
 
@@ -545,29 +547,29 @@ class _Loader:
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
             mass = self.number(v["mass"], *at("mass"), nonneg=True)
-            com = np.array(self.vector(v["com"], *at("com")))
+            com = exact.vector(self.vector(v["com"], *at("com")))
             if "inertia" not in v and mass > 0:
                 self.err("missing 'inertia'", v.loc, key,
                          "a body needs mass, com and inertia (mass: 0 for a body of "
                          "negligible mass)")
             inertia = v.get("inertia", [0, 0, 0])     # negligible mass: no inertia either
             loc, kk = at("inertia") if "inertia" in v else at("mass")
-            frame = self.frame(v["frame"], *at("frame")) if "frame" in v else np.eye(3)
+            frame = self.frame(v["frame"], *at("frame")) if "frame" in v else sp.eye(3)
             if "inertia" not in v:
-                moments = np.zeros(3)
+                moments = sp.zeros(3, 1)
             elif isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
                 if len(inertia) != 3:
                     self.err("an inertia matrix has 3 rows", loc, kk)
-                M = np.array([self.vector(r, inertia.item_locs[i], f"{kk}[{i}]")
-                              for i, r in enumerate(inertia)])
-                if np.abs(M - M.T).max() > 1e-9 * max(np.abs(M).max(), 1e-30):
+                M = exact.matrix([self.vector(r, inertia.item_locs[i], f"{kk}[{i}]")
+                                  for i, r in enumerate(inertia)])
+                Mf = np.array(exact.floats(M))
+                if np.abs(Mf - Mf.T).max() > 1e-9 * max(np.abs(Mf).max(), 1e-30):
                     self.err("the inertia matrix is not symmetric", loc, kk)
-                moments, axes = np.linalg.eigh(frame @ M @ frame.T if "frame" in v else M)
-                if np.linalg.det(axes) < 0:
-                    axes[:, 2] = -axes[:, 2]
-                frame = axes
+                moments, frame = exact.principal_axes(
+                    frame * M * frame.T if "frame" in v else M)
             else:
-                moments = np.array(self.vector(inertia, loc, kk))
+                moments = exact.vector(self.vector(inertia, loc, kk))
+            moments = np.array(exact.floats(moments))
             if mass == 0:
                 if np.abs(moments).max() > 0:
                     self.err("a body of negligible mass (mass: 0) has no inertia either",
@@ -586,13 +588,14 @@ class _Loader:
                     if not isinstance(pn, str) or not _IDENT.match(pn):
                         self.err(f"'{pn}' is not a valid point name", pts.key_locs[pn],
                                  f"{key}.points")
-                    pos = np.array(self.vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
-                    points[pn] = tuple(float(x) for x in frame.T @ (pos - com))
+                    pos = exact.vector(self.vector(pv, pts.val_locs[pn],
+                                                   f"{key}.points.{pn}"))
+                    points[pn] = exact.floats(frame.T * (pos - com))
+                    self.point_r0[(name, pn)] = pos
             vel = self.vector(v["velocity"], *at("velocity")) if "velocity" in v else (0, 0, 0)
             omg = self.vector(v["omega"], *at("omega")) if "omega" in v else (0, 0, 0)
             out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
-                             tuple(tuple(float(x) for x in row) for row in frame),
-                             tuple(float(x) for x in com), points,
+                             exact.floats(frame), exact.floats(com), points,
                              tuple(float(x) for x in vel), tuple(float(x) for x in omg))
         self.bodies = out
         return out
@@ -609,35 +612,35 @@ class _Loader:
               for k in PARASITIC_KEYS if k in m}
         return Parasitic(**{**base.__dict__, **kw})
 
-    def frame(self, v, loc, key):
-        """``{x: [..], y: [..], z: [..]}`` (R0) -> 3x3 matrix whose columns are the unit
-        axes; they must be orthogonal and right-handed."""
+    def frame(self, v, loc, key) -> sp.Matrix:
+        """``{x: [..], y: [..], z: [..]}`` (R0) -> exact 3x3 matrix whose columns are the
+        unit axes (``exact``: no floating-point noise reaches the equations); they must be
+        orthogonal and right-handed."""
         import numpy as np
         fr = self.mapping(v, loc, key, "a mapping {x: [..], y: [..], z: [..]}")
         self.check_keys(fr, ("x", "y", "z"), key)
         if set(fr) != {"x", "y", "z"}:
             self.err("a frame needs its three axes x, y, z", fr.loc, key)
-        cols = [np.array(self.vector(fr[a], fr.val_locs[a], f"{key}.{a}")) for a in "xyz"]
-        F = np.column_stack([c / np.linalg.norm(c) if np.linalg.norm(c) > 0 else c
-                             for c in cols])
-        if np.abs(F.T @ F - np.eye(3)).max() > 1e-6 or np.linalg.det(F) < 0:
+        F = sp.Matrix.hstack(*[exact.unit(exact.vector(
+            self.vector(fr[a], fr.val_locs[a], f"{key}.{a}"))) for a in "xyz"])
+        Ff = np.array(exact.floats(F))
+        if np.abs(Ff.T @ Ff - np.eye(3)).max() > 1e-6 or np.linalg.det(Ff) < 0:
             self.err("the frame axes must be orthogonal and right-handed (x cross y = z)",
                      fr.loc, key, "give unit axes such as x: [1, 0, 0] ...")
         return F
 
-    def unit_vector(self, v, loc, key):
-        import numpy as np
-        u = np.array(self.vector(v, loc, key))
-        n = np.linalg.norm(u)
-        if n < 1e-12:
+    def unit_vector(self, v, loc, key) -> sp.Matrix:
+        """An axis, scaled to unit length exactly."""
+        u = exact.vector(self.vector(v, loc, key))
+        if exact.to_float(exact.norm(u)) < 1e-12:
             self.err("an axis of zero length", loc, key, "give a direction such as [0, 0, 1]")
-        return u / n
+        return exact.unit(u)
 
-    def joint_point(self, v, loc, key):
-        """``at``: [x, y, z] in R0, a point name of one body, or body.point."""
-        import numpy as np
+    def joint_point(self, v, loc, key) -> sp.Matrix:
+        """``at``: [x, y, z] in R0, a point name of one body, or body.point (exact: the
+        point as the body's ``points`` wrote it)."""
         if isinstance(v, YList):
-            return np.array(self.vector(v, loc, key))
+            return exact.vector(self.vector(v, loc, key))
         if not isinstance(v, str):
             self.err(f"expected [x, y, z] or a point name, got {_kind_of(v)}", loc, key)
         body, _, pt = v.rpartition(".")
@@ -647,8 +650,7 @@ class _Loader:
             why = "names no point" if not owners else "is a point of several bodies"
             self.err(f"'{v}' {why}", loc, key, ("write body.point; " if owners else "")
                      + "known points: " + (", ".join(known) or "none (add 'points:' to a body)"))
-        b = owners[0]
-        return np.array(b.com) + np.array(b.frame) @ np.array(b.points[pt])
+        return self.point_r0[(owners[0].name, pt)]
 
     def functional(self, v, loc, key, names) -> Functional:
         m = self.mapping(v, loc, key, "a mapping {k, c, preload, actuator}")
@@ -684,7 +686,6 @@ class _Loader:
         return bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
 
     def joints_section(self, sec: YMap, params, signals, base: Parasitic) -> dict[str, Joint]:
-        import numpy as np
         names = self.expr_names(params, signals)
         out = {}
         for name, v in sec.items():
@@ -718,23 +719,23 @@ class _Loader:
                 self.err(f"a joint joins two different bodies, got {pair[0]!r} twice",
                          *at("between"))
             point = self.joint_point(v["at"], *at("at"))
-            x = self.unit_vector(v["axis"], *at("axis")) if "axis" in v else np.eye(3)[0]
+            x = (self.unit_vector(v["axis"], *at("axis")) if "axis" in v
+                 else sp.Matrix([1, 0, 0]))
             if "axis2" in v:
                 y = self.unit_vector(v["axis2"], *at("axis2"))
-                if abs(float(x @ y)) > 1e-6:
+                if abs(exact.to_float(x.dot(y))) > 1e-6:
                     self.err("axis2 must be perpendicular to axis", *at("axis2"))
             elif kind in NEEDS_AXIS2:
                 self.err(f"a {kind} joint needs 'axis2'", v.loc, key,
                          "the second axis (body 2's), perpendicular to 'axis'")
-            else:
-                e = np.eye(3)[int(np.argmin(np.abs(x)))]
-                y = e - (e @ x) * x
-                y /= np.linalg.norm(y)
-            frame = np.column_stack([x, y, np.cross(x, y)])
+            else:       # the R0 axis most nearly perpendicular to x, made perpendicular
+                xf = [abs(c) for c in exact.floats(x)]
+                e = sp.Matrix([int(i == xf.index(min(xf))) for i in range(3)])
+                y = exact.unit(e - e.dot(x) * x)
+            frame = sp.Matrix.hstack(x, y, x.cross(y))
             out_frame = None
             if "frame" in v:
-                F = self.frame(v["frame"], *at("frame"))
-                out_frame = tuple(tuple(float(c) for c in row) for row in F)
+                out_frame = exact.floats(self.frame(v["frame"], *at("frame")))
             pitch = 0.0
             if kind == "screw":
                 if "pitch" not in v:
@@ -769,8 +770,7 @@ class _Loader:
             para = (self.parasitic(v["parasitic"], *at("parasitic"), base)
                     if "parasitic" in v else base)
             j = Joint(name, v.loc, kind, bodies[0], bodies[1],
-                      tuple(float(c) for c in point),
-                      tuple(tuple(float(c) for c in row) for row in frame), para,
+                      exact.floats(point), exact.floats(frame), para,
                       functional, pitch, out_frame)
             joint_params(j, params)
             out[name] = j

@@ -64,6 +64,12 @@ class NumbaPrinter(NumPyPrinter):
     def _print_Rational(self, expr):
         return repr(float(expr))
 
+    def parenthesize(self, item, level, strict=False):
+        """A positive rational prints as a float literal, an atom: no parentheses."""
+        if isinstance(item, sp.Rational) and item > 0:
+            return self._print(item)
+        return super().parenthesize(item, level, strict)
+
     def _print_Float(self, expr):
         return repr(float(expr))
 

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import sympy as sp
 
-from . import symbols
+from . import exact, symbols
 from .emit import _cone
 from .equations import EquationSystem, LinearBlock
 from .joints import JOINT_KINDS
@@ -117,7 +117,7 @@ def fold_parameters(system: EquationSystem, values: dict, expose=()) -> tuple:
             keep.append((sym, name, values.get(name, default)))
         else:
             v = float(values.get(name, default))
-            mapping[sym] = sp.Integer(int(v)) if v.is_integer() else sp.Float(v)
+            mapping[sym] = exact.rational(v)
     out = replace(_substitute(system, mapping), params=keep)
     folded = sorted(name for sym, name, _ in system.params if sym in mapping)
     return out, report("fold_parameters", system, out, folded,
@@ -314,6 +314,8 @@ def _universal_centre(ra: _Link, rb: _Link) -> tuple[np.ndarray | None, str]:
     scale = max(1.0, float(np.abs(pa).max()), float(np.abs(pb).max()))
     if np.linalg.norm(qa - qb) > AXIS_TOLERANCE * scale:
         return None, f"the axes of {ra.joint.name} and {rb.joint.name} do not meet"
+    pa, pb, a, b = (exact.vector(v) for v in (pa, pb, a, b))    # the centre, exactly
+    qa, qb = pa + (pb - pa).dot(a) * a, pb + (pa - pb).dot(b) * b
     return (qa + qb) / 2, ""
 
 
@@ -342,9 +344,11 @@ def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, s
                           f"axes of {ra.joint.name} and {rb.joint.name}")
         if z @ p < 0:
             y = -y
-    y = y - (y @ x) * x
-    y /= np.linalg.norm(y)
-    z = np.cross(x, y)
+    X = exact.vector(x)                          # the frame, exactly (``exact``)
+    Y = exact.unit(exact.vector(y) - exact.vector(y).dot(X) * X)
+    frame = sp.Matrix.hstack(X, Y, X.cross(Y))
+    x, y, z = (np.array(exact.floats(frame[:, k])) for k in range(3))
+    frame = exact.floats(frame)
     labels = {id(ra): ("rx", x), id(rb): ("ry", y)}
     if slider is not None:
         labels[id(slider)] = ("tz", z)
@@ -358,8 +362,7 @@ def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, s
         functional[label] = Functional(f.k, f.c, s * f.preload + 0.0,
                                        None if f.actuator is None else s * f.actuator, f.loc)
     first = links[0].joint
-    return Joint(name, first.loc, kind, end1, end2, tuple(float(c) for c in centre),
-                 tuple(tuple(float(c) for c in row) for row in np.column_stack([x, y, z])),
+    return Joint(name, first.loc, kind, end1, end2, exact.floats(centre), frame,
                  first.parasitic, functional), ""
 
 

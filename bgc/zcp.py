@@ -35,10 +35,10 @@ equations stage finds; ``paths`` classifies everything for ``bgc check --method 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import scipy.linalg
 import sympy as sp
 
 from . import symbols
@@ -179,6 +179,32 @@ def _loop(cut: str, graph: BondGraph, parent: dict) -> KinematicLoop:
     return KinematicLoop(cut, joints, bodies)
 
 
+def _pivot_columns(A: np.ndarray, k: int) -> list[int]:
+    """``k`` independent columns of ``A``, as QR with column pivoting picks them (the
+    largest residual norm first), but with ties (within 1e-9) going to the lowest index
+    and in Python's correctly rounded arithmetic: the choice, and so the generated code,
+    is the same on every machine (LAPACK's pivoting broke ties of a symmetric mechanism
+    by the last bits of its own rounding)."""
+    cols = [[float(x) for x in A[:, j]] for j in range(A.shape[1])]
+    chosen, basis = [], []
+    for _ in range(k):
+        residual = {}
+        for j, col in enumerate(cols):
+            if j in chosen:
+                continue
+            r = col
+            for q in basis:
+                d = math.fsum(a * b for a, b in zip(r, q))
+                r = [a - d * b for a, b in zip(r, q)]
+            residual[j] = (math.sqrt(math.fsum(a * a for a in r)), r)
+        top = max(n for n, _ in residual.values())
+        j = min(j for j, (n, _) in residual.items() if n >= top * (1 - 1e-9))
+        n, r = residual[j]
+        chosen.append(j)
+        basis.append([a / n for a in r] if n > 0 else r)
+    return sorted(chosen)
+
+
 def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
     """Choose the flow-source (tree) and break-variable (loop-closing) directions and the
     dependent velocity components; return the graph with its ``zcp`` plan and its
@@ -205,8 +231,7 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
         rows = np.array([_twist_row(model, j, d, {child: 0}, pose, 6)
                          for d in graph.joints[name] if d.blocked])
         weights = np.array([1.0] * 3 + [_ROTATION_WEIGHT] * 3)
-        _, _, piv = scipy.linalg.qr(rows * weights, mode="economic", pivoting=True)
-        cols = sorted(piv[:len(rows)])
+        cols = _pivot_columns(rows * weights, len(rows))
         block = rows[:, cols]
         if np.linalg.cond(block) > 1e10:
             raise EquationError(

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "995c20946d65af71e510d1fd1245a073"
+MODEL_HASH = "3902e85576c62dea77dd521fefbc8d8d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

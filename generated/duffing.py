@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "4c66d3651195bfaccc432b429131341d"
+MODEL_HASH = "ada64d9759d3903af08fcafd93c2aa76"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -138,7 +138,7 @@ def outputs(t, x, p):
     y = np.empty(3)
     y[0] = X_spring__q
     y[1] = E_b2
-    y[2] = (0.5)*P_k*X_spring__q**2 + (0.25)*P_k3*X_spring__q**4 + (0.5)*X_mass__p**2/P_m
+    y[2] = 0.5*P_k*X_spring__q**2 + 0.25*P_k3*X_spring__q**4 + 0.5*X_mass__p**2/P_m
     return y
 
 

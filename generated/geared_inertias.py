@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "407e43dda8c64e665eba951337642c01"
+MODEL_HASH = "8b19f575b204507a3788dd35a988fe32"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

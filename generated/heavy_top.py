@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "b021865049e75669364083ac6e104ae4"
+MODEL_HASH = "ff595be7591bef8314809021c4d99887"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -42,7 +42,7 @@ STATIC_LOADS = False
 
 def initial_state(p):
     """The initial state for parameter values p (initial conditions may use them)."""
-    return np.array([0.0, 0.02052874, 0.0, -0.0041057484061891355, 0.0, 2.400000000117637, 0.05, 0.0, 0.0, 0.0, 0.0866025404, 0.0], dtype=np.float64)
+    return np.array([0.0, 0.02052874, 0.0, -0.004105748406189175, 0.0, 2.400000000117637, 0.05, 0.0, 0.0, 0.0, 0.0866025404, 0.0], dtype=np.float64)
 
 
 X0 = initial_state(PARAMS)
@@ -86,37 +86,34 @@ def rhs(t, x, p):
     COS_X_top__ax = math.cos(X_top__ax)
     COS_X_top__ay = math.cos(X_top__ay)
     COS_X_top__az = math.cos(X_top__az)
-    F_b__top__v__top__m__x = 1.0*X_top__m__px
-    F_b__top__v__top__m__y = 1.0*X_top__m__py
-    F_b__top__v__top__m__z = 1.0*X_top__m__pz
     ROT_top__00 = -0.4999999999932617*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay + 0.866025403788329*COS_X_top__ay*COS_X_top__az + 0.4999999999932617*SIN_X_top__ax*SIN_X_top__az
     ROT_top__02 = 0.4999999999932617*COS_X_top__ax*COS_X_top__ay + 0.866025403788329*SIN_X_top__ay
-    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x) - P_pivot__tx_load
+    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x) - P_pivot__tx_load
     F_b__top__w__top__J__y = 50.0*X_top__J__py
     F_b__top__pivot__x__top__pivot__R__x = -0.10000000001866816*F_b__top__w__top__J__y
     F_b__top__w__top__J__x = 50.0*X_top__J__px
     F_b__top__w__top__J__z = 25.0*X_top__J__pz
-    F_b__top__pivot__x__top__pivot__R__y = 0.10000000001866816*F_b__top__w__top__J__x + 9.999986949615902e-12*F_b__top__w__top__J__z
-    F_b__top__pivot__x__top__pivot__R__z = -9.999986949615902e-12*F_b__top__w__top__J__y
+    F_b__top__pivot__x__top__pivot__R__y = 0.10000000001866816*F_b__top__w__top__J__x + 9.99999610202268e-12*F_b__top__w__top__J__z
+    F_b__top__pivot__x__top__pivot__R__z = -9.99999610202268e-12*F_b__top__w__top__J__y
     ROT_top__01 = 0.4999999999932617*COS_X_top__ax*SIN_X_top__ay*SIN_X_top__az - 0.866025403788329*COS_X_top__ay*SIN_X_top__az + 0.4999999999932617*COS_X_top__az*SIN_X_top__ax
     F_b__top__pivot__R__top__pivot__0__x = F_b__top__pivot__x__top__pivot__R__x*ROT_top__00 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__01 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__02
-    F_b__top__pivot__0__top__pivot__x = F_b__top__pivot__R__top__pivot__0__x + F_b__top__v__top__m__x
+    F_b__top__pivot__0__top__pivot__x = F_b__top__pivot__R__top__pivot__0__x + X_top__m__px
     E_b__pivot__tx__1__pivot__tx__Lc = F_b__top__pivot__0__top__pivot__x*P_pivot__damping
     E_b__pivot__tx__pivot__tx__1 = E_b__pivot__tx__1__pivot__tx__L + E_b__pivot__tx__1__pivot__tx__Lc
-    ROT_top__10 = 1.0*COS_X_top__ax*SIN_X_top__az + 1.0*COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
-    ROT_top__12 = -1.0*COS_X_top__ay*SIN_X_top__ax
-    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y) - P_pivot__ty_load
-    ROT_top__11 = 1.0*COS_X_top__ax*COS_X_top__az - 1.0*SIN_X_top__ax*SIN_X_top__ay*SIN_X_top__az
+    ROT_top__10 = COS_X_top__ax*SIN_X_top__az + COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
+    ROT_top__12 = -COS_X_top__ay*SIN_X_top__ax
+    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y) - P_pivot__ty_load
+    ROT_top__11 = COS_X_top__ax*COS_X_top__az - SIN_X_top__ax*SIN_X_top__ay*SIN_X_top__az
     F_b__top__pivot__R__top__pivot__0__y = F_b__top__pivot__x__top__pivot__R__x*ROT_top__10 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__11 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__12
-    F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + F_b__top__v__top__m__y
+    F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + X_top__m__py
     E_b__pivot__ty__1__pivot__ty__Lc = F_b__top__pivot__0__top__pivot__y*P_pivot__damping
     E_b__pivot__ty__pivot__ty__1 = E_b__pivot__ty__1__pivot__ty__L + E_b__pivot__ty__1__pivot__ty__Lc
     ROT_top__20 = -0.866025403788329*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay - 0.4999999999932617*COS_X_top__ay*COS_X_top__az + 0.866025403788329*SIN_X_top__ax*SIN_X_top__az
     ROT_top__22 = 0.866025403788329*COS_X_top__ax*COS_X_top__ay - 0.4999999999932617*SIN_X_top__ay
-    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z) - P_pivot__tz_load
+    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z) - P_pivot__tz_load
     ROT_top__21 = 0.866025403788329*COS_X_top__ax*SIN_X_top__ay*SIN_X_top__az + 0.4999999999932617*COS_X_top__ay*SIN_X_top__az + 0.866025403788329*COS_X_top__az*SIN_X_top__ax
     F_b__top__pivot__R__top__pivot__0__z = F_b__top__pivot__x__top__pivot__R__x*ROT_top__20 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__21 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__22
-    F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + F_b__top__v__top__m__z
+    F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + X_top__m__pz
     E_b__pivot__tz__1__pivot__tz__Lc = F_b__top__pivot__0__top__pivot__z*P_pivot__damping
     E_b__pivot__tz__pivot__tz__1 = E_b__pivot__tz__1__pivot__tz__L + E_b__pivot__tz__1__pivot__tz__Lc
     E_b__top__v__top__m__z = -E_b__pivot__tz__pivot__tz__1 - 9.81
@@ -127,20 +124,20 @@ def rhs(t, x, p):
     E_b__top__w__top__EJS__y = -0.02*F_b__top__w__top__J__x*F_b__top__w__top__J__z
     E_b__top__pivot__x__top__pivot__R__x = E_b__pivot__tx__pivot__tx__1*ROT_top__00 + E_b__pivot__ty__pivot__ty__1*ROT_top__10 + E_b__pivot__tz__pivot__tz__1*ROT_top__20
     E_b__top__pivot__x__top__pivot__R__z = E_b__pivot__tx__pivot__tx__1*ROT_top__02 + E_b__pivot__ty__pivot__ty__1*ROT_top__12 + E_b__pivot__tz__pivot__tz__1*ROT_top__22
-    E_b__top__w__top__pivot__x__y = -0.10000000001866816*E_b__top__pivot__x__top__pivot__R__x - 9.999986949615902e-12*E_b__top__pivot__x__top__pivot__R__z
+    E_b__top__w__top__pivot__x__y = -0.10000000001866816*E_b__top__pivot__x__top__pivot__R__x - 9.99999610202268e-12*E_b__top__pivot__x__top__pivot__R__z
     E_b__top__w__top__J__y = -E_b__top__w__top__EJS__y - E_b__top__w__top__pivot__x__y
-    E_b__top__w__top__pivot__x__z = 9.999986949615902e-12*E_b__top__pivot__x__top__pivot__R__y
+    E_b__top__w__top__pivot__x__z = 9.99999610202268e-12*E_b__top__pivot__x__top__pivot__R__y
     DX_top__m__px = -E_b__pivot__tx__pivot__tx__1
     DX_top__m__py = -E_b__pivot__ty__pivot__ty__1
     DX_top__m__pz = E_b__top__v__top__m__z
     DX_top__J__px = E_b__top__w__top__J__x
     DX_top__J__py = E_b__top__w__top__J__y
     DX_top__J__pz = -E_b__top__w__top__pivot__x__z
-    DX_top__x = F_b__top__v__top__m__x
+    DX_top__x = X_top__m__px
     DX_top__ax = (COS_X_top__az*F_b__top__w__top__J__x - F_b__top__w__top__J__y*SIN_X_top__az)/COS_X_top__ay
-    DX_top__y = F_b__top__v__top__m__y
+    DX_top__y = X_top__m__py
     DX_top__ay = COS_X_top__az*F_b__top__w__top__J__y + F_b__top__w__top__J__x*SIN_X_top__az
-    DX_top__z = F_b__top__v__top__m__z
+    DX_top__z = X_top__m__pz
     DX_top__az = F_b__top__w__top__J__z - SIN_X_top__ay*(COS_X_top__az*F_b__top__w__top__J__x - F_b__top__w__top__J__y*SIN_X_top__az)/COS_X_top__ay
     dx = np.empty(12)
     dx[0] = DX_top__m__px
@@ -162,13 +159,13 @@ def rhs(t, x, p):
 # over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
 # (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
 # from row JAC_ROW, column JAC_COLOUR.
-TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 18, 21, 22, 23, 24, 25, 27, 28, 34, 40, 42, 43, 45, 50, 52, 55, 60, 66, 68, 69, 71, 77, 80, 83, 89, 95, 97, 98, 100, 101, 103, 109, 110, 112, 114, 120, 126, 128, 130, 131, 132, 133, 134, 135, 136, 137, 138, 143, 144, 148, 149, 156], dtype=np.int64)
-TAPE_SRC = np.array([-6, -4, -3, -6, -4, -3, -7, -8, -9, 3, 4, 5, 0, 1, 2, 3, 4, 1, 9, 10, -10, -2, 12, -1, -5, 14, 15, 12, 3, 4, 5, 0, 1, 2, 13, 16, 17, 9, 18, 10, 19, 6, 20, 11, 21, 3, 5, 0, 1, 2, 4, 0, 23, 24, -11, 3, 5, 0, 1, 2, 13, 16, 17, 23, 26, 24, 27, 7, 28, 25, 29, 3, 4, 5, 0, 1, 2, 3, 4, 1, 31, 32, -12, 3, 4, 5, 0, 1, 2, 13, 16, 17, 31, 34, 32, 35, 8, 36, 33, 37, 38, 12, 15, 22, 30, 38, 18, 26, 34, 41, 40, 42, 14, 15, 22, 30, 38, 9, 23, 31, 22, 30, 38, 10, 24, 32, 45, 46, 44, 47, 41, 22, 30, 39, 43, 48, 49, 6, 4, 5, 14, 12, 2, 7, 5, 14, 12, 2, 8, 4, 5, 14, 12, 15, 1, 2], dtype=np.int64)
-TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 0, 0, 0, 7, 8, 9, 10, 11, 12, 13, 14, 0, 15, 15, 15, 0, 0, 0, 0, 0, 0, 0, 16, 10, 12, 8, 17, 18, 19, 20, 21, 22, 23, 24, 0, 0, 25, 0, 0, 10, 26, 7, 27, 14, 12, 13, 15, 15, 15, 8, 14, 16, 28, 26, 29, 30, 31, 22, 23, 24, 0, 0, 25, 0, 0, 7, 8, 32, 10, 11, 12, 13, 14, 0, 15, 15, 15, 16, 10, 12, 8, 17, 33, 34, 35, 36, 22, 23, 24, 0, 0, 25, 0, 0, 0, 37, 38, 20, 30, 35, 39, 40, 41, 0, 0, 0, 37, 42, 19, 29, 34, 39, 40, 41, 21, 31, 36, 39, 40, 41, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 43, 44, 45, 46, 47, 0, 38, 10, 8, 42, 0, 48, 49, 50, 51, 0, 52, 53], dtype=np.int64)
-TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, -0.4999999999932617, 0.866025403788329, 1.0, 0.4999999999932617, -0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 0.866025403788329, 9.999986949615902e-12, -0.10000000001866816, 1.0, 50.0, -0.10000000001866816, 50.0, 25.0, 0.10000000001866816, 9.999986949615902e-12, -9.999986949615902e-12, 0.4999999999932617, -0.866025403788329, 0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 9.999986949615902e-12, -0.10000000001866816, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.866025403788329, -0.4999999999932617, 1.0, 0.866025403788329, -0.866025403788329, 0.866025403788329, 0.866025403788329, 0.866025403788329, -0.4999999999932617, 9.999986949615902e-12, -0.10000000001866816, 1.0, 0.866025403788329, 0.4999999999932617, 0.866025403788329, 0.866025403788329, 0.866025403788329, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 0.02, 0.02, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.10000000001866816, -1.0, -1.0, -0.02, -0.02, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.10000000001866816, -9.999986949615902e-12, -1.0, -1.0, 9.999986949615902e-12, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
+TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 12, 15, 18, 19, 20, 21, 22, 24, 25, 31, 37, 39, 40, 42, 47, 49, 52, 57, 63, 65, 66, 68, 74, 77, 80, 86, 92, 94, 95, 97, 98, 100, 106, 107, 109, 111, 117, 123, 125, 127, 128, 129, 130, 131, 132, 133, 134, 135, 140, 141, 145, 146, 153], dtype=np.int64)
+TAPE_SRC = np.array([-6, -4, -3, -6, -4, -3, 3, 4, 5, 0, 1, 2, 3, 4, 1, 6, 7, -10, -2, 9, -1, -5, 11, 12, 9, 3, 4, 5, 0, 1, 2, 10, 13, 14, 6, 15, 7, 16, -7, 17, 8, 18, 3, 5, 0, 1, 2, 4, 0, 20, 21, -11, 3, 5, 0, 1, 2, 10, 13, 14, 20, 23, 21, 24, -8, 25, 22, 26, 3, 4, 5, 0, 1, 2, 3, 4, 1, 28, 29, -12, 3, 4, 5, 0, 1, 2, 10, 13, 14, 28, 31, 29, 32, -9, 33, 30, 34, 35, 9, 12, 19, 27, 35, 15, 23, 31, 38, 37, 39, 11, 12, 19, 27, 35, 6, 20, 28, 19, 27, 35, 7, 21, 29, 42, 43, 41, 44, 38, 19, 27, 36, 40, 45, 46, -7, 4, 5, 11, 9, 2, -8, 5, 11, 9, 2, -9, 4, 5, 11, 9, 12, 1, 2], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 0, 15, 15, 15, 0, 0, 0, 0, 0, 0, 0, 16, 10, 12, 8, 17, 18, 19, 20, 21, 22, 23, 24, 0, 0, 25, 0, 0, 10, 26, 7, 27, 14, 12, 13, 15, 15, 15, 8, 14, 16, 28, 26, 29, 30, 31, 22, 23, 24, 0, 0, 25, 0, 0, 7, 8, 32, 10, 11, 12, 13, 14, 0, 15, 15, 15, 16, 10, 12, 8, 17, 33, 34, 35, 36, 22, 23, 24, 0, 0, 25, 0, 0, 0, 37, 38, 20, 30, 35, 39, 40, 41, 0, 0, 0, 37, 42, 19, 29, 34, 39, 40, 41, 21, 31, 36, 39, 40, 41, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 43, 44, 45, 46, 47, 0, 38, 10, 8, 42, 0, 48, 49, 50, 51, 0, 52, 53], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -0.4999999999932617, 0.866025403788329, 1.0, 0.4999999999932617, -0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 0.866025403788329, 9.99999610202268e-12, -0.10000000001866816, 1.0, 50.0, -0.10000000001866816, 50.0, 25.0, 0.10000000001866816, 9.99999610202268e-12, -9.99999610202268e-12, 0.4999999999932617, -0.866025403788329, 0.4999999999932617, 0.4999999999932617, 0.4999999999932617, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 9.99999610202268e-12, -0.10000000001866816, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.866025403788329, -0.4999999999932617, 1.0, 0.866025403788329, -0.866025403788329, 0.866025403788329, 0.866025403788329, 0.866025403788329, -0.4999999999932617, 9.99999610202268e-12, -0.10000000001866816, 1.0, 0.866025403788329, 0.4999999999932617, 0.866025403788329, 0.866025403788329, 0.866025403788329, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 0.02, 0.02, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.10000000001866816, -1.0, -1.0, -0.02, -0.02, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.10000000001866816, -9.99999610202268e-12, -1.0, -1.0, 9.99999610202268e-12, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
 JAC_I = np.array([0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 7, 7, 7, 8, 9, 9, 9, 10, 11, 11, 11, 11, 11], dtype=np.int64)
 JAC_J = np.array([0, 3, 4, 5, 6, 7, 9, 11, 1, 3, 4, 5, 7, 8, 9, 11, 2, 3, 4, 5, 7, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 3, 4, 9, 11, 1, 3, 4, 11, 2, 3, 4, 5, 9, 11], dtype=np.int64)
-JAC_ROW = np.array([50, 50, 50, 50, 50, 50, 50, 50, 51, 51, 51, 51, 51, 51, 51, 51, 52, 52, 52, 52, 52, 52, 52, 52, 53, 53, 53, 53, 53, 53, 53, 53, 53, 53, 53, 53, 54, 54, 54, 54, 54, 54, 54, 54, 54, 54, 54, 54, 55, 55, 55, 55, 55, 55, 55, 55, 55, 55, 55, 55, 56, 57, 57, 57, 57, 58, 59, 59, 59, 60, 61, 61, 61, 61, 61], dtype=np.int64)
+JAC_ROW = np.array([47, 47, 47, 47, 47, 47, 47, 47, 48, 48, 48, 48, 48, 48, 48, 48, 49, 49, 49, 49, 49, 49, 49, 49, 50, 50, 50, 50, 50, 50, 50, 50, 50, 50, 50, 50, 51, 51, 51, 51, 51, 51, 51, 51, 51, 51, 51, 51, 52, 52, 52, 52, 52, 52, 52, 52, 52, 52, 52, 52, 53, 54, 54, 54, 54, 55, 56, 56, 56, 57, 58, 58, 58, 58, 58], dtype=np.int64)
 JAC_COLOUR = np.array([6, 0, 1, 4, 9, 5, 3, 2, 7, 0, 1, 4, 5, 10, 3, 2, 8, 0, 1, 4, 5, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 0, 1, 3, 2, 7, 0, 1, 2, 8, 0, 1, 4, 3, 2], dtype=np.int64)
 
 
@@ -212,37 +209,34 @@ def jac(t, x, p):
     COS_X_top__ax = math.cos(X_top__ax)
     COS_X_top__ay = math.cos(X_top__ay)
     COS_X_top__az = math.cos(X_top__az)
-    F_b__top__v__top__m__x = 1.0*X_top__m__px
-    F_b__top__v__top__m__y = 1.0*X_top__m__py
-    F_b__top__v__top__m__z = 1.0*X_top__m__pz
     ROT_top__00 = -0.4999999999932617*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay + 0.866025403788329*COS_X_top__ay*COS_X_top__az + 0.4999999999932617*SIN_X_top__ax*SIN_X_top__az
     ROT_top__02 = 0.4999999999932617*COS_X_top__ax*COS_X_top__ay + 0.866025403788329*SIN_X_top__ay
-    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x) - P_pivot__tx_load
+    E_b__pivot__tx__1__pivot__tx__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x) - P_pivot__tx_load
     F_b__top__w__top__J__y = 50.0*X_top__J__py
     F_b__top__pivot__x__top__pivot__R__x = -0.10000000001866816*F_b__top__w__top__J__y
     F_b__top__w__top__J__x = 50.0*X_top__J__px
     F_b__top__w__top__J__z = 25.0*X_top__J__pz
-    F_b__top__pivot__x__top__pivot__R__y = 0.10000000001866816*F_b__top__w__top__J__x + 9.999986949615902e-12*F_b__top__w__top__J__z
-    F_b__top__pivot__x__top__pivot__R__z = -9.999986949615902e-12*F_b__top__w__top__J__y
+    F_b__top__pivot__x__top__pivot__R__y = 0.10000000001866816*F_b__top__w__top__J__x + 9.99999610202268e-12*F_b__top__w__top__J__z
+    F_b__top__pivot__x__top__pivot__R__z = -9.99999610202268e-12*F_b__top__w__top__J__y
     ROT_top__01 = 0.4999999999932617*COS_X_top__ax*SIN_X_top__ay*SIN_X_top__az - 0.866025403788329*COS_X_top__ay*SIN_X_top__az + 0.4999999999932617*COS_X_top__az*SIN_X_top__ax
     F_b__top__pivot__R__top__pivot__0__x = F_b__top__pivot__x__top__pivot__R__x*ROT_top__00 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__01 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__02
-    F_b__top__pivot__0__top__pivot__x = F_b__top__pivot__R__top__pivot__0__x + F_b__top__v__top__m__x
+    F_b__top__pivot__0__top__pivot__x = F_b__top__pivot__R__top__pivot__0__x + X_top__m__px
     E_b__pivot__tx__1__pivot__tx__Lc = F_b__top__pivot__0__top__pivot__x*P_pivot__damping
     E_b__pivot__tx__pivot__tx__1 = E_b__pivot__tx__1__pivot__tx__L + E_b__pivot__tx__1__pivot__tx__Lc
-    ROT_top__10 = 1.0*COS_X_top__ax*SIN_X_top__az + 1.0*COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
-    ROT_top__12 = -1.0*COS_X_top__ay*SIN_X_top__ax
-    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y) - P_pivot__ty_load
-    ROT_top__11 = 1.0*COS_X_top__ax*COS_X_top__az - 1.0*SIN_X_top__ax*SIN_X_top__ay*SIN_X_top__az
+    ROT_top__10 = COS_X_top__ax*SIN_X_top__az + COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
+    ROT_top__12 = -COS_X_top__ay*SIN_X_top__ax
+    E_b__pivot__ty__1__pivot__ty__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y) - P_pivot__ty_load
+    ROT_top__11 = COS_X_top__ax*COS_X_top__az - SIN_X_top__ax*SIN_X_top__ay*SIN_X_top__az
     F_b__top__pivot__R__top__pivot__0__y = F_b__top__pivot__x__top__pivot__R__x*ROT_top__10 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__11 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__12
-    F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + F_b__top__v__top__m__y
+    F_b__top__pivot__0__top__pivot__y = F_b__top__pivot__R__top__pivot__0__y + X_top__m__py
     E_b__pivot__ty__1__pivot__ty__Lc = F_b__top__pivot__0__top__pivot__y*P_pivot__damping
     E_b__pivot__ty__pivot__ty__1 = E_b__pivot__ty__1__pivot__ty__L + E_b__pivot__ty__1__pivot__ty__Lc
     ROT_top__20 = -0.866025403788329*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay - 0.4999999999932617*COS_X_top__ay*COS_X_top__az + 0.866025403788329*SIN_X_top__ax*SIN_X_top__az
     ROT_top__22 = 0.866025403788329*COS_X_top__ax*COS_X_top__ay - 0.4999999999932617*SIN_X_top__ay
-    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z) - P_pivot__tz_load
+    E_b__pivot__tz__1__pivot__tz__L = P_pivot__stiffness*(9.99999610202268e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z) - P_pivot__tz_load
     ROT_top__21 = 0.866025403788329*COS_X_top__ax*SIN_X_top__ay*SIN_X_top__az + 0.4999999999932617*COS_X_top__ay*SIN_X_top__az + 0.866025403788329*COS_X_top__az*SIN_X_top__ax
     F_b__top__pivot__R__top__pivot__0__z = F_b__top__pivot__x__top__pivot__R__x*ROT_top__20 + F_b__top__pivot__x__top__pivot__R__y*ROT_top__21 + F_b__top__pivot__x__top__pivot__R__z*ROT_top__22
-    F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + F_b__top__v__top__m__z
+    F_b__top__pivot__0__top__pivot__z = F_b__top__pivot__R__top__pivot__0__z + X_top__m__pz
     E_b__pivot__tz__1__pivot__tz__Lc = F_b__top__pivot__0__top__pivot__z*P_pivot__damping
     E_b__pivot__tz__pivot__tz__1 = E_b__pivot__tz__1__pivot__tz__L + E_b__pivot__tz__1__pivot__tz__Lc
     _pv = np.empty(54)
@@ -300,8 +294,8 @@ def jac(t, x, p):
     _pv[51] = SIN_X_top__ay*SIN_X_top__az/COS_X_top__ay
     _pv[52] = (COS_X_top__az*F_b__top__w__top__J__x - F_b__top__w__top__J__y*SIN_X_top__az)/COS_X_top__ay
     _pv[53] = F_b__top__w__top__J__y*SIN_X_top__ay/COS_X_top__ay
-    _d = np.zeros((62, 12))
-    _tape(_d, _pv, 0, 62)
+    _d = np.zeros((59, 12))
+    _tape(_d, _pv, 0, 59)
     J = np.zeros((12, 12))
     for k in range(JAC_I.shape[0]):
         J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
@@ -325,15 +319,15 @@ def outputs(t, x, p):
     COS_X_top__az = math.cos(X_top__az)
     ROT_top__00 = -0.4999999999932617*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay + 0.866025403788329*COS_X_top__ay*COS_X_top__az + 0.4999999999932617*SIN_X_top__ax*SIN_X_top__az
     ROT_top__02 = 0.4999999999932617*COS_X_top__ax*COS_X_top__ay + 0.866025403788329*SIN_X_top__ay
-    ROT_top__10 = 1.0*COS_X_top__ax*SIN_X_top__az + 1.0*COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
-    ROT_top__12 = -1.0*COS_X_top__ay*SIN_X_top__ax
+    ROT_top__10 = COS_X_top__ax*SIN_X_top__az + COS_X_top__az*SIN_X_top__ax*SIN_X_top__ay
+    ROT_top__12 = -COS_X_top__ay*SIN_X_top__ax
     ROT_top__20 = -0.866025403788329*COS_X_top__ax*COS_X_top__az*SIN_X_top__ay - 0.4999999999932617*COS_X_top__ay*COS_X_top__az + 0.866025403788329*SIN_X_top__ax*SIN_X_top__az
     ROT_top__22 = 0.866025403788329*COS_X_top__ax*COS_X_top__ay - 0.4999999999932617*SIN_X_top__ay
     y = np.empty(4)
     y[0] = X_top__x
     y[1] = X_top__y
     y[2] = X_top__z
-    y[3] = math.sqrt((9.999986949615902e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x)**2 + (9.999986949615902e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y)**2 + (9.999986949615902e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z)**2)
+    y[3] = math.sqrt((9.99999610202268e-12*ROT_top__00 - 0.10000000001866816*ROT_top__02 + X_top__x)**2 + (9.99999610202268e-12*ROT_top__10 - 0.10000000001866816*ROT_top__12 + X_top__y)**2 + (9.99999610202268e-12*ROT_top__20 - 0.10000000001866816*ROT_top__22 + X_top__z)**2)
     return y
 
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "cb880664473108a0b9362cd5dea067fd"
+MODEL_HASH = "cfb105cc148fe71dcfbe12a8e683a65e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "9265288fee7014861883205b6eebf1b3"
+MODEL_HASH = "660874d888ffc8abaf9297054c418a3a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "596f2733d1b56ec59eeb0712a7cd33ef"
+MODEL_HASH = "f02b220fb4b574cb891b08cdb2ae341c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -93,8 +93,8 @@ def rhs(t, x, p):
     F_b__rod__v__rod__m__x = 0.5*X_rod__m__px
     F_b__rod__v__rod__m__y = 0.5*X_rod__m__py
     F_b__rod__v__rod__m__z = 0.5*X_rod__m__pz
-    ROT_rod__01 = 1.0*COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax
-    ROT_rod__02 = 1.0*COS_X_rod__ax*COS_X_rod__ay
+    ROT_rod__01 = COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax
+    ROT_rod__02 = COS_X_rod__ax*COS_X_rod__ay
     E_b__hinge__tx__1__hinge__tx__L = P_hinge__stiffness*(0.499695*ROT_rod__01 - 0.01745*ROT_rod__02 + X_rod__x) - P_hinge__tx_load
     F_b__rod__w__rod__J__y = 5.0*X_rod__J__py
     F_b__rod__w__rod__J__z = 100.0*X_rod__J__pz
@@ -102,49 +102,45 @@ def rhs(t, x, p):
     F_b__rod__w__rod__J__x = 5.0*X_rod__J__px
     F_b__rod__hinge__x__rod__hinge__R__y = 0.01745*F_b__rod__w__rod__J__x
     F_b__rod__hinge__x__rod__hinge__R__z = 0.499695*F_b__rod__w__rod__J__x
-    ROT_rod__00 = -1.0*COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + 1.0*SIN_X_rod__ax*SIN_X_rod__az
+    ROT_rod__00 = -COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + SIN_X_rod__ax*SIN_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__x = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__00 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__01 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__02
     F_b__rod__hinge__0__rod__hinge__x = F_b__rod__hinge__R__rod__hinge__0__x + F_b__rod__v__rod__m__x
     E_b__hinge__tx__1__hinge__tx__Lc = F_b__rod__hinge__0__rod__hinge__x*P_hinge__damping
     E_b__hinge__tx__hinge__tx__1 = E_b__hinge__tx__1__hinge__tx__L + E_b__hinge__tx__1__hinge__tx__Lc
-    ROT_rod__11 = -1.0*COS_X_rod__ay*SIN_X_rod__az
-    ROT_rod__12 = 1.0*SIN_X_rod__ay
+    ROT_rod__11 = -COS_X_rod__ay*SIN_X_rod__az
+    ROT_rod__12 = SIN_X_rod__ay
     E_b__hinge__ty__1__hinge__ty__L = P_hinge__stiffness*(0.499695*ROT_rod__11 - 0.01745*ROT_rod__12 + X_rod__y) - P_hinge__ty_load
-    ROT_rod__10 = 1.0*COS_X_rod__ay*COS_X_rod__az
+    ROT_rod__10 = COS_X_rod__ay*COS_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__y = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__10 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__11 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__12
     F_b__rod__hinge__0__rod__hinge__y = F_b__rod__hinge__R__rod__hinge__0__y + F_b__rod__v__rod__m__y
     E_b__hinge__ty__1__hinge__ty__Lc = F_b__rod__hinge__0__rod__hinge__y*P_hinge__damping
     E_b__hinge__ty__hinge__ty__1 = E_b__hinge__ty__1__hinge__ty__L + E_b__hinge__ty__1__hinge__ty__Lc
-    ROT_rod__21 = 1.0*COS_X_rod__ax*COS_X_rod__az - 1.0*SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
-    ROT_rod__22 = -1.0*COS_X_rod__ay*SIN_X_rod__ax
+    ROT_rod__21 = COS_X_rod__ax*COS_X_rod__az - SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
+    ROT_rod__22 = -COS_X_rod__ay*SIN_X_rod__ax
     E_b__hinge__tz__1__hinge__tz__L = P_hinge__stiffness*(0.499695*ROT_rod__21 - 0.01745*ROT_rod__22 + X_rod__z) - P_hinge__tz_load
-    ROT_rod__20 = 1.0*COS_X_rod__ax*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
+    ROT_rod__20 = COS_X_rod__ax*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
     F_b__rod__hinge__R__rod__hinge__0__z = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__20 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__21 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__22
     F_b__rod__hinge__0__rod__hinge__z = F_b__rod__hinge__R__rod__hinge__0__z + F_b__rod__v__rod__m__z
     E_b__hinge__tz__1__hinge__tz__Lc = F_b__rod__hinge__0__rod__hinge__z*P_hinge__damping
     E_b__hinge__tz__hinge__tz__1 = E_b__hinge__tz__1__hinge__tz__L + E_b__hinge__tz__1__hinge__tz__Lc
     E_b__rod__v__rod__m__z = -E_b__hinge__tz__hinge__tz__1 - 19.62
     E_b__rod__w__rod__EJS__x = -0.19*F_b__rod__w__rod__J__y*F_b__rod__w__rod__J__z
-    E_b__hinge__ry__1__hinge__ry__L = 1.0*P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
+    E_b__hinge__ry__1__hinge__ry__L = P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
     F_b__rod__Rw__rod__W__x = F_b__rod__w__rod__J__x*ROT_rod__00 + F_b__rod__w__rod__J__y*ROT_rod__01 + F_b__rod__w__rod__J__z*ROT_rod__02
     F_b__rod__Rw__rod__W__y = F_b__rod__w__rod__J__x*ROT_rod__10 + F_b__rod__w__rod__J__y*ROT_rod__11 + F_b__rod__w__rod__J__z*ROT_rod__12
-    M_hinge__ry__w2__00 = 1.0*ROT_rod__10
-    M_hinge__ry__w2__01 = -1.0*ROT_rod__00
-    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*M_hinge__ry__w2__00 + F_b__rod__Rw__rod__W__y*M_hinge__ry__w2__01
+    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*ROT_rod__10 - F_b__rod__Rw__rod__W__y*ROT_rod__00
     E_b__hinge__ry__1__hinge__ry__Lc = F_b__hinge__ry__w2__hinge__ry*P_hinge__rot_damping
     E_b__hinge__ry__hinge__ry__1 = E_b__hinge__ry__1__hinge__ry__L + E_b__hinge__ry__1__hinge__ry__Lc
-    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__00
-    E_b__rod__W__hinge__ry__w2__y = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__01
-    E_b__hinge__rz__1__hinge__rz__L = 1.0*P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
+    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*ROT_rod__10
+    E_b__rod__W__hinge__ry__w2__y = -E_b__hinge__ry__hinge__ry__1*ROT_rod__00
+    E_b__hinge__rz__1__hinge__rz__L = P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
     F_b__rod__Rw__rod__W__z = F_b__rod__w__rod__J__x*ROT_rod__20 + F_b__rod__w__rod__J__y*ROT_rod__21 + F_b__rod__w__rod__J__z*ROT_rod__22
-    M_hinge__rz__w2__01 = 1.0*ROT_rod__20
-    M_hinge__rz__w2__02 = -1.0*ROT_rod__10
-    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*M_hinge__rz__w2__01 + F_b__rod__Rw__rod__W__z*M_hinge__rz__w2__02
+    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*ROT_rod__20 - F_b__rod__Rw__rod__W__z*ROT_rod__10
     E_b__hinge__rz__1__hinge__rz__Lc = F_b__hinge__rz__w2__hinge__rz*P_hinge__rot_damping
     E_b__hinge__rz__hinge__rz__1 = E_b__hinge__rz__1__hinge__rz__L + E_b__hinge__rz__1__hinge__rz__Lc
-    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__01
+    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*ROT_rod__20
     E_b__rod__Rw__rod__W__y = E_b__rod__W__hinge__ry__w2__y + E_b__rod__W__hinge__rz__w2__y
-    E_b__rod__W__hinge__rz__w2__z = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__02
+    E_b__rod__W__hinge__rz__w2__z = -E_b__hinge__rz__hinge__rz__1*ROT_rod__10
     E_b__rod__w__rod__Rw__x = E_b__rod__Rw__rod__W__y*ROT_rod__10 + E_b__rod__W__hinge__ry__w2__x*ROT_rod__00 + E_b__rod__W__hinge__rz__w2__z*ROT_rod__20
     E_b__rod__hinge__x__rod__hinge__R__y = E_b__hinge__tx__hinge__tx__1*ROT_rod__01 + E_b__hinge__ty__hinge__ty__1*ROT_rod__11 + E_b__hinge__tz__hinge__tz__1*ROT_rod__21
     E_b__rod__hinge__x__rod__hinge__R__z = E_b__hinge__tx__hinge__tx__1*ROT_rod__02 + E_b__hinge__ty__hinge__ty__1*ROT_rod__12 + E_b__hinge__tz__hinge__tz__1*ROT_rod__22
@@ -190,13 +186,13 @@ def rhs(t, x, p):
 # over entries m in TAPE_PTR[r]..TAPE_PTR[r+1] of TAPE_SCALE[m] * pv[TAPE_SLOT[m]] times row TAPE_SRC[m]
 # (or, for TAPE_SRC[m] < 0, a state of colour -TAPE_SRC[m]-1); J[JAC_I, JAC_J] is read
 # from row JAC_ROW, column JAC_COLOUR.
-TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 14, 16, 19, 20, 21, 23, 24, 25, 26, 31, 37, 39, 40, 42, 44, 45, 48, 50, 56, 58, 59, 61, 66, 68, 71, 76, 82, 84, 85, 87, 88, 90, 91, 97, 103, 104, 105, 109, 110, 112, 114, 116, 117, 123, 124, 125, 129, 130, 132, 134, 136, 138, 144, 150, 156, 158, 161, 163, 169, 175, 176, 179, 185, 186, 188, 189, 190, 191, 192, 193, 194, 195, 200, 201, 205, 206, 213], dtype=np.int64)
-TAPE_SRC = np.array([-9, -4, -3, -9, -4, -3, -6, -7, -8, 3, 5, 0, 1, 2, 3, 4, 9, 10, -10, -2, -5, 12, 13, -1, 15, 15, 3, 5, 0, 1, 2, 14, 16, 17, 18, 9, 10, 19, 6, 20, 11, 21, 4, 2, 1, 23, 24, -11, 4, 5, 14, 16, 17, 26, 23, 24, 27, 7, 28, 25, 29, 3, 5, 0, 1, 2, 4, 0, 31, 32, -12, 3, 5, 0, 1, 2, 14, 16, 17, 34, 31, 32, 35, 8, 36, 33, 37, 38, 12, 13, 34, 15, 12, 13, 18, 9, 10, 15, 12, 13, 26, 23, 24, 26, 18, 42, 43, 44, 45, 46, 41, 47, 48, 44, 48, 45, 18, 15, 12, 13, 34, 31, 32, 34, 26, 43, 52, 53, 54, 55, 51, 56, 57, 53, 50, 58, 57, 54, 59, 49, 60, 18, 26, 34, 22, 30, 38, 9, 23, 31, 22, 30, 38, 10, 24, 32, 62, 63, 40, 61, 64, 15, 13, 59, 49, 60, 9, 23, 31, 22, 30, 38, 18, 26, 34, 68, 66, 67, 69, 59, 49, 60, 10, 24, 32, 68, 71, 72, 22, 30, 39, 65, 70, 73, 6, 4, 5, 15, 12, 2, 7, 5, 15, 12, 2, 8, 4, 5, 15, 12, 13, 1, 2], dtype=np.int64)
-TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 0, 0, 0, 7, 8, 9, 10, 11, 12, 13, 14, 14, 14, 0, 0, 0, 0, 0, 0, 0, 15, 11, 16, 17, 8, 18, 19, 20, 21, 22, 23, 0, 0, 24, 0, 0, 16, 12, 0, 14, 14, 14, 9, 12, 25, 26, 27, 21, 22, 23, 0, 0, 24, 0, 0, 9, 13, 7, 28, 29, 8, 12, 14, 14, 14, 16, 29, 15, 30, 13, 31, 32, 33, 21, 22, 23, 0, 0, 24, 0, 0, 0, 34, 35, 36, 18, 19, 20, 37, 35, 34, 25, 26, 27, 37, 35, 34, 0, 0, 38, 39, 40, 41, 42, 0, 0, 38, 43, 39, 43, 36, 31, 32, 33, 37, 35, 34, 0, 0, 44, 45, 41, 46, 42, 0, 0, 44, 47, 0, 0, 45, 47, 25, 18, 31, 48, 49, 50, 19, 26, 32, 51, 52, 53, 20, 27, 33, 51, 52, 53, 0, 0, 0, 0, 0, 34, 37, 26, 19, 32, 48, 49, 50, 18, 25, 31, 51, 52, 53, 0, 0, 0, 0, 27, 20, 33, 48, 49, 50, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 54, 55, 56, 57, 58, 0, 35, 16, 9, 37, 0, 59, 60, 61, 62, 0, 63, 64], dtype=np.int64)
-TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.499695, -0.01745, 1.0, 5.0, 100.0, -0.01745, -0.499695, 5.0, 0.01745, 0.499695, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 0.499695, -0.01745, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 0.499695, -0.01745, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.19, -0.19, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.01745, 0.499695, -1.0, -1.0, -1.0, 0.19, 0.19, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.01745, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.499695, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
+TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 14, 16, 19, 20, 21, 23, 24, 25, 26, 31, 37, 39, 40, 42, 44, 45, 48, 50, 56, 58, 59, 61, 66, 68, 71, 76, 82, 84, 85, 87, 88, 90, 91, 97, 103, 107, 108, 110, 112, 114, 115, 121, 125, 126, 128, 130, 132, 134, 140, 146, 152, 154, 157, 159, 165, 171, 172, 175, 181, 182, 184, 185, 186, 187, 188, 189, 190, 191, 196, 197, 201, 202, 209], dtype=np.int64)
+TAPE_SRC = np.array([-9, -4, -3, -9, -4, -3, -6, -7, -8, 3, 5, 0, 1, 2, 3, 4, 9, 10, -10, -2, -5, 12, 13, -1, 15, 15, 3, 5, 0, 1, 2, 14, 16, 17, 18, 9, 10, 19, 6, 20, 11, 21, 4, 2, 1, 23, 24, -11, 4, 5, 14, 16, 17, 26, 23, 24, 27, 7, 28, 25, 29, 3, 5, 0, 1, 2, 4, 0, 31, 32, -12, 3, 5, 0, 1, 2, 14, 16, 17, 34, 31, 32, 35, 8, 36, 33, 37, 38, 12, 13, 34, 15, 12, 13, 18, 9, 10, 15, 12, 13, 26, 23, 24, 42, 43, 18, 26, 44, 41, 45, 46, 26, 46, 18, 18, 15, 12, 13, 34, 31, 32, 43, 50, 26, 34, 51, 49, 52, 53, 34, 48, 54, 53, 26, 55, 47, 56, 18, 26, 34, 22, 30, 38, 9, 23, 31, 22, 30, 38, 10, 24, 32, 58, 59, 40, 57, 60, 15, 13, 55, 47, 56, 9, 23, 31, 22, 30, 38, 18, 26, 34, 64, 62, 63, 65, 55, 47, 56, 10, 24, 32, 64, 67, 68, 22, 30, 39, 61, 66, 69, 6, 4, 5, 15, 12, 2, 7, 5, 15, 12, 2, 8, 4, 5, 15, 12, 13, 1, 2], dtype=np.int64)
+TAPE_SLOT = np.array([1, 2, 3, 4, 5, 6, 0, 0, 0, 7, 8, 9, 10, 11, 12, 13, 14, 14, 14, 0, 0, 0, 0, 0, 0, 0, 15, 11, 16, 17, 8, 18, 19, 20, 21, 22, 23, 0, 0, 24, 0, 0, 16, 12, 0, 14, 14, 14, 9, 12, 25, 26, 27, 21, 22, 23, 0, 0, 24, 0, 0, 9, 13, 7, 28, 29, 8, 12, 14, 14, 14, 16, 29, 15, 30, 13, 31, 32, 33, 21, 22, 23, 0, 0, 24, 0, 0, 0, 34, 35, 36, 18, 19, 20, 37, 35, 34, 25, 26, 27, 37, 35, 34, 25, 18, 38, 39, 40, 0, 0, 25, 41, 18, 41, 36, 31, 32, 33, 37, 35, 34, 31, 25, 42, 38, 40, 0, 0, 31, 43, 0, 0, 25, 43, 25, 18, 31, 44, 45, 46, 19, 26, 32, 47, 48, 49, 20, 27, 33, 47, 48, 49, 0, 0, 0, 0, 0, 34, 37, 26, 19, 32, 44, 45, 46, 18, 25, 31, 47, 48, 49, 0, 0, 0, 0, 27, 20, 33, 44, 45, 46, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 50, 51, 52, 53, 54, 0, 35, 16, 9, 37, 0, 55, 56, 57, 58, 0, 59, 60], dtype=np.int64)
+TAPE_SCALE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.499695, -0.01745, 1.0, 5.0, 100.0, -0.01745, -0.499695, 5.0, 0.01745, 0.499695, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 0.499695, -0.01745, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 0.499695, -0.01745, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -0.19, -0.19, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.01745, 0.499695, -1.0, -1.0, -1.0, 0.19, 0.19, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.01745, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -0.499695, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
 JAC_I = np.array([0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 7, 7, 7, 8, 9, 9, 9, 10, 11, 11, 11, 11, 11], dtype=np.int64)
 JAC_J = np.array([0, 3, 4, 5, 6, 7, 9, 11, 1, 3, 4, 5, 8, 9, 11, 2, 3, 4, 5, 7, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 3, 4, 9, 11, 1, 3, 4, 11, 2, 3, 4, 5, 9, 11], dtype=np.int64)
-JAC_ROW = np.array([74, 74, 74, 74, 74, 74, 74, 74, 75, 75, 75, 75, 75, 75, 75, 76, 76, 76, 76, 76, 76, 76, 76, 77, 77, 77, 77, 77, 77, 77, 77, 77, 77, 77, 77, 78, 78, 78, 78, 78, 78, 78, 78, 78, 78, 78, 78, 79, 79, 79, 79, 79, 79, 79, 79, 79, 79, 79, 79, 80, 81, 81, 81, 81, 82, 83, 83, 83, 84, 85, 85, 85, 85, 85], dtype=np.int64)
+JAC_ROW = np.array([70, 70, 70, 70, 70, 70, 70, 70, 71, 71, 71, 71, 71, 71, 71, 72, 72, 72, 72, 72, 72, 72, 72, 73, 73, 73, 73, 73, 73, 73, 73, 73, 73, 73, 73, 74, 74, 74, 74, 74, 74, 74, 74, 74, 74, 74, 74, 75, 75, 75, 75, 75, 75, 75, 75, 75, 75, 75, 75, 76, 77, 77, 77, 77, 78, 79, 79, 79, 80, 81, 81, 81, 81, 81], dtype=np.int64)
 JAC_COLOUR = np.array([5, 0, 1, 4, 9, 8, 3, 2, 6, 0, 1, 4, 10, 3, 2, 7, 0, 1, 4, 8, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 0, 1, 3, 2, 6, 0, 1, 2, 7, 0, 1, 4, 3, 2], dtype=np.int64)
 
 
@@ -247,8 +243,8 @@ def jac(t, x, p):
     F_b__rod__v__rod__m__x = 0.5*X_rod__m__px
     F_b__rod__v__rod__m__y = 0.5*X_rod__m__py
     F_b__rod__v__rod__m__z = 0.5*X_rod__m__pz
-    ROT_rod__01 = 1.0*COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax
-    ROT_rod__02 = 1.0*COS_X_rod__ax*COS_X_rod__ay
+    ROT_rod__01 = COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax
+    ROT_rod__02 = COS_X_rod__ax*COS_X_rod__ay
     E_b__hinge__tx__1__hinge__tx__L = P_hinge__stiffness*(0.499695*ROT_rod__01 - 0.01745*ROT_rod__02 + X_rod__x) - P_hinge__tx_load
     F_b__rod__w__rod__J__y = 5.0*X_rod__J__py
     F_b__rod__w__rod__J__z = 100.0*X_rod__J__pz
@@ -256,48 +252,44 @@ def jac(t, x, p):
     F_b__rod__w__rod__J__x = 5.0*X_rod__J__px
     F_b__rod__hinge__x__rod__hinge__R__y = 0.01745*F_b__rod__w__rod__J__x
     F_b__rod__hinge__x__rod__hinge__R__z = 0.499695*F_b__rod__w__rod__J__x
-    ROT_rod__00 = -1.0*COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + 1.0*SIN_X_rod__ax*SIN_X_rod__az
+    ROT_rod__00 = -COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + SIN_X_rod__ax*SIN_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__x = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__00 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__01 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__02
     F_b__rod__hinge__0__rod__hinge__x = F_b__rod__hinge__R__rod__hinge__0__x + F_b__rod__v__rod__m__x
     E_b__hinge__tx__1__hinge__tx__Lc = F_b__rod__hinge__0__rod__hinge__x*P_hinge__damping
     E_b__hinge__tx__hinge__tx__1 = E_b__hinge__tx__1__hinge__tx__L + E_b__hinge__tx__1__hinge__tx__Lc
-    ROT_rod__11 = -1.0*COS_X_rod__ay*SIN_X_rod__az
-    ROT_rod__12 = 1.0*SIN_X_rod__ay
+    ROT_rod__11 = -COS_X_rod__ay*SIN_X_rod__az
+    ROT_rod__12 = SIN_X_rod__ay
     E_b__hinge__ty__1__hinge__ty__L = P_hinge__stiffness*(0.499695*ROT_rod__11 - 0.01745*ROT_rod__12 + X_rod__y) - P_hinge__ty_load
-    ROT_rod__10 = 1.0*COS_X_rod__ay*COS_X_rod__az
+    ROT_rod__10 = COS_X_rod__ay*COS_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__y = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__10 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__11 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__12
     F_b__rod__hinge__0__rod__hinge__y = F_b__rod__hinge__R__rod__hinge__0__y + F_b__rod__v__rod__m__y
     E_b__hinge__ty__1__hinge__ty__Lc = F_b__rod__hinge__0__rod__hinge__y*P_hinge__damping
     E_b__hinge__ty__hinge__ty__1 = E_b__hinge__ty__1__hinge__ty__L + E_b__hinge__ty__1__hinge__ty__Lc
-    ROT_rod__21 = 1.0*COS_X_rod__ax*COS_X_rod__az - 1.0*SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
-    ROT_rod__22 = -1.0*COS_X_rod__ay*SIN_X_rod__ax
+    ROT_rod__21 = COS_X_rod__ax*COS_X_rod__az - SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
+    ROT_rod__22 = -COS_X_rod__ay*SIN_X_rod__ax
     E_b__hinge__tz__1__hinge__tz__L = P_hinge__stiffness*(0.499695*ROT_rod__21 - 0.01745*ROT_rod__22 + X_rod__z) - P_hinge__tz_load
-    ROT_rod__20 = 1.0*COS_X_rod__ax*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
+    ROT_rod__20 = COS_X_rod__ax*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
     F_b__rod__hinge__R__rod__hinge__0__z = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__20 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__21 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__22
     F_b__rod__hinge__0__rod__hinge__z = F_b__rod__hinge__R__rod__hinge__0__z + F_b__rod__v__rod__m__z
     E_b__hinge__tz__1__hinge__tz__Lc = F_b__rod__hinge__0__rod__hinge__z*P_hinge__damping
     E_b__hinge__tz__hinge__tz__1 = E_b__hinge__tz__1__hinge__tz__L + E_b__hinge__tz__1__hinge__tz__Lc
-    E_b__hinge__ry__1__hinge__ry__L = 1.0*P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
+    E_b__hinge__ry__1__hinge__ry__L = P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
     F_b__rod__Rw__rod__W__x = F_b__rod__w__rod__J__x*ROT_rod__00 + F_b__rod__w__rod__J__y*ROT_rod__01 + F_b__rod__w__rod__J__z*ROT_rod__02
     F_b__rod__Rw__rod__W__y = F_b__rod__w__rod__J__x*ROT_rod__10 + F_b__rod__w__rod__J__y*ROT_rod__11 + F_b__rod__w__rod__J__z*ROT_rod__12
-    M_hinge__ry__w2__00 = 1.0*ROT_rod__10
-    M_hinge__ry__w2__01 = -1.0*ROT_rod__00
-    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*M_hinge__ry__w2__00 + F_b__rod__Rw__rod__W__y*M_hinge__ry__w2__01
+    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*ROT_rod__10 - F_b__rod__Rw__rod__W__y*ROT_rod__00
     E_b__hinge__ry__1__hinge__ry__Lc = F_b__hinge__ry__w2__hinge__ry*P_hinge__rot_damping
     E_b__hinge__ry__hinge__ry__1 = E_b__hinge__ry__1__hinge__ry__L + E_b__hinge__ry__1__hinge__ry__Lc
-    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__00
-    E_b__rod__W__hinge__ry__w2__y = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__01
-    E_b__hinge__rz__1__hinge__rz__L = 1.0*P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
+    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*ROT_rod__10
+    E_b__rod__W__hinge__ry__w2__y = -E_b__hinge__ry__hinge__ry__1*ROT_rod__00
+    E_b__hinge__rz__1__hinge__rz__L = P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
     F_b__rod__Rw__rod__W__z = F_b__rod__w__rod__J__x*ROT_rod__20 + F_b__rod__w__rod__J__y*ROT_rod__21 + F_b__rod__w__rod__J__z*ROT_rod__22
-    M_hinge__rz__w2__01 = 1.0*ROT_rod__20
-    M_hinge__rz__w2__02 = -1.0*ROT_rod__10
-    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*M_hinge__rz__w2__01 + F_b__rod__Rw__rod__W__z*M_hinge__rz__w2__02
+    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*ROT_rod__20 - F_b__rod__Rw__rod__W__z*ROT_rod__10
     E_b__hinge__rz__1__hinge__rz__Lc = F_b__hinge__rz__w2__hinge__rz*P_hinge__rot_damping
     E_b__hinge__rz__hinge__rz__1 = E_b__hinge__rz__1__hinge__rz__L + E_b__hinge__rz__1__hinge__rz__Lc
-    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__01
+    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*ROT_rod__20
     E_b__rod__Rw__rod__W__y = E_b__rod__W__hinge__ry__w2__y + E_b__rod__W__hinge__rz__w2__y
-    E_b__rod__W__hinge__rz__w2__z = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__02
-    _pv = np.empty(65)
+    E_b__rod__W__hinge__rz__w2__z = -E_b__hinge__rz__hinge__rz__1*ROT_rod__10
+    _pv = np.empty(61)
     _pv[0] = 1.0
     _pv[1] = COS_X_rod__ax
     _pv[2] = COS_X_rod__ay
@@ -336,35 +328,31 @@ def jac(t, x, p):
     _pv[35] = F_b__rod__w__rod__J__y
     _pv[36] = P_hinge__rot_stiffness
     _pv[37] = F_b__rod__w__rod__J__x
-    _pv[38] = M_hinge__ry__w2__00
-    _pv[39] = M_hinge__ry__w2__01
-    _pv[40] = F_b__rod__Rw__rod__W__x
-    _pv[41] = F_b__rod__Rw__rod__W__y
-    _pv[42] = P_hinge__rot_damping
-    _pv[43] = E_b__hinge__ry__hinge__ry__1
-    _pv[44] = M_hinge__rz__w2__01
-    _pv[45] = M_hinge__rz__w2__02
-    _pv[46] = F_b__rod__Rw__rod__W__z
-    _pv[47] = E_b__hinge__rz__hinge__rz__1
-    _pv[48] = E_b__rod__W__hinge__ry__w2__x
-    _pv[49] = E_b__rod__Rw__rod__W__y
-    _pv[50] = E_b__rod__W__hinge__rz__w2__z
-    _pv[51] = E_b__hinge__tx__hinge__tx__1
-    _pv[52] = E_b__hinge__ty__hinge__ty__1
-    _pv[53] = E_b__hinge__tz__hinge__tz__1
-    _pv[54] = (COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay**2
-    _pv[55] = F_b__rod__w__rod__J__x/COS_X_rod__ay
-    _pv[56] = COS_X_rod__az/COS_X_rod__ay
-    _pv[57] = SIN_X_rod__az/COS_X_rod__ay
-    _pv[58] = F_b__rod__w__rod__J__y/COS_X_rod__ay
-    _pv[59] = SIN_X_rod__ay*(COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay**2
-    _pv[60] = F_b__rod__w__rod__J__x*SIN_X_rod__ay/COS_X_rod__ay
-    _pv[61] = COS_X_rod__az*SIN_X_rod__ay/COS_X_rod__ay
-    _pv[62] = SIN_X_rod__ay*SIN_X_rod__az/COS_X_rod__ay
-    _pv[63] = (COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay
-    _pv[64] = F_b__rod__w__rod__J__y*SIN_X_rod__ay/COS_X_rod__ay
-    _d = np.zeros((86, 12))
-    _tape(_d, _pv, 0, 86)
+    _pv[38] = F_b__rod__Rw__rod__W__y
+    _pv[39] = F_b__rod__Rw__rod__W__x
+    _pv[40] = P_hinge__rot_damping
+    _pv[41] = E_b__hinge__ry__hinge__ry__1
+    _pv[42] = F_b__rod__Rw__rod__W__z
+    _pv[43] = E_b__hinge__rz__hinge__rz__1
+    _pv[44] = E_b__rod__W__hinge__ry__w2__x
+    _pv[45] = E_b__rod__Rw__rod__W__y
+    _pv[46] = E_b__rod__W__hinge__rz__w2__z
+    _pv[47] = E_b__hinge__tx__hinge__tx__1
+    _pv[48] = E_b__hinge__ty__hinge__ty__1
+    _pv[49] = E_b__hinge__tz__hinge__tz__1
+    _pv[50] = (COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay**2
+    _pv[51] = F_b__rod__w__rod__J__x/COS_X_rod__ay
+    _pv[52] = COS_X_rod__az/COS_X_rod__ay
+    _pv[53] = SIN_X_rod__az/COS_X_rod__ay
+    _pv[54] = F_b__rod__w__rod__J__y/COS_X_rod__ay
+    _pv[55] = SIN_X_rod__ay*(COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay**2
+    _pv[56] = F_b__rod__w__rod__J__x*SIN_X_rod__ay/COS_X_rod__ay
+    _pv[57] = COS_X_rod__az*SIN_X_rod__ay/COS_X_rod__ay
+    _pv[58] = SIN_X_rod__ay*SIN_X_rod__az/COS_X_rod__ay
+    _pv[59] = (COS_X_rod__az*F_b__rod__w__rod__J__x - F_b__rod__w__rod__J__y*SIN_X_rod__az)/COS_X_rod__ay
+    _pv[60] = F_b__rod__w__rod__J__y*SIN_X_rod__ay/COS_X_rod__ay
+    _d = np.zeros((82, 12))
+    _tape(_d, _pv, 0, 82)
     J = np.zeros((12, 12))
     for k in range(JAC_I.shape[0]):
         J[JAC_I[k], JAC_J[k]] = _d[JAC_ROW[k], JAC_COLOUR[k]]
@@ -404,8 +392,8 @@ def outputs(t, x, p):
     F_b__rod__v__rod__m__x = 0.5*X_rod__m__px
     F_b__rod__v__rod__m__y = 0.5*X_rod__m__py
     F_b__rod__v__rod__m__z = 0.5*X_rod__m__pz
-    ROT_rod__01 = 1.0*COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax
-    ROT_rod__02 = 1.0*COS_X_rod__ax*COS_X_rod__ay
+    ROT_rod__01 = COS_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax
+    ROT_rod__02 = COS_X_rod__ax*COS_X_rod__ay
     E_b__hinge__tx__1__hinge__tx__L = P_hinge__stiffness*(0.499695*ROT_rod__01 - 0.01745*ROT_rod__02 + X_rod__x) - P_hinge__tx_load
     F_b__rod__w__rod__J__y = 5.0*X_rod__J__py
     F_b__rod__w__rod__J__z = 100.0*X_rod__J__pz
@@ -413,48 +401,44 @@ def outputs(t, x, p):
     F_b__rod__w__rod__J__x = 5.0*X_rod__J__px
     F_b__rod__hinge__x__rod__hinge__R__y = 0.01745*F_b__rod__w__rod__J__x
     F_b__rod__hinge__x__rod__hinge__R__z = 0.499695*F_b__rod__w__rod__J__x
-    ROT_rod__00 = -1.0*COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + 1.0*SIN_X_rod__ax*SIN_X_rod__az
+    ROT_rod__00 = -COS_X_rod__ax*COS_X_rod__az*SIN_X_rod__ay + SIN_X_rod__ax*SIN_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__x = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__00 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__01 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__02
     F_b__rod__hinge__0__rod__hinge__x = F_b__rod__hinge__R__rod__hinge__0__x + F_b__rod__v__rod__m__x
     E_b__hinge__tx__1__hinge__tx__Lc = F_b__rod__hinge__0__rod__hinge__x*P_hinge__damping
     E_b__hinge__tx__hinge__tx__1 = E_b__hinge__tx__1__hinge__tx__L + E_b__hinge__tx__1__hinge__tx__Lc
-    ROT_rod__11 = -1.0*COS_X_rod__ay*SIN_X_rod__az
-    ROT_rod__12 = 1.0*SIN_X_rod__ay
+    ROT_rod__11 = -COS_X_rod__ay*SIN_X_rod__az
+    ROT_rod__12 = SIN_X_rod__ay
     E_b__hinge__ty__1__hinge__ty__L = P_hinge__stiffness*(0.499695*ROT_rod__11 - 0.01745*ROT_rod__12 + X_rod__y) - P_hinge__ty_load
-    ROT_rod__10 = 1.0*COS_X_rod__ay*COS_X_rod__az
+    ROT_rod__10 = COS_X_rod__ay*COS_X_rod__az
     F_b__rod__hinge__R__rod__hinge__0__y = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__10 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__11 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__12
     F_b__rod__hinge__0__rod__hinge__y = F_b__rod__hinge__R__rod__hinge__0__y + F_b__rod__v__rod__m__y
     E_b__hinge__ty__1__hinge__ty__Lc = F_b__rod__hinge__0__rod__hinge__y*P_hinge__damping
     E_b__hinge__ty__hinge__ty__1 = E_b__hinge__ty__1__hinge__ty__L + E_b__hinge__ty__1__hinge__ty__Lc
-    ROT_rod__21 = 1.0*COS_X_rod__ax*COS_X_rod__az - 1.0*SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
-    ROT_rod__22 = -1.0*COS_X_rod__ay*SIN_X_rod__ax
+    ROT_rod__21 = COS_X_rod__ax*COS_X_rod__az - SIN_X_rod__ax*SIN_X_rod__ay*SIN_X_rod__az
+    ROT_rod__22 = -COS_X_rod__ay*SIN_X_rod__ax
     E_b__hinge__tz__1__hinge__tz__L = P_hinge__stiffness*(0.499695*ROT_rod__21 - 0.01745*ROT_rod__22 + X_rod__z) - P_hinge__tz_load
-    ROT_rod__20 = 1.0*COS_X_rod__ax*SIN_X_rod__az + 1.0*COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
+    ROT_rod__20 = COS_X_rod__ax*SIN_X_rod__az + COS_X_rod__az*SIN_X_rod__ax*SIN_X_rod__ay
     F_b__rod__hinge__R__rod__hinge__0__z = F_b__rod__hinge__x__rod__hinge__R__x*ROT_rod__20 + F_b__rod__hinge__x__rod__hinge__R__y*ROT_rod__21 + F_b__rod__hinge__x__rod__hinge__R__z*ROT_rod__22
     F_b__rod__hinge__0__rod__hinge__z = F_b__rod__hinge__R__rod__hinge__0__z + F_b__rod__v__rod__m__z
     E_b__hinge__tz__1__hinge__tz__Lc = F_b__rod__hinge__0__rod__hinge__z*P_hinge__damping
     E_b__hinge__tz__hinge__tz__1 = E_b__hinge__tz__1__hinge__tz__L + E_b__hinge__tz__1__hinge__tz__Lc
     E_b__rod__w__rod__EJS__x = -0.19*F_b__rod__w__rod__J__y*F_b__rod__w__rod__J__z
-    E_b__hinge__ry__1__hinge__ry__L = 1.0*P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
+    E_b__hinge__ry__1__hinge__ry__L = P_hinge__rot_stiffness*ROT_rod__20 - P_hinge__ry_load
     F_b__rod__Rw__rod__W__x = F_b__rod__w__rod__J__x*ROT_rod__00 + F_b__rod__w__rod__J__y*ROT_rod__01 + F_b__rod__w__rod__J__z*ROT_rod__02
     F_b__rod__Rw__rod__W__y = F_b__rod__w__rod__J__x*ROT_rod__10 + F_b__rod__w__rod__J__y*ROT_rod__11 + F_b__rod__w__rod__J__z*ROT_rod__12
-    M_hinge__ry__w2__00 = 1.0*ROT_rod__10
-    M_hinge__ry__w2__01 = -1.0*ROT_rod__00
-    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*M_hinge__ry__w2__00 + F_b__rod__Rw__rod__W__y*M_hinge__ry__w2__01
+    F_b__hinge__ry__w2__hinge__ry = F_b__rod__Rw__rod__W__x*ROT_rod__10 - F_b__rod__Rw__rod__W__y*ROT_rod__00
     E_b__hinge__ry__1__hinge__ry__Lc = F_b__hinge__ry__w2__hinge__ry*P_hinge__rot_damping
     E_b__hinge__ry__hinge__ry__1 = E_b__hinge__ry__1__hinge__ry__L + E_b__hinge__ry__1__hinge__ry__Lc
-    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__00
-    E_b__rod__W__hinge__ry__w2__y = E_b__hinge__ry__hinge__ry__1*M_hinge__ry__w2__01
-    E_b__hinge__rz__1__hinge__rz__L = 1.0*P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
+    E_b__rod__W__hinge__ry__w2__x = E_b__hinge__ry__hinge__ry__1*ROT_rod__10
+    E_b__rod__W__hinge__ry__w2__y = -E_b__hinge__ry__hinge__ry__1*ROT_rod__00
+    E_b__hinge__rz__1__hinge__rz__L = P_hinge__rot_stiffness*ROT_rod__00 - P_hinge__rz_load
     F_b__rod__Rw__rod__W__z = F_b__rod__w__rod__J__x*ROT_rod__20 + F_b__rod__w__rod__J__y*ROT_rod__21 + F_b__rod__w__rod__J__z*ROT_rod__22
-    M_hinge__rz__w2__01 = 1.0*ROT_rod__20
-    M_hinge__rz__w2__02 = -1.0*ROT_rod__10
-    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*M_hinge__rz__w2__01 + F_b__rod__Rw__rod__W__z*M_hinge__rz__w2__02
+    F_b__hinge__rz__w2__hinge__rz = F_b__rod__Rw__rod__W__y*ROT_rod__20 - F_b__rod__Rw__rod__W__z*ROT_rod__10
     E_b__hinge__rz__1__hinge__rz__Lc = F_b__hinge__rz__w2__hinge__rz*P_hinge__rot_damping
     E_b__hinge__rz__hinge__rz__1 = E_b__hinge__rz__1__hinge__rz__L + E_b__hinge__rz__1__hinge__rz__Lc
-    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__01
+    E_b__rod__W__hinge__rz__w2__y = E_b__hinge__rz__hinge__rz__1*ROT_rod__20
     E_b__rod__Rw__rod__W__y = E_b__rod__W__hinge__ry__w2__y + E_b__rod__W__hinge__rz__w2__y
-    E_b__rod__W__hinge__rz__w2__z = E_b__hinge__rz__hinge__rz__1*M_hinge__rz__w2__02
+    E_b__rod__W__hinge__rz__w2__z = -E_b__hinge__rz__hinge__rz__1*ROT_rod__10
     E_b__rod__w__rod__Rw__x = E_b__rod__Rw__rod__W__y*ROT_rod__10 + E_b__rod__W__hinge__ry__w2__x*ROT_rod__00 + E_b__rod__W__hinge__rz__w2__z*ROT_rod__20
     E_b__rod__hinge__x__rod__hinge__R__y = E_b__hinge__tx__hinge__tx__1*ROT_rod__01 + E_b__hinge__ty__hinge__ty__1*ROT_rod__11 + E_b__hinge__tz__hinge__tz__1*ROT_rod__21
     E_b__rod__hinge__x__rod__hinge__R__z = E_b__hinge__tx__hinge__tx__1*ROT_rod__02 + E_b__hinge__ty__hinge__ty__1*ROT_rod__12 + E_b__hinge__tz__hinge__tz__1*ROT_rod__22
@@ -474,8 +458,8 @@ def outputs(t, x, p):
     DX_rod__J__pz = E_b__rod__w__rod__J__z
     y = np.empty(6)
     y[0] = X_rod__x
-    y[1] = F_b__rod__v__rod__m__x - 0.017449*F_b__rod__w__rod__J__x*ROT_rod__01 - 0.49969600000000003*F_b__rod__w__rod__J__x*ROT_rod__02 + ROT_rod__00*(0.017449*F_b__rod__w__rod__J__y + 0.49969600000000003*F_b__rod__w__rod__J__z)
-    y[2] = 0.5*DX_rod__m__px + ROT_rod__00*(0.08724499999999999*DX_rod__J__py + 49.9696*DX_rod__J__pz - 0.49969600000000003*F_b__rod__w__rod__J__x*F_b__rod__w__rod__J__y + 0.017449*F_b__rod__w__rod__J__x*F_b__rod__w__rod__J__z) + ROT_rod__01*(-0.08724499999999999*DX_rod__J__px + 0.49969600000000003*F_b__rod__w__rod__J__x**2 + F_b__rod__w__rod__J__z*(0.017449*F_b__rod__w__rod__J__y + 0.49969600000000003*F_b__rod__w__rod__J__z)) + ROT_rod__02*(-2.4984800000000003*DX_rod__J__px - 0.017449*F_b__rod__w__rod__J__x**2 - F_b__rod__w__rod__J__y*(0.017449*F_b__rod__w__rod__J__y + 0.49969600000000003*F_b__rod__w__rod__J__z))
+    y[1] = F_b__rod__v__rod__m__x - 0.017449*F_b__rod__w__rod__J__x*ROT_rod__01 - 0.499696*F_b__rod__w__rod__J__x*ROT_rod__02 + ROT_rod__00*(0.017449*F_b__rod__w__rod__J__y + 0.499696*F_b__rod__w__rod__J__z)
+    y[2] = 0.5*DX_rod__m__px + ROT_rod__00*(0.087245*DX_rod__J__py + 49.9696*DX_rod__J__pz - 0.499696*F_b__rod__w__rod__J__x*F_b__rod__w__rod__J__y + 0.017449*F_b__rod__w__rod__J__x*F_b__rod__w__rod__J__z) + ROT_rod__01*(-0.087245*DX_rod__J__px + 0.499696*F_b__rod__w__rod__J__x**2 + F_b__rod__w__rod__J__z*(0.017449*F_b__rod__w__rod__J__y + 0.499696*F_b__rod__w__rod__J__z)) + ROT_rod__02*(-2.49848*DX_rod__J__px - 0.017449*F_b__rod__w__rod__J__x**2 - F_b__rod__w__rod__J__y*(0.017449*F_b__rod__w__rod__J__y + 0.499696*F_b__rod__w__rod__J__z))
     y[3] = -E_b__hinge__tz__hinge__tz__1
     y[4] = math.sqrt((0.499695*ROT_rod__01 - 0.01745*ROT_rod__02 + X_rod__x)**2 + (0.499695*ROT_rod__11 - 0.01745*ROT_rod__12 + X_rod__y)**2 + (0.499695*ROT_rod__21 - 0.01745*ROT_rod__22 + X_rod__z)**2)
     y[5] = 1.0*F_b__rod__v__rod__m__x**2 + 1.0*F_b__rod__v__rod__m__y**2 + 1.0*F_b__rod__v__rod__m__z**2 + 0.1*F_b__rod__w__rod__J__x**2 + 0.1*F_b__rod__w__rod__J__y**2 + 0.005*F_b__rod__w__rod__J__z**2 + 19.62*X_rod__z

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "8dd83ffe1315bd2ca0c537fb710244d8"
+MODEL_HASH = "ffbeaea3cd6282036278d8991b2678e7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "d78ff006ba34f43e57f5be1ec2bf6cde"
+MODEL_HASH = "2d4aea64205c401babb100803826cb0c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "fcbbbbdee7015ad173c6f2ee1533db32"
+MODEL_HASH = "0fd99951d5b6a5f1e9d8df5e65d93b40"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "c442ad9e934972029fe500775b09f233"
+MODEL_HASH = "55e09d597f68b1cd7dcf98f6e890bdbd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "0b327d8eb6d41db24b6dcc49e86a980f"
+MODEL_HASH = "f69cc220ea6fa8009a95a8821b79b4d2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 

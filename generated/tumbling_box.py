@@ -15,7 +15,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "b2625223f005c69aac81721ffb101bd4"
+MODEL_HASH = "e36788121348da76aa7903164663ffcf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -42,7 +42,7 @@ STATIC_LOADS = False
 
 def initial_state(p):
     """The initial state for parameter values p (initial conditions may use them)."""
-    return np.array([1.0, 0.0, 0.0, 0.5, 0.010000000000000002, 0.03, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=np.float64)
+    return np.array([1.0, 0.0, 0.0, 0.5, 0.01, 0.03, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=np.float64)
 
 
 X0 = initial_state(PARAMS)
@@ -78,8 +78,8 @@ def rhs(t, x, p):
     F_b__box__w__box__J__x = 10.0*X_box__J__px
     F_b__box__w__box__J__y = 5.0*X_box__J__py
     F_b__box__w__box__J__z = 3.3333333333333335*X_box__J__pz
-    E_b__box__w__box__EJS__x = 0.09999999999999998*F_b__box__w__box__J__y*F_b__box__w__box__J__z
-    E_b__box__w__box__EJS__y = -0.19999999999999998*F_b__box__w__box__J__x*F_b__box__w__box__J__z
+    E_b__box__w__box__EJS__x = 0.1*F_b__box__w__box__J__y*F_b__box__w__box__J__z
+    E_b__box__w__box__EJS__y = -0.2*F_b__box__w__box__J__x*F_b__box__w__box__J__z
     E_b__box__w__box__EJS__z = 0.1*F_b__box__w__box__J__x*F_b__box__w__box__J__y
     F_b__box__v__box__m__x = 0.5*X_box__m__px
     F_b__box__v__box__m__y = 0.5*X_box__m__py
@@ -119,7 +119,7 @@ def rhs(t, x, p):
 TAPE_PTR = np.array([0, 1, 2, 3, 4, 5, 6, 7, 9, 11, 13, 14, 15, 16, 17, 18, 19, 20, 25, 26, 30, 31, 38], dtype=np.int64)
 TAPE_SRC = np.array([-5, -4, -5, -4, -1, -2, -3, 5, 6, 4, 6, 4, 5, -1, -1, -1, 7, 8, 9, 10, 2, 3, 4, 5, 1, 11, 3, 4, 5, 1, 12, 2, 3, 4, 5, 6, 0, 1], dtype=np.int64)
 TAPE_SLOT = np.array([1, 2, 3, 4, 0, 0, 0, 5, 6, 5, 7, 6, 7, 0, 0, 0, 0, 0, 0, 0, 8, 9, 10, 11, 12, 0, 6, 13, 14, 7, 0, 15, 16, 17, 18, 0, 19, 20], dtype=np.int64)
-TAPE_SCALE = np.array([1.0, 1.0, -1.0, -1.0, 10.0, 5.0, 3.3333333333333335, 0.09999999999999998, 0.09999999999999998, -0.19999999999999998, -0.19999999999999998, 0.1, 0.1, 0.5, 0.5, 0.5, -1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
+TAPE_SCALE = np.array([1.0, 1.0, -1.0, -1.0, 10.0, 5.0, 3.3333333333333335, 0.1, 0.1, -0.2, -0.2, 0.1, 0.1, 0.5, 0.5, 0.5, -1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=np.float64)
 JAC_I = np.array([3, 3, 4, 4, 5, 5, 6, 7, 7, 7, 7, 8, 9, 9, 9, 10, 11, 11, 11, 11, 11], dtype=np.int64)
 JAC_J = np.array([4, 5, 3, 5, 3, 4, 0, 3, 4, 9, 11, 1, 3, 4, 11, 2, 3, 4, 5, 9, 11], dtype=np.int64)
 JAC_ROW = np.array([13, 13, 14, 14, 15, 15, 16, 17, 17, 17, 17, 18, 19, 19, 19, 20, 21, 21, 21, 21, 21], dtype=np.int64)

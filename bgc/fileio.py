@@ -39,10 +39,43 @@ def output_dir(path: str | Path, what: str = "output") -> Path:
     return parent
 
 
+def check_writable(path: str | Path | None, what: str = "output",
+                   directory: bool = False) -> None:
+    """Refuse, before any work is done, an output path bgc could not write: under a
+    regular file, an existing directory where a file is wanted (or a file where a
+    directory is: ``directory``), or in a directory that does not take new files (read-only,
+    /proc). Probes with a temporary file in the nearest existing directory, removed at
+    once; missing directories are fine (they are created when written). Nothing is left
+    behind."""
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and path.is_dir() != directory:
+        kind = "a directory" if path.is_dir() else "not a directory"
+        raise BgcError(f"cannot write {what} {str(path)!r}: it is {kind}",
+                       hint="give a " + ("directory" if directory else "file") + " path "
+                            "in a writable directory")
+    probe = path if directory else path.parent
+    probe = probe if str(probe) else Path(".")
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise BgcError(f"cannot write {what} {str(path)!r}: {str(probe)!r} is not a "
+                       "directory", hint="give a path in a writable directory (missing directories are created)")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=".bgc-probe.", suffix=".tmp")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise BgcError(f"cannot write {what} {str(path)!r}: directory {str(probe)!r} does "
+                       f"not take new files ({e.strerror or type(e).__name__})",
+                       hint="give a path in a writable directory (missing directories are created)") from None
+
+
 def unwritable(path: str | Path, e: OSError, what: str = "output") -> BgcError:
     """The one-line error for an output path bgc cannot write."""
     reason = e.strerror or type(e).__name__
-    return BgcError(f"cannot write {what} file {str(path)!r}: {reason}",
+    return BgcError(f"cannot write {what} {str(path)!r}: {reason}",
                     hint="give a path in a writable directory (missing directories are "
                          "created)")
 

@@ -152,7 +152,7 @@ class _Loader:
 
     def declare(self, name, what, loc, key):
         if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
-            self.err(f"'{name}' is not a valid name", loc, key,
+            self.err(f"{name!r} is not a valid name", loc, key,
                      "use letters, digits and '_', not starting with a digit")
         if "__" in name:
             self.err(f"'{name}' contains '__', which bgc keeps for the names it generates",

@@ -261,6 +261,9 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
                        hint="valid solvers: " + ", ".join(SOLVERS))
     check_writable(out, "--out")       # before the run: a bad path fails at once
     check_writable(plot, "--plot")
+    if plot:
+        from .results import plot_format
+        plot_format(plot, "--plot")
     module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
     p, choice = _parse_params(module, params), None

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import BgcError
 from .fileio import atomic_write
 from .simulate import Result
 
@@ -44,14 +45,25 @@ def _panels(n: int, height: float, sharex: bool = True):
                         sharex=sharex, squeeze=False)
 
 
+def plot_format(path: str | Path, key: str | None = None) -> str:
+    """The image format of a plot path, from its suffix (none: PNG); a BgcError naming
+    the path (and ``key``, the option) if matplotlib cannot write that format."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    fmt = Path(path).suffix[1:].lower() or "png"
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if fmt not in formats:
+        raise BgcError(f"cannot write plot {str(path)!r}: unknown image format '.{fmt}'",
+                       key=key, hint="use one of " + ", ".join(f".{f}" for f in formats))
+    return fmt
+
+
 def _save(fig, path: str | Path, title: str) -> Path:
     import matplotlib.pyplot as plt
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
     try:
-        # the format from the target's suffix (the temporary file's is .tmp)
-        fmt = Path(path).suffix[1:].lower() or "png"
+        fmt = plot_format(path)     # the temporary file's suffix is .tmp
+        if title:
+            fig.suptitle(title)
+        fig.tight_layout()
         return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format=fmt), "plot")
     finally:
         plt.close(fig)

@@ -91,6 +91,19 @@ def test_files_plot_in_missing_dir_under_proc(work):
             names="'/proc/none/x.png'")
 
 
+def test_files_good_csv_bad_plot_changes_neither(work):
+    """An existing CSV is not replaced when the run's plot path is bad (checked first)."""
+    (work / "x.csv").write_text("old results\n")
+    refused(work, "simulate", RLC, "-o", "gen", "--out", "x.csv", "--plot", "/proc/x.png",
+            names="'/proc/x.png'")
+    assert (work / "x.csv").read_text() == "old results\n"
+
+
+def test_files_plot_unknown_format(work):
+    err = refused(work, "simulate", RLC, "-o", "gen", "--plot", "x.xyz", names="'x.xyz'")
+    assert ".png" in err
+
+
 def test_files_frf_csv_under_regular_file(work):
     refused(work, "frf", RLC, "--input", "x", "--output", "current", "--out", "afile/f.csv",
             names="'afile/f.csv'")

@@ -378,8 +378,8 @@ def is_stale(path: Path, model_digest: str, method: str) -> bool:
 def import_module(path: Path):
     """Import a generated module from its file (numba's cache sits beside it)."""
     path = Path(path).resolve()
-    # Always the name `from <dir> import <model>` gives: numba's on-disk cache records the
-    # module name, and loading it under another name would fail.
+    # The name `from <dir> import <model>` gives (numba's cache does not depend on it: the
+    # module gives itself one canonical __name__, see the template)
     name = f"{path.parent.name}.{path.stem}"
     if name in sys.modules and getattr(sys.modules[name], "__file__", None) == str(path) \
             and getattr(sys.modules[name], "MODEL_HASH", None) == stored_hash(path):

@@ -12,6 +12,7 @@ import functools
 import hashlib
 import importlib.util
 import keyword
+import math
 import re
 import sys
 from dataclasses import replace
@@ -59,6 +60,13 @@ def _ident(text: str, what: str = "name") -> str:
         raise BgcError(f"{what} {text!r} is not a valid Python name",
                        hint="letters, digits and '_', not starting with a digit")
     return text
+
+
+def _float(value) -> str:
+    """A number as a Python float literal (``repr``, which round-trips; a non-finite value
+    as ``float('nan')`` / ``float('inf')``, which are no Python literals)."""
+    v = float(value)
+    return repr(v) if math.isfinite(v) else f'float("{v}")'
 
 
 def _doc(text: str) -> str:
@@ -267,9 +275,10 @@ def render(system: EquationSystem) -> str:
                      if any(f.has(sy) for f in freqs)],
         freq=code(sp.Max(sp.S.Zero, *freqs)) if freqs else "0.0",
         x0=[code(st.initial) for st in system.states],
-        p0=[repr(float(v)) for _, _, v in system.params],
-        breakpoints=[repr(float(b)) for b in system.breakpoints],
-        tables=[{"index": tb.index, "t": [repr(v) for v in tb.t], "y": [repr(v) for v in tb.y]}
+        p0=[_float(v) for _, _, v in system.params],
+        breakpoints=[_float(b) for b in system.breakpoints],
+        tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
+                 "y": [_float(v) for v in tb.y]}
                 for tb in system.tables],
         n=len(system.states),
         rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
@@ -281,7 +290,7 @@ def render(system: EquationSystem) -> str:
         algebraic=system.algebraic,
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         con_out=[f"c[{k}] = {code(e)}" for k, e in enumerate(con_exprs)],
-        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[repr(c) for c in jt.scale],
+        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[_float(c) for c in jt.scale],
                   i=[i for i, _, _ in jt.pattern],
                   row=[r for _, _, r in jt.pattern],
                   j=[j for _, j, _ in jt.pattern],

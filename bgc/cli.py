@@ -16,6 +16,7 @@ import numpy as np
 
 from . import __version__, emit
 from .errors import BgcError, SimulationError
+from .fileio import check_writable
 from .joints import JOINT_KINDS
 from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
@@ -258,6 +259,11 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",
                        hint="valid solvers: " + ", ".join(SOLVERS))
+    check_writable(out, "--out")       # before the run: a bad path fails at once
+    check_writable(plot, "--plot")
+    if plot:
+        from .results import plot_format
+        plot_format(plot, "--plot")
     module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
     p, choice = _parse_params(module, params), None
@@ -351,6 +357,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
     from . import frf as bfrf
     if not 0 < f_min < f_max:
         raise BgcError(f"need 0 < --f-min < --f-max, got {f_min} and {f_max}", key="--f-min")
+    check_writable(out, "--out")
     module, m, _ = ensure_module(model, out_dir, method)
     if output not in module.OUTPUT_NAMES:
         raise BgcError(f"unknown output '{output}'", key="--output",
@@ -403,6 +410,8 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
             values[name] = float(value)
         except ValueError:
             raise BgcError(f"-p {item}: expected NAME=NUMBER", key="-p") from None
+    check_writable(out_dir, "--out", directory=True)
+    check_writable(gen_dir, "-o", directory=True)
     summary = bscene.run_scene(sc, out_dir, gen_dir, values)
     if as_json:
         click.echo(json.dumps(summary, indent=2, default=str))
@@ -448,6 +457,7 @@ def bench(out, parts, quick, repeats, budget, build, as_json):
     from . import bench as bbench
     if repeats < 1:
         raise BgcError(f"--repeats must be >= 1, got {repeats}", key="--repeats")
+    check_writable(out, "--out", directory=True)
     report = bbench.run(out, parts or bbench.PARTS, quick, repeats, budget,
                         log=lambda m: click.echo(m, err=True), build=build)
     if as_json:

@@ -8,12 +8,13 @@ depend on, in causal order. The same input gives the same bytes.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
-import os
+import keyword
+import math
 import re
 import sys
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,12 +23,61 @@ import sympy as sp
 
 from . import __version__, symbols
 from .equations import EquationSystem, LinearBlock
+from .errors import BgcError
+from .fileio import atomic_write
 from .jacobian import tape
 from .printer import code
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("bgc", "templates"),
                           trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
                           undefined=jinja2.StrictUndefined)
+
+
+def py_str(text: str) -> str:
+    """``text`` as a double-quoted Python string literal of printable ASCII only: safe
+    anywhere in generated source, a docstring included (no quote of its own survives
+    unescaped, no line break, no non-ASCII character, no lone surrogate)."""
+    out = []
+    for ch in str(text):
+        o = ord(ch)
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif 0x20 <= o < 0x7F:
+            out.append(ch)
+        elif o < 0x100:
+            out.append(f"\\x{o:02x}")
+        elif o < 0x10000:
+            out.append(f"\\u{o:04x}")
+        else:
+            out.append(f"\\U{o:08x}")
+    return '"' + "".join(out) + '"'
+
+
+def _ident(text: str, what: str = "name") -> str:
+    """``text`` if it is a plain identifier (it is written into code as is)."""
+    if not (isinstance(text, str) and text.isascii() and text.isidentifier()
+            and not keyword.iskeyword(text)):
+        raise BgcError(f"{what} {text!r} is not a valid Python name",
+                       hint="letters, digits and '_', not starting with a digit")
+    return text
+
+
+def _float(value) -> str:
+    """A number as a Python float literal (``repr``, which round-trips; a non-finite value
+    as ``float('nan')`` / ``float('inf')``, which are no Python literals)."""
+    v = float(value)
+    return repr(v) if math.isfinite(v) else f'float("{v}")'
+
+
+def _doc(text: str) -> str:
+    """``text`` for a docstring: a plain dotted name as is, anything else as an escaped
+    literal (which cannot end the docstring)."""
+    return text if re.fullmatch(r"[A-Za-z0-9_.\[\]]+", str(text)) else py_str(text)
+
+
+_ENV.filters["pystr"] = py_str
+_ENV.filters["doc"] = _doc
+_ENV.filters["ident"] = _ident
 _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
 
 
@@ -200,6 +250,10 @@ def render(system: EquationSystem) -> str:
              if isinstance(it, LinearBlock) and it.rank is not None}
     blocks = any(isinstance(it, LinearBlock) for it in system.assignments)
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
+    # every name the code assigns or reads is written as is: each must be an identifier
+    for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
+                + dx + [v for it in system.assignments for v in _defines(it)]):
+        _ident(sym.name, "symbol")
     funcs = {}
     for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
                            ("jac", jac_all, jac_used),
@@ -209,9 +263,9 @@ def render(system: EquationSystem) -> str:
         params, unpack = _prologue(system, used)
         funcs[key] = (params, unpack, _body(asg))
     ctx = dict(
-        title=f"{m.name}: bgc-generated simulation module",
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
+        canonical=f"_bgc_{m.name}_{model_hash(m.digest, system.variant)}",
         state_names=[st.name for st in system.states],
         param_names=[name for _, name, _ in system.params],
         output_names=[name for name, _ in system.outputs],
@@ -221,9 +275,10 @@ def render(system: EquationSystem) -> str:
                      if any(f.has(sy) for f in freqs)],
         freq=code(sp.Max(sp.S.Zero, *freqs)) if freqs else "0.0",
         x0=[code(st.initial) for st in system.states],
-        p0=[repr(float(v)) for _, _, v in system.params],
-        breakpoints=[repr(float(b)) for b in system.breakpoints],
-        tables=[{"index": tb.index, "t": [repr(v) for v in tb.t], "y": [repr(v) for v in tb.y]}
+        p0=[_float(v) for _, _, v in system.params],
+        breakpoints=[_float(b) for b in system.breakpoints],
+        tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
+                 "y": [_float(v) for v in tb.y]}
                 for tb in system.tables],
         n=len(system.states),
         rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
@@ -235,7 +290,7 @@ def render(system: EquationSystem) -> str:
         algebraic=system.algebraic,
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         con_out=[f"c[{k}] = {code(e)}" for k, e in enumerate(con_exprs)],
-        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[repr(c) for c in jt.scale],
+        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[_float(c) for c in jt.scale],
                   i=[i for i, _, _ in jt.pattern],
                   row=[r for _, _, r in jt.pattern],
                   j=[j for _, j, _ in jt.pattern],
@@ -250,6 +305,45 @@ def render(system: EquationSystem) -> str:
     return _ENV.get_template("module.py.j2").render(**ctx)
 
 
+@functools.lru_cache(maxsize=1)
+def _taken_names() -> frozenset:
+    """Top-level module names a generated module must not shadow: the standard library's,
+    the interpreter's built-in modules and every installed distribution's (from the
+    installed metadata: deterministic, no search of sys.path or the working directory)."""
+    import importlib.metadata
+    return frozenset(sys.stdlib_module_names) | frozenset(sys.builtin_module_names) | \
+        frozenset(importlib.metadata.packages_distributions()) | {"bgc"}
+
+
+def module_name_problem(name) -> str | None:
+    """Why ``name`` cannot name a generated module (None if it can): it must be a Python
+    identifier, not a keyword, not a dunder such as ``__init__`` (which would overwrite
+    the output package's ``__init__.py``), and must not shadow a standard library module
+    or an installed package (``numpy.py`` beside other modules breaks their imports)."""
+    if not (isinstance(name, str) and name.isascii() and name.isidentifier()):
+        return f"{name!r} is not a valid Python module name"
+    if keyword.iskeyword(name):
+        return f"{name!r} is a Python keyword"
+    if name.startswith("__") and name.endswith("__"):
+        return f"{name!r} is a special (dunder) name"
+    if name in _taken_names():
+        what = "standard library module" if name in sys.stdlib_module_names \
+            else "built-in module" if name in sys.builtin_module_names else "installed package"
+        return f"{name!r} would shadow the {what} '{name}'"
+    return None
+
+
+def suggest_module_name(name) -> str:
+    """A valid module name close to ``name`` (for the hint of a rejected one)."""
+    base = re.sub(r"[^0-9A-Za-z_]+", "_", str(name)).strip("_") or "model"
+    if base[0].isdigit():
+        base = "m_" + base
+    for cand in (base, f"{base}_model"):
+        if module_name_problem(cand) is None:
+            return cand
+    return "bgc_model"
+
+
 def module_path(name: str, out_dir: str | Path = "generated",
                 method: str = "parasitic") -> Path:
     """``<name>.py`` for the default method, ``<name>_<method>.py`` for the others (so
@@ -261,26 +355,17 @@ def module_path(name: str, out_dir: str | Path = "generated",
 def write(system: EquationSystem, out_dir: str | Path = "generated") -> Path:
     """Render and write ``out_dir/<name>.py`` atomically (temp file + rename)."""
     source = render(system)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    init = out_dir / "__init__.py"
-    if not init.exists():
-        _atomic_write(init, '"""Modules generated by `bgc compile`."""\n')
     path = module_path(system.model.name, out_dir, system.variant)
-    _atomic_write(path, source)
+    problem = module_name_problem(path.stem)
+    if problem:
+        raise BgcError(f"cannot write module {str(path)!r}: {problem}",
+                       hint=f"give the model (or scene) another 'name:', e.g. "
+                            f"{suggest_module_name(system.model.name)!r}")
+    init = path.parent / "__init__.py"
+    if not init.exists():
+        atomic_write(init, '"""Modules generated by `bgc compile`."""\n', "module")
+    atomic_write(path, source, "module")
     return path
-
-
-def _atomic_write(path: Path, text: str):
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def stored_hash(path: Path) -> str | None:
@@ -302,8 +387,8 @@ def is_stale(path: Path, model_digest: str, method: str) -> bool:
 def import_module(path: Path):
     """Import a generated module from its file (numba's cache sits beside it)."""
     path = Path(path).resolve()
-    # Always the name `from <dir> import <model>` gives: numba's on-disk cache records the
-    # module name, and loading it under another name would fail.
+    # The name `from <dir> import <model>` gives (numba's cache does not depend on it: the
+    # module gives itself one canonical __name__, see the template)
     name = f"{path.parent.name}.{path.stem}"
     if name in sys.modules and getattr(sys.modules[name], "__file__", None) == str(path) \
             and getattr(sys.modules[name], "MODEL_HASH", None) == stored_hash(path):

@@ -42,7 +42,9 @@ class BgcError(Exception):
         text = " ".join(parts)
         if self.hint:
             text += f" (hint: {self.hint})"
-        return text
+        # one line whatever the input held: a line break or control character in a file
+        # name or a model's key is shown escaped
+        return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
     def to_dict(self) -> dict:
         return {

@@ -27,7 +27,7 @@ from .joints import JOINT_KINDS, NEEDS_AXIS2
 from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Excitation, Functional, Joint,
                     Model, Output, Parameter, Parasitic, Settings, Signal, Table)
 
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
             "parasitic", "excitation", "elements", "bonds", "outputs", "simulation")
 BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
@@ -152,7 +152,7 @@ class _Loader:
 
     def declare(self, name, what, loc, key):
         if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
-            self.err(f"'{name}' is not a valid name", loc, key,
+            self.err(f"{name!r} is not a valid name", loc, key,
                      "use letters, digits and '_', not starting with a digit")
         if "__" in name:
             self.err(f"'{name}' contains '__', which bgc keeps for the names it generates",
@@ -923,11 +923,13 @@ def loads(text: str, file: str = "<string>") -> Model:
     elif doc.get("elements") and not doc.get("bonds"):
         ld.err("missing section 'bonds'", doc.loc, "bonds",
                "elements need the bonds between them")
+    from .emit import module_name_problem, suggest_module_name
     name = doc.get("name", Path(file).stem)
-    if not isinstance(name, str) or not _IDENT.match(name):
-        ld.err(f"model name {name!r} is not a valid module name",
-               doc.val_locs.get("name", doc.loc), "name",
-               "use letters, digits and '_' (it names generated/<name>.py)")
+    problem = module_name_problem(name)
+    if problem:     # without a name: key, the file's stem names the module
+        ld.err(f"model name {problem}", doc.val_locs.get("name", doc.loc), "name",
+               f"write name: {suggest_module_name(name)} (it names the generated module "
+               "<name>.py)")
     params = ld.parameters(section("parameters"))
     tables: list[Table] = []
     sigs = ld.signals(section("signals"), params, tables)

@@ -9,6 +9,7 @@ from pathlib import Path
 from . import causality, emit, equations, expand, load, zcp
 from .causality import CausalGraph
 from .equations import EquationSystem
+from .fileio import check_writable
 from .model import Model
 
 # what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
@@ -49,6 +50,7 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
                   method: str = "parasitic", **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
+    check_writable(out_dir, "output directory", directory=True)   # before the work
     c = build(model, method, **derive_options)
     t0 = time.perf_counter()
     path = emit.write(c.system, out_dir)

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .errors import BgcError
+from .fileio import atomic_write
 from .simulate import Result
 
 
@@ -22,19 +22,10 @@ def write_csv(result: Result, path: str | Path, states: bool = True) -> Path:
 def write_table(path: str | Path, names, columns) -> Path:
     """A CSV of named columns (arrays of one or more columns each), written atomically:
     a failure never leaves a half-written file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     header = ",".join(names)
     data = np.column_stack(columns)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        np.savetxt(tmp, data, delimiter=",", header=header, comments="", fmt="%.12g")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return atomic_write(path, lambda tmp: np.savetxt(tmp, data, delimiter=",", header=header,
+                                                     comments="", fmt="%.12g"), "CSV")
 
 
 def read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
@@ -54,16 +45,28 @@ def _panels(n: int, height: float, sharex: bool = True):
                         sharex=sharex, squeeze=False)
 
 
+def plot_format(path: str | Path, key: str | None = None) -> str:
+    """The image format of a plot path, from its suffix (none: PNG); a BgcError naming
+    the path (and ``key``, the option) if matplotlib cannot write that format."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    fmt = Path(path).suffix[1:].lower() or "png"
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if fmt not in formats:
+        raise BgcError(f"cannot write plot {str(path)!r}: unknown image format '.{fmt}'",
+                       key=key, hint="use one of " + ", ".join(f".{f}" for f in formats))
+    return fmt
+
+
 def _save(fig, path: str | Path, title: str) -> Path:
     import matplotlib.pyplot as plt
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        fmt = plot_format(path)     # the temporary file's suffix is .tmp
+        if title:
+            fig.suptitle(title)
+        fig.tight_layout()
+        return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format=fmt), "plot")
+    finally:
+        plt.close(fig)
 
 
 def plot(result: Result, path: str | Path, title: str = "", window=None,

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from . import emit, load, reduce
 from .errors import ModelError
+from .fileio import atomic_write
 from .load import YMap, _Loader, _read_yaml
 from .pipeline import METHODS, build
 
@@ -206,7 +207,7 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
             not passes.exists():
         _, system, reports = reduced_system(scene)
         path = emit.write(system, out_dir)
-        emit._atomic_write(passes, json.dumps([r.to_dict() for r in reports], indent=2))
+        atomic_write(passes, json.dumps([r.to_dict() for r in reports], indent=2))
     return emit.import_module(path), json.loads(passes.read_text())
 
 
@@ -279,6 +280,6 @@ def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generate
                "envelope_minima_hz": minima, "ok": error is None, "error": error,
                "files": files}
     path = out_dir / f"{scene.name}.json"
-    emit._atomic_write(path, json.dumps(summary, indent=2, default=str) + "\n")
+    atomic_write(path, json.dumps(summary, indent=2, default=str) + "\n")
     summary["files"]["json"] = str(path)
     return summary

@@ -99,13 +99,14 @@ def test_write_is_atomic_and_leaves_no_temp_files(tmp_path):
 
 def test_generated_module_imports_standalone(tmp_path):
     """`from generated import <model>` works in a fresh interpreter that has no bgc on
-    its path, and the module imports only numpy, numba and the standard library's math;
+    its path, and the module imports only numpy, numba and the standard library's math
+    and sys;
     its C entry points for the native integrators compile there too."""
     out = tmp_path / "generated"
     _, path = compile_model(MODELS / "dc_motor.yaml", out)
     text = path.read_text()
     imports = [ln for ln in text.splitlines() if ln.startswith(("import ", "from "))]
-    assert imports == ["import math", "import numpy as np",
+    assert imports == ["import math", "import sys", "import numpy as np",
                        "from numba import carray, cfunc, njit, types"]
     code = ("import sys; sys.modules['bgc'] = None\n"
             "from generated import dc_motor as m\n"

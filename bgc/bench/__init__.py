@@ -26,12 +26,12 @@ import datetime
 import json
 import os
 import platform
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from ..fileio import atomic_write
 from . import charts, compile_cost, precision, scenes, stability, symmetry
 from .cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
 from .peers import at_equal_error, peers
@@ -50,18 +50,13 @@ BRICARD = Scenario("bricard", "Bricard's overconstrained mechanism, 1 s",
 def write_rows(path: Path, rows: list[dict]) -> Path:
     """Rows (dicts) as a CSV, columns in first-seen order, written atomically."""
     keys = list(dict.fromkeys(k for r in rows for k in r))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
+
+    def writer(tmp):
+        with open(tmp, "w", newline="") as fh:
             w = csv.DictWriter(fh, keys)
             w.writeheader()
             w.writerows(rows)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return atomic_write(path, writer, "CSV")
 
 
 def machine() -> str:
@@ -432,9 +427,7 @@ class Run:
         fragment = {"part": part, "quick": self.quick, "date": str(datetime.date.today()),
                     "revision": self.revision, "machine": f"{machine()}; {load}",
                     "summary": self.summary, "targets": self.targets}
-        path = self.out / "parts" / f"{part}.json"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(fragment, indent=1) + "\n")
+        atomic_write(self.out / "parts" / f"{part}.json", json.dumps(fragment, indent=1) + "\n")
 
     def write_summary(self) -> tuple[Path, list[str]]:
         """summary.md from every part's fragment in ``out/parts`` (in PARTS order), each
@@ -452,8 +445,7 @@ class Run:
             at = f" at bgc {f['revision']}" if "revision" in f else ""
             body += f["summary"][:1] + [f"*Run {f['date']}{at} on {f['machine']}.*", ""] \
                 + f["summary"][1:]
-        path = self.out / "summary.md"
-        path.write_text("\n".join(head + body) + "\n")
+        path = atomic_write(self.out / "summary.md", "\n".join(head + body) + "\n")
         return path, targets
 
 

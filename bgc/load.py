@@ -12,7 +12,9 @@ import contextlib
 import hashlib
 import json
 import keyword
+import os
 import re
+import stat
 from pathlib import Path
 
 import sympy as sp
@@ -54,6 +56,17 @@ def _loc(file: str, node) -> Loc:
     return Loc(file, m.line + 1, m.column + 1)
 
 
+# A model is a few kilobytes of text (the SARIB: 11 kB); these bounds refuse what no model
+# needs before it can cost memory or time: a huge file, an alias bomb (a few lines whose
+# aliases expand to billions of values), nesting deeper than any model's.
+MAX_FILE_BYTES = 4 * 1024 * 1024
+MAX_VALUES = 50_000
+MAX_DEPTH = 64
+# the tags plain YAML resolves to; any other (!!python/..., !custom) is refused, not ignored
+_PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in
+               ("map", "seq", "str", "int", "float", "bool", "null", "timestamp")}
+
+
 def _read_yaml(text: str, file: str):
     try:
         loader = yaml.SafeLoader(text)
@@ -61,6 +74,10 @@ def _read_yaml(text: str, file: str):
             node = loader.get_single_node()
         finally:
             loader.dispose()
+    except RecursionError:
+        raise ModelError(f"YAML nested too deeply (a model needs at most {MAX_DEPTH} levels)",
+                         loc=Loc(file, 1), key=_section_at(text, 1),
+                         hint="flatten the nesting") from None
     except yaml.MarkedYAMLError as exc:
         # An unclosed [ or { is best shown where it was opened (the context mark).
         opened = exc.context_mark is not None and "flow" in (exc.context or "")
@@ -78,8 +95,27 @@ def _read_yaml(text: str, file: str):
         raise ModelError("the model file is empty", loc=Loc(file, 1),
                          hint="a model needs at least 'elements:' and 'bonds:'")
     scalar_loader = yaml.SafeLoader("")
+    count = [0]
 
-    def build(n, path=""):
+    def _top(path):
+        """The top-level key of a value path such as ``elements.r[0]``."""
+        return re.split(r"[.\[]", path)[0] or None
+
+    def build(n, path="", depth=0):
+        count[0] += 1
+        if count[0] > MAX_VALUES:
+            raise ModelError(f"the YAML expands to more than {MAX_VALUES} values (aliases "
+                             "repeated into each other, or a recursive alias)",
+                             loc=_loc(file, n), key=_top(path),
+                             hint="write the values out, or use fewer nested aliases")
+        if depth > MAX_DEPTH:
+            raise ModelError(f"YAML nested more than {MAX_DEPTH} levels deep",
+                             loc=_loc(file, n), key=_top(path),
+                             hint="flatten the nesting (a recursive alias nests forever)")
+        if n.tag not in _PLAIN_TAGS:
+            raise ModelError(f"YAML tag '{n.tag}' is not allowed", loc=_loc(file, n),
+                             key=_top(path),
+                             hint="plain YAML: mappings, lists, numbers, strings, booleans")
         if isinstance(n, yaml.MappingNode):
             out = YMap()
             out.loc, out.key_locs, out.val_locs = _loc(file, n), {}, {}
@@ -93,12 +129,12 @@ def _read_yaml(text: str, file: str):
                     raise ModelError(f"duplicate key '{k}'", loc=_loc(file, kn), key=key,
                                      hint=f"'{k}' is already defined at line "
                                           f"{out.key_locs[k].line}")
-                out[k] = build(vn, key)
+                out[k] = build(vn, key, depth + 1)
                 out.key_locs[k] = _loc(file, kn)
                 out.val_locs[k] = _loc(file, vn)
             return out
         if isinstance(n, yaml.SequenceNode):
-            out = YList(build(c, f"{path}[{i}]") for i, c in enumerate(n.value))
+            out = YList(build(c, f"{path}[{i}]", depth + 1) for i, c in enumerate(n.value))
             out.loc, out.item_locs = _loc(file, n), [_loc(file, c) for c in n.value]
             return out
         return scalar_loader.construct_object(n)
@@ -953,13 +989,35 @@ def loads(text: str, file: str = "<string>") -> Model:
                  static_loads=doc.get("parasitic", {}).get("loads") == "static")
 
 
-def load(path: str | Path) -> Model:
-    """Read and parse a model file."""
+def read_text(path: str | Path, what: str = "model") -> str:
+    """A model or scene file's text, refusing what is not one before it is read: a directory,
+    a FIFO (opening it would block), a device (it could stream forever), a file over
+    MAX_FILE_BYTES, bytes that are not UTF-8."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode):
+            kind = ("a directory" if stat.S_ISDIR(info.st_mode) else
+                    "a FIFO" if stat.S_ISFIFO(info.st_mode) else "a device or special file")
+            raise ModelError(f"{path} is {kind}, not a {what} file", loc=None,
+                             hint=f"give the path of a YAML {what} file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise ModelError(f"{path} has {info.st_size} bytes; a {what} file has at most "
+                             f"{MAX_FILE_BYTES}", loc=None,
+                             hint=f"is this the {what} file you meant?")
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+        return data.decode("utf-8")
     except FileNotFoundError:
-        raise ModelError(f"no such model file: {path}", loc=None) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ModelError(f"cannot read model file {path}: {exc}") from None
-    return loads(text, str(path))
+        raise ModelError(f"no such {what} file: {path}", loc=None) from None
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ModelError(f"not UTF-8 text: byte 0x{data[exc.start]:02x} cannot be decoded",
+                         loc=Loc(str(path), line), hint="save the file as UTF-8") from None
+    except OSError as exc:
+        raise ModelError(f"cannot read {what} file {path}: {exc.strerror or exc}") from None
+
+
+def load(path: str | Path) -> Model:
+    """Read and parse a model file."""
+    return loads(read_text(path), str(Path(path)))

@@ -27,7 +27,7 @@ from pathlib import Path
 from . import emit, load, reduce
 from .errors import ModelError
 from .fileio import atomic_write
-from .load import YMap, _Loader, _read_yaml
+from .load import YMap, _Loader, _read_yaml, read_text
 from .pipeline import METHODS, build
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
@@ -59,11 +59,7 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every mistake is one located line."""
     from .simulate import SOLVERS
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModelError(f"cannot read scene file {path}: {exc}") from None
-    doc = _read_yaml(text, str(path))
+    doc = _read_yaml(read_text(path, "scene"), str(path))
     ld = _Loader(str(path))
     if not isinstance(doc, YMap):
         raise ModelError("a scene file is a mapping", loc=load.Loc(str(path), 1),
@@ -213,11 +209,10 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
 
 def is_scene(path: str | Path) -> bool:
     """A scene file names a model (``model:``); a model file has bodies or elements."""
-    import yaml
     try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
-        return False
+        doc = _read_yaml(read_text(path), str(path))
+    except ModelError:
+        return False    # loading it as a model reports the same error
     return isinstance(doc, dict) and "model" in doc
 
 

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "aa51ebcdda0c7e58d2d7b6f45486a131"
+MODEL_HASH = "d528d3fb5ff37c12ad3fb8f7279f358b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_dc_motor_aa51ebcdda0c7e58d2d7b6f45486a131", sys.modules[__name__])
-__name__ = "_bgc_dc_motor_aa51ebcdda0c7e58d2d7b6f45486a131"
+    sys.modules.setdefault("_bgc_dc_motor_d528d3fb5ff37c12ad3fb8f7279f358b", sys.modules[__name__])
+__name__ = "_bgc_dc_motor_d528d3fb5ff37c12ad3fb8f7279f358b"
 
 STATE_NAMES = ("L_a.p", "J.p", )
 PARAM_NAMES = ("Ra", "La", "km", "b_m", "ratio", "J_load", "b_load", "T_load", "U", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "fe6c7696975c3dce537b8c65934cd223"
+MODEL_HASH = "a270d498549f20d2d79a448b3c015430"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_duffing_fe6c7696975c3dce537b8c65934cd223", sys.modules[__name__])
-__name__ = "_bgc_duffing_fe6c7696975c3dce537b8c65934cd223"
+    sys.modules.setdefault("_bgc_duffing_a270d498549f20d2d79a448b3c015430", sys.modules[__name__])
+__name__ = "_bgc_duffing_a270d498549f20d2d79a448b3c015430"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )

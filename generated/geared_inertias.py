@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "052425384a5f775f5fc098b71d1db086"
+MODEL_HASH = "2d2f610550a351634b3ea13408887d97"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_052425384a5f775f5fc098b71d1db086", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_052425384a5f775f5fc098b71d1db086"
+    sys.modules.setdefault("_bgc_geared_inertias_2d2f610550a351634b3ea13408887d97", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_2d2f610550a351634b3ea13408887d97"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )

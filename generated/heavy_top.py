@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "fca779f526bddc98b9f8d8b7ffc0fcb9"
+MODEL_HASH = "e9f74ba4ad9b279ce5ab46678545ceba"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_fca779f526bddc98b9f8d8b7ffc0fcb9", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_fca779f526bddc98b9f8d8b7ffc0fcb9"
+    sys.modules.setdefault("_bgc_heavy_top_e9f74ba4ad9b279ce5ab46678545ceba", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_e9f74ba4ad9b279ce5ab46678545ceba"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )

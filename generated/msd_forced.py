@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "b1f204a57aca941f17331c6d34c42c53"
+MODEL_HASH = "2fea2ff596c5155920c97fc9fbbcf8bc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_forced_b1f204a57aca941f17331c6d34c42c53", sys.modules[__name__])
-__name__ = "_bgc_msd_forced_b1f204a57aca941f17331c6d34c42c53"
+    sys.modules.setdefault("_bgc_msd_forced_2fea2ff596c5155920c97fc9fbbcf8bc", sys.modules[__name__])
+__name__ = "_bgc_msd_forced_2fea2ff596c5155920c97fc9fbbcf8bc"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "F0", "f_drive", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "06f28d616e06dc520bc93bbe8e3c99fd"
+MODEL_HASH = "277a90e50507c032003fc950cde86d1a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_06f28d616e06dc520bc93bbe8e3c99fd", sys.modules[__name__])
-__name__ = "_bgc_msd_free_06f28d616e06dc520bc93bbe8e3c99fd"
+    sys.modules.setdefault("_bgc_msd_free_277a90e50507c032003fc950cde86d1a", sys.modules[__name__])
+__name__ = "_bgc_msd_free_277a90e50507c032003fc950cde86d1a"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )

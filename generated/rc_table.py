@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "c250924715394e230b0f172fed1dc264"
+MODEL_HASH = "2367df342eba1e6dbadd18e3e4a2c778"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_c250924715394e230b0f172fed1dc264", sys.modules[__name__])
-__name__ = "_bgc_rc_table_c250924715394e230b0f172fed1dc264"
+    sys.modules.setdefault("_bgc_rc_table_2367df342eba1e6dbadd18e3e4a2c778", sys.modules[__name__])
+__name__ = "_bgc_rc_table_2367df342eba1e6dbadd18e3e4a2c778"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )

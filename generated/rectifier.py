@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "6d1abe6c63715e493a81a3ff9b6bc827"
+MODEL_HASH = "71a3020a53501abe7b2dd74e0ce912c6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rectifier_6d1abe6c63715e493a81a3ff9b6bc827", sys.modules[__name__])
-__name__ = "_bgc_rectifier_6d1abe6c63715e493a81a3ff9b6bc827"
+    sys.modules.setdefault("_bgc_rectifier_71a3020a53501abe7b2dd74e0ce912c6", sys.modules[__name__])
+__name__ = "_bgc_rectifier_71a3020a53501abe7b2dd74e0ce912c6"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("Vpk", "f_line", "Is", "Vt", "C", "R_load", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "46220e4c317e72b6f24b2ea8b72bee62"
+MODEL_HASH = "471f3639ee3196d0fa60416242e998b0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rlc_46220e4c317e72b6f24b2ea8b72bee62", sys.modules[__name__])
-__name__ = "_bgc_rlc_46220e4c317e72b6f24b2ea8b72bee62"
+    sys.modules.setdefault("_bgc_rlc_471f3639ee3196d0fa60416242e998b0", sys.modules[__name__])
+__name__ = "_bgc_rlc_471f3639ee3196d0fa60416242e998b0"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "e26f19649c6fcbc1593aafe682b0fea6"
+MODEL_HASH = "1e76c10e6c3bd8f8299512d24a93c81c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rr_loop_e26f19649c6fcbc1593aafe682b0fea6", sys.modules[__name__])
-__name__ = "_bgc_rr_loop_e26f19649c6fcbc1593aafe682b0fea6"
+    sys.modules.setdefault("_bgc_rr_loop_1e76c10e6c3bd8f8299512d24a93c81c", sys.modules[__name__])
+__name__ = "_bgc_rr_loop_1e76c10e6c3bd8f8299512d24a93c81c"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "700a5c53cf75bc128c735590d8ebf36b"
+MODEL_HASH = "50dad3355b2256895d774b6d5725fb45"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_servo_700a5c53cf75bc128c735590d8ebf36b", sys.modules[__name__])
-__name__ = "_bgc_servo_700a5c53cf75bc128c735590d8ebf36b"
+    sys.modules.setdefault("_bgc_servo_50dad3355b2256895d774b6d5725fb45", sys.modules[__name__])
+__name__ = "_bgc_servo_50dad3355b2256895d774b6d5725fb45"
 
 STATE_NAMES = ("L_a.p", "J_rotor.p", "angle.q", )
 PARAM_NAMES = ("Ra", "La", "km", "J_m", "ratio", "J_load", "b_load", "Kp", "Kd", "target", )

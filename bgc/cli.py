@@ -20,7 +20,7 @@ from .fileio import check_writable
 from .joints import JOINT_KINDS
 from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
-from .simulate import SOLVERS
+from .simulate import SOLVERS, Interrupted
 
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 _method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
@@ -31,7 +31,14 @@ _loops_opt = click.option("--keep-loops", is_flag=True,
                                "opening them with break variables")
 
 
+# exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it)
+EXIT_INTERRUPTED = 130
+
+
 def _user_errors(fn):
+    """BgcError: one line (and the JSON object with --json), partial results of a failed
+    run saved, exit 2. Ctrl-C: a note on stderr (the results so far saved if the
+    integration was under way), exit 130, no traceback."""
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
@@ -39,10 +46,14 @@ def _user_errors(fn):
         except BgcError as exc:
             if kwargs.get("as_json"):
                 click.echo(json.dumps(exc.to_dict()))
-            click.echo(f"error: {exc}", err=True)
+            interrupted = isinstance(exc, Interrupted)
+            click.echo(f"{'interrupted' if interrupted else 'error'}: {exc}", err=True)
             if isinstance(exc, SimulationError) and exc.result is not None:
                 _save_partial(exc.result, kwargs)
-            sys.exit(2)
+            sys.exit(EXIT_INTERRUPTED if interrupted else 2)
+        except KeyboardInterrupt:
+            click.echo("interrupted (Ctrl-C): nothing was written", err=True)
+            sys.exit(EXIT_INTERRUPTED)
     return wrapper
 
 
@@ -221,6 +232,8 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
               + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
 @click.option("--step", type=float, help="fixed-step solvers (rk4): the step [s]")
 @click.option("--points", type=int, help="number of output times (default 1001)")
+@click.option("--max-steps", type=int, help="stop the run after this many steps, keeping "
+              "its results (default: 10^6; rk4: its planned steps)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
               help="override a parameter (no recompilation)")
 @click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
@@ -248,8 +261,8 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @_loops_opt
 @_json_opt
 @_user_errors
-def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, states,
-             out_dir,
+def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, out, plot,
+             states, out_dir,
              parasitic_mode, separation, exc_kind, exc_dir, amplitude, frequency, zoom,
              method, keep_loops, as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
@@ -259,6 +272,9 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",
                        hint="valid solvers: " + ", ".join(SOLVERS))
+    if max_steps is not None and max_steps < 1:
+        raise BgcError(f"--max-steps must be >= 1, got {max_steps}", key="--max-steps",
+                       hint="a whole number of steps, e.g. --max-steps 1000000")
     check_writable(out, "--out")       # before the run: a bad path fails at once
     check_writable(plot, "--plot")
     if plot:
@@ -282,7 +298,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
         p = _parse_params(module, params, base=p)     # explicit -p values still win
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                  atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
-                 params=p, step=step)
+                 params=p, step=step, max_steps=max_steps)
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out, states))

@@ -107,6 +107,22 @@ def _jacobian(fun, x, cols) -> np.ndarray:
     return J
 
 
+def equilibrate(J: np.ndarray) -> np.ndarray:
+    """``J`` with its columns, then its rows, scaled to unit length (zero ones kept): the
+    rank of the constraint rows on the momenta, J M^-1, must not depend on the units of
+    the rows (m/s, rad/s) nor on the spread of the inverse masses and inertias, which at a
+    millimetre scale spans ten decades and hid real constraints below RANK_TOL. Scaling
+    rows does not move the left null space's support, so the redundant rows stay named.
+    (Only the rank at the start: ``RankMonitor`` watches the rows as they are, since a
+    row that vanishes at a singular pose would be scaled back up.)"""
+    if J.size == 0:
+        return J
+    c = np.linalg.norm(J, axis=0)
+    J = J / np.where(c > 0, c, 1.0)
+    r = np.linalg.norm(J, axis=1)
+    return J / np.where(r > 0, r, 1.0)[:, None]
+
+
 def _dependent(J: np.ndarray, names, rank: int) -> list[str]:
     """The constraints that take part in the left null space of ``J`` (its rows beyond
     ``rank``)."""
@@ -197,7 +213,7 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
         x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
     Kb, free, n_imposed = _measured_rows(module, K)
-    rank = n_imposed + _rank(Kb)
+    rank = n_imposed + _rank(equilibrate(Kb))
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
         worst = int(np.argmax(np.abs(r)))
         raise SimulationError(
@@ -208,7 +224,8 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     dx = x - x_user
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
-                      _dependent(Kb, free, rank - n_imposed) if rank < len(names) else [],
+                      _dependent(equilibrate(Kb), free, rank - n_imposed)
+                      if rank < len(names) else [],
                       _conditioning(Kb, rank - n_imposed))
     return x, proj
 

@@ -20,8 +20,10 @@ ST_STEPS, ST_RHS, ST_JAC, ST_LU, ST_REJECTED = 0, 1, 2, 3, 4
 N_STATS = 5
 
 # status a loop returns (PAUSED: after its ``max_steps`` steps, for Python to look at
-# the state before it goes on; UNSTABLE: rk4's step beyond the stability limit there)
-REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE = range(7)
+# the state before it goes on; UNSTABLE: rk4's step beyond the stability limit there;
+# INTERRUPTED: its ``stop`` flag was set, by Ctrl-C: ``solver.Interrupt``)
+REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE, INTERRUPTED = \
+    range(8)
 
 
 @intrinsic
@@ -59,3 +61,24 @@ def guard_min(addr, n_guards, t, x, p, tol):
         if g[i] - tol < low:
             k, low = i, g[i] - tol
     return k, low
+
+
+@intrinsic
+def load_flag(typingctx, flag):
+    """``flag[0]`` (a uint8 array) read by an atomic load, so that a loop sees it change:
+    the flag is written by the kernel (``solver.Interrupt``), and a plain load could be
+    hoisted out of the loop by the compiler."""
+    sig = types.int64(flag)
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        value = builder.load_atomic(data, ordering="monotonic", align=1)
+        return builder.zext(value, ir.IntType(64))
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def stopped(flag) -> bool:
+    """Whether the loop was asked to stop (an empty ``flag``: never)."""
+    return flag.shape[0] > 0 and load_flag(flag) != 0

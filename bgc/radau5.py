@@ -23,9 +23,9 @@ from numba import njit, types
 from numba.np.linalg import F_INT_nptype, _LAPACK
 
 from . import sparse_lu
-from .native import (GUARD, NOT_FINITE, PAUSED, REACHED, SINGULAR, ST_JAC, ST_LU,
-                     ST_REJECTED, ST_RHS, ST_STEPS, STEP_TOO_SMALL, call_entry, evaluate,
-                     guard_min)
+from .native import (GUARD, INTERRUPTED, NOT_FINITE, PAUSED, REACHED, SINGULAR, ST_JAC,
+                     ST_LU, ST_REJECTED, ST_RHS, ST_STEPS, STEP_TOO_SMALL, call_entry,
+                     evaluate, guard_min, stopped)
 
 _S6 = 6.0 ** 0.5
 _C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
@@ -180,7 +180,7 @@ def _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats):
 
 @njit(cache=True)
 def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, rtol, atol,
-           max_step, h_start, guard_tol, max_steps, stats):
+           max_step, h_start, guard_tol, max_steps, stats, stop, diag):
     """Integrate ``M dx/dt = rhs(t, x, p)`` from t0 to t1 (``M`` empty: the identity);
     ``index2`` (empty, or 1.0 where a state is an algebraic variable of index 2) scales
     those states' error tolerances by 1/h, as RADAU5 does for index-2 DAEs; ``plan``
@@ -192,7 +192,11 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
 
     Returns (states at t_eval, how many were reached, t reached, state there, status,
     guard index, the next step size); status PAUSED after ``max_steps`` accepted steps
-    (0: no limit), so that Python can watch its events and go on from there."""
+    (0: no limit), so that Python can watch its events and go on from there, INTERRUPTED
+    as soon as ``stop`` (a uint8 flag, ``solver.Interrupt``; empty: none) is set. ``diag``
+    (length n) holds each state's share of the last rejected step's error (error over its
+    scale; inf where the stages were not finite), to name the states that made a step
+    size collapse (STEP_TOO_SMALL)."""
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
     k_out = 0
@@ -204,6 +208,10 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
         return out, k_out, t, y, REACHED, -1, h_start
     f = evaluate(rhs, t, y, p, n)
     stats[ST_RHS] += 1
+    if not np.all(np.isfinite(f)):     # no step size follows from it (a NaN one never ends)
+        for i in range(n):
+            diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
+        return out, k_out, t, y, NOT_FINITE, -1, h_start
     if h_start > 0.0:
         h_abs = h_start
     else:
@@ -228,6 +236,8 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
     dW = np.empty((3, n))
     taken = 0
     while t < t1:
+        if stopped(stop):
+            return out, k_out, t, y, INTERRUPTED, -1, h_abs
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
         if h_abs > max_step:
             h_abs, h_abs_old, err_old = max_step, -1.0, -1.0
@@ -283,6 +293,11 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
                     stats[ST_RHS] += 3
                     if not np.all(np.isfinite(F)):
                         finite = False
+                        for i in range(n):
+                            ok_i = True
+                            for j in range(3):
+                                ok_i = ok_i and np.isfinite(F[j, i])
+                            diag[i] = 0.0 if ok_i else np.inf
                         break
                     FT = np.ascontiguousarray(F.T)
                     f_real = FT @ _TI[0] - _MU_REAL / h * _times_mass(M, W[0])
@@ -334,6 +349,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
                 stats[ST_RHS] += 1
                 err_norm = _rms(error / scale)
             if err_norm > 1.0:
+                diag[:] = np.abs(error / scale)
                 mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
                     h_abs / h_abs_old * (err_old / err_norm) ** 0.25
                 factor = min(1.0, mult) * err_norm ** -0.25

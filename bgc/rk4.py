@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .native import (GUARD, NOT_FINITE, PAUSED, REACHED, ST_RHS, ST_STEPS, UNSTABLE,
-                     call_entry, evaluate, guard_min)
+from .native import (GUARD, INTERRUPTED, NOT_FINITE, PAUSED, REACHED, ST_RHS, ST_STEPS,
+                     UNSTABLE, call_entry, evaluate, guard_min, stopped)
 
 @njit(cache=True)
 def amplification(z):
@@ -68,7 +68,7 @@ def _unstable(jac, t, y, p, step) -> bool:
 
 @njit(cache=True)
 def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, check_every,
-        max_steps, stats):
+        max_steps, stats, stop):
     """Steps of ``step`` from t0 to t1 (the last one shortened to land on t1); states at
     ``t_eval`` by cubic Hermite interpolation. Every ``check_every`` steps (0: never) the
     step is checked against the stability limit of the Jacobian there, since the
@@ -77,7 +77,8 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
     a guard margin reaches ``guard_tol``.
 
     Returns (states at t_eval, how many were reached, t reached, state there, status,
-    guard index, the step); status PAUSED after ``max_steps`` steps (0: no limit)."""
+    guard index, the step); status PAUSED after ``max_steps`` steps (0: no limit),
+    INTERRUPTED as soon as the ``stop`` flag is set (``solver.Interrupt``; empty: none)."""
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
     k_out = 0
@@ -89,6 +90,8 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
     stats[ST_RHS] += 1
     taken = 0
     while t < t1:
+        if stopped(stop):
+            return out, k_out, t, y, INTERRUPTED, -1, step
         h = min(step, t1 - t)
         if t1 - (t + h) < 1e-9 * step:
             h = t1 - t

@@ -22,6 +22,10 @@ from .solver import GUARD_TOLERANCE, Problem, Segment, Solver, Stats
 from .sundials import SundialsSolver
 
 
+class Interrupted(SimulationError):
+    """Ctrl-C stopped the integration; ``result`` holds the states up to there."""
+
+
 @dataclass
 class Result:
     t: np.ndarray
@@ -51,9 +55,18 @@ class ScipySolver(Solver):
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
         kw = {"jac": problem.jac} if self.method in ("BDF", "Radau", "LSODA") else {}
-        sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=rtol, atol=atol,
-                        dense_output=True, events=list(events) or None,
-                        max_step=max_step, **kw)
+        stop = StopEvent(problem, stats)
+        try:
+            sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=rtol,
+                            atol=atol, dense_output=True, events=[*events, stop],
+                            max_step=max_step, **kw)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            # scipy's LU refuses a Newton matrix with NaN in it ("array must not contain
+            # infs or NaNs"): the state left the model's domain after the last step
+            t_ok, x_ok = stop.last if stop.last[0] is not None else (t0, x0)
+            return Segment(np.empty((0, len(x0))), np.array(x_ok), t_ok, False,
+                           f"{self.name} stopped after t = {t_ok:.6g} ({exc})"
+                           + _fastest(problem, t_ok, x_ok))
         stats.steps += max(len(sol.t) - 1, 0)
         stats.rhs_calls += int(sol.nfev)
         stats.jac_calls += int(sol.njev)
@@ -63,12 +76,48 @@ class ScipySolver(Solver):
         x_end = sol.y[:, -1] if sol.y.size else np.asarray(x0)
         if sol.status < 0 or sol.sol is None:
             reached = t_eval[t_eval <= t_ok] if sol.sol is not None else t_eval[:0]
-            return Segment(_dense(sol, reached, len(x0)), x_end, t_ok, False, sol.message)
+            why = sol.message
+            if "step size is less than spacing" in why:
+                why = collapse_message(problem, t_ok, x_end, np.spacing(t_ok))
+            return Segment(_dense(sol, reached, len(x0)), x_end, t_ok, False, why)
         if sol.status == 1:       # a guard fired: keep what lies before it
             k = next(i for i, te in enumerate(sol.t_events) if len(te))
-            return Segment(_dense(sol, t_eval[t_eval <= t_ok], len(x0)), x_end, t_ok,
-                           False, "", event=k)
+            x_eval = _dense(sol, t_eval[t_eval <= t_ok], len(x0))
+            if k == len(events):  # the stop event: Ctrl-C or the step budget
+                return Segment(x_eval, x_end, t_ok, False, stop.why(t_ok, x_end),
+                               interrupted=stop.interrupted)
+            return Segment(x_eval, x_end, t_ok, False, "", event=k)
         return Segment(_dense(sol, t_eval, len(x0)), x_end, t_ok, True)
+
+
+class StopEvent:
+    """A terminal event that stops a Python-driven integrator (scipy, SUNDIALS) at the end
+    of the step where Ctrl-C was pressed (``Problem.interrupt``) or the run's step budget
+    ran out: +1 until then, t - t_stop after (a root exactly at the step's end t_stop).
+    solve_ivp calls it once at the start and once per accepted step; it also keeps the
+    last accepted point (``last``)."""
+
+    terminal, direction = True, 0
+
+    def __init__(self, problem, stats, budget: bool = True):
+        self.problem, self.t_stop, self.calls = problem, None, 0
+        self.left = problem.budget(stats) if budget else None
+        self.interrupted = False
+        self.last = (None, None)
+
+    def __call__(self, t, x):
+        if self.t_stop is None:
+            self.calls += 1
+            self.last = (float(t), np.array(x))
+            self.interrupted = self.problem.interrupt.requested
+            if self.interrupted or (self.left is not None and self.calls - 1 >= self.left):
+                self.t_stop = t
+            else:
+                return 1.0
+        return t - self.t_stop
+
+    def why(self, t, x) -> str:
+        return "interrupted" if self.interrupted else budget_message(self.problem, t, x)
 
 
 def _dense(sol, ts, n: int) -> np.ndarray:
@@ -78,6 +127,43 @@ def _dense(sol, ts, n: int) -> np.ndarray:
     if not len(ts):
         return np.empty((0, n))
     return sol.sol(ts).T.reshape(len(ts), n)
+
+
+# the step budget of a run (``--max-steps``) unless told: a million accepted steps. The
+# shipped models need at most ~1e5 (the SARIB over a 60 s chirp, its step limited by the
+# excitation), native Radau takes ~1e5 steps a second on small models, so a run that
+# needs more is one whose step has collapsed or whose input outruns it; the run stops
+# there, keeping what it computed. rk4's fixed steps are planned: its budget is its plan.
+MAX_STEPS = 10 ** 6
+
+
+def budget_message(problem, t, x) -> str:
+    """Why a run stopped at its step budget, with the states moving fastest there."""
+    return (f"the step budget ({problem.max_steps} steps) is spent at t = {t:.6g}"
+            + _fastest(problem, t, x))
+
+
+def _fastest(problem, t, x, most: int = 3) -> str:
+    """The states changing fastest at (t, x) (|dx/dt| over |x| + 1), as a clause."""
+    f = np.asarray(problem.rhs(t, np.asarray(x, dtype=np.float64)))
+    if not np.all(np.isfinite(f)):
+        return f"; d/dt of {_names(problem.module.STATE_NAMES, ~np.isfinite(f))} not finite"
+    rate = np.abs(f) / (np.abs(x) + 1.0)
+    top = [problem.module.STATE_NAMES[i] for i in np.argsort(-rate)[:most] if rate[i] > 0]
+    return f"; fastest states there: {', '.join(top)}" if top else ""
+
+
+def collapse_message(problem, t, x, h, diag=None, most: int = 3) -> str:
+    """Why a step size collapsed at (t, x): the states with the largest share of the last
+    rejected step's error (``diag``, native Radau), else the fastest ones."""
+    text = f"the step size collapsed to {h:.3g} s at t = {t:.6g}"
+    if diag is not None and np.any(diag != 0):
+        names = problem.module.STATE_NAMES
+        if not np.all(np.isfinite(diag)):
+            return text + f"; d/dt of {_names(names, ~np.isfinite(diag))} not finite there"
+        top = [names[i] for i in np.argsort(-diag)[:most] if diag[i] > 0]
+        return text + f"; largest error in {', '.join(top)}"
+    return text + _fastest(problem, t, x)
 
 
 # an event's location: the grid its scan of the dense output takes, and at most so many
@@ -143,13 +229,16 @@ class NativeSolver(Solver):
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
             res = rk4.rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                          float(problem.step), GUARD_TOLERANCE, check, max_steps, counts)
+                          float(problem.step), GUARD_TOLERANCE, check, max_steps, counts,
+                          problem.interrupt.flag)
         else:
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
+            self.diag = np.zeros(len(x0))
             res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
                                 mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
-                                GUARD_TOLERANCE, max_steps, counts)
+                                GUARD_TOLERANCE, max_steps, counts, problem.interrupt.flag,
+                                self.diag)
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
@@ -165,16 +254,26 @@ class NativeSolver(Solver):
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
         watched = [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)]
-        pause = self.STEPS_PER_CHECK if watched else 0
         t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
         t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
         xs, done = [], 0
         before = [e(t0, x) for _, e in watched]
         while True:
             sel = t_eval[done:]
+            # pause for the watched events, and where the run's step budget ends
+            left = problem.budget(stats)
+            if left == 0:
+                x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
+                return Segment(x_eval, x, float(t), False, budget_message(problem, t, x))
+            pause = self.STEPS_PER_CHECK if watched else 0
+            if left is not None:
+                pause = min(pause, left) if pause else left
             out, k, t_r, x_r, status, guard, h = self._run(
                 problem, t, t1, x, sel, rtol, atol, max_step, stats, h, pause)
             xs.append(out[:k])
+            if status == native.INTERRUPTED:
+                return Segment(np.vstack(xs), np.array(x_r), float(t_r), False, "interrupted",
+                               interrupted=True)
             if status in (native.REACHED, native.PAUSED):
                 after = [e(t_r, x_r) for _, e in watched]
                 hit = [j for j in range(len(watched))
@@ -196,14 +295,18 @@ class NativeSolver(Solver):
                                self._unstable(problem, float(t_r), x_r))
             why = {native.NOT_FINITE: self._diverged(problem, float(t_r), x_r),
                    native.SINGULAR: "the Newton matrix is singular at every step size",
-                   }.get(status, "step size too small")
+                   }.get(status) or collapse_message(problem, float(t_r), x_r, h,
+                                                     getattr(self, "diag", None))
             return Segment(x_eval, np.array(x_r), float(t_r), False, why)
 
     def _diverged(self, problem, t, x) -> str:
         """Why the state became non-finite after (t, x), the last finite state: for rk4,
         the step against the stability limit there (the spectrum moves with the state)."""
         if self.loop != "rk4":
-            return "the state became non-finite"
+            diag = getattr(self, "diag", None)
+            bad = (_names(problem.module.STATE_NAMES, ~np.isfinite(diag))
+                   if diag is not None and not np.all(np.isfinite(diag)) else "")
+            return "the state became non-finite" + (f" (d/dt of {bad} first)" if bad else "")
         J = problem.jac(t, x)
         if not np.all(np.isfinite(J)):     # a singular configuration: no spectrum there
             return (f"the state became non-finite after t = {t:.6g}, where the Jacobian "
@@ -367,6 +470,91 @@ def _segments(t_start: float, t_end: float, breakpoints) -> list[tuple[float, fl
     return list(zip(cuts[:-1], cuts[1:]))
 
 
+def _names(names, mask, most: int = 6) -> str:
+    """The names where ``mask`` holds, at most ``most`` of them and how many more."""
+    picked = [n for n, m in zip(names, mask) if m]
+    more = len(picked) - most
+    return ", ".join(picked[:most]) + (f" and {more} more" if more > 0 else "")
+
+
+def _refuse_non_finite(module, x, p, t):
+    """Refuse an initial state or parameter values that are not finite, naming them."""
+    for what, names, v in (("parameter", module.PARAM_NAMES, p),
+                           ("initial state", module.STATE_NAMES, x)):
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise SimulationError(f"{what}(s) {_names(names, bad)} not finite at t = {t:g} "
+                                  f"({', '.join(map(str, v[bad][:3]))}); nothing was run",
+                                  hint=f"give every {what} a finite value")
+
+
+def _block_rank(module, x, p, t) -> int:
+    """The largest rank below the one set in ``p`` that the generated constraint block
+    solve keeps at (t, x) with a finite rhs (0: none)."""
+    i = list(module.PARAM_NAMES).index(consistent.RANK_PARAM)
+    q = np.array(p, dtype=np.float64)
+    for k in range(int(p[i]) - 1, 0, -1):
+        q[i] = k
+        if np.all(np.isfinite(module.rhs(t, x, q))):
+            return k
+    return 0
+
+
+def _culprit_params(module, x, p, t) -> list[str]:
+    """The parameters whose own value makes the rhs non-finite at (t, x): moving one alone
+    (by a thousandth, or to 1e-3 from 0) makes it finite."""
+    if len(p) > 2000:               # one rhs call each: keep the check cheap
+        return []
+    found = []
+    for i, name in enumerate(module.PARAM_NAMES):
+        if name == consistent.RANK_PARAM:
+            continue
+        q = np.array(p, dtype=np.float64)
+        q[i] = q[i] * 1.001 + 1e-3
+        if np.all(np.isfinite(module.rhs(t, x, q))):
+            found.append(name)
+    return found
+
+
+def check_start(module, x, p, t, projection=None):
+    """Evaluate rhs and Jacobian at the start of a run (after the projection) and refuse
+    non-finite values with one line naming the states whose derivative is not finite and
+    what is responsible, where it can be told: the constraint block (method lagrange: the
+    rank the projection found is more than its generated solve keeps), or the parameters
+    whose value alone makes it so. Integrating from there fails at once or, worse, never
+    ends (a NaN step size)."""
+    f = np.asarray(module.rhs(t, x, p))
+    J = np.asarray(module.jac(t, x, p))
+    bad = ~np.isfinite(f)
+    where = "d/dt of"
+    if not bad.any():
+        bad = ~np.all(np.isfinite(J), axis=1)
+        where = "the Jacobian row of"
+        if not bad.any():
+            return
+    states = f"{where} {_names(module.STATE_NAMES, bad)} not finite at the initial state " \
+             f"(t = {t:g})"
+    if projection is not None and consistent.RANK_PARAM in module.PARAM_NAMES:
+        kept = _block_rank(module, x, p, t)
+        if kept:
+            n, rank = projection.n_constraints, projection.rank
+            red = (f", {n - rank} redundant among {', '.join(projection.redundant)}"
+                   if rank < n else "")
+            raise SimulationError(
+                f"{states}: the constraint block is singular there; its {n} constraints "
+                f"have rank {rank}{red}, but the generated block solve keeps only {kept} "
+                f"singular values of J M^-1 J^T above 1e-10 of the largest (the inverse "
+                f"masses, inertias and lever arms spread over too many decades); nothing "
+                f"was run", hint="state the model in units that bring masses and inertias "
+                                 "closer (mm and g for a millimetre mechanism), remove the "
+                                 "redundant joint directions, or use --method parasitic")
+    culprits = _culprit_params(module, x, p, t)
+    cause = (f": parameter(s) {', '.join(culprits[:6])} make it so (a division by zero, "
+             "a log or sqrt out of its domain?)" if culprits else "")
+    raise SimulationError(f"{states}{cause}; nothing was run",
+                          hint="check the model's parameters, initial state and laws there")
+
+
 def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
     """The start of a run as ``simulate`` makes it: joint loads of a model that starts at
     rest (at t = 0), the state projected onto the constraints and the rank of the
@@ -395,7 +583,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
              solver: str = "bdf", points: int = 1001, params=None, x0=None,
              step: float | None = None, mass=None, check_stability: bool = True,
              t_start: float = 0.0, check_drift: bool = True,
-             redundancy: bool = True, check_index: bool = True) -> Result:
+             redundancy: bool = True, check_index: bool = True,
+             max_steps: int | None = None) -> Result:
     """Integrate a generated module from ``t_start`` to ``t_end``; outputs on a uniform
     grid. A model that starts at rest (``STATIC_LOADS``) has its joint loads set from its
     state at t = 0; a run that continues another from ``t_start`` > 0 takes that run's
@@ -412,8 +601,13 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     independent, as a tool without redundancy handling does: a model with redundant
     constraints is then refused (its block is singular, its joint forces undetermined).
 
-    A failing run raises SimulationError whose ``result`` holds everything computed up to
-    the failure.
+    ``max_steps``: the run's step budget (None: ``MAX_STEPS`` for the adaptive solvers;
+    rk4's plan of fixed steps), a run that needs more stops there.
+
+    The start (after the projection) is checked: a rhs or Jacobian that is not finite
+    there is refused (``check_start``). A failing run raises SimulationError whose
+    ``result`` holds everything computed up to the failure; Ctrl-C during the integration
+    stops it within a step and raises ``Interrupted`` (a SimulationError) likewise.
     """
     if solver not in SOLVERS:
         raise SimulationError(f"unknown solver '{solver}'",
@@ -447,18 +641,30 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             raise SimulationError(f"solver {solver} cannot integrate a system with a mass "
                                   "matrix", hint="solvers that can: " + ", ".join(
                                       s.name for s in SOLVERS.values() if s.takes_mass))
+    if max_steps is not None and not (isinstance(max_steps, (int, np.integer))
+                                      and max_steps >= 1):
+        raise SimulationError(f"the step budget must be a whole number >= 1, got "
+                              f"{max_steps!r}", key="--max-steps")
+    planned = (int(np.ceil((t_end - t_start) / step * (1 - 1e-9)))
+               if method.name == "rk4" and step and step > 0 else None)
+    if planned is not None and max_steps is not None and planned > max_steps:
+        raise SimulationError(f"rk4 with --step {step:g} takes {planned} steps from t = "
+                              f"{t_start:g} to {t_end:g}, more than the step budget "
+                              f"{max_steps}; nothing was run", key="--max-steps",
+                              hint=f"take --max-steps {planned} or a larger --step")
+    budget = max_steps or (planned + 1 if planned is not None else MAX_STEPS)
     p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
     x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
     stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
 
     t0 = time.perf_counter()
+    _refuse_non_finite(module, x, p, t_start)
     x, p, projection = prepare(module, x, p, t_start, redundancy)
-    module.rhs(t_start, x, p)
-    module.jac(t_start, x, p)
+    check_start(module, x, p, t_start, projection)
     if algebraic:
         _check_index2(module, x, p, algebraic, t_start)
     problem = Problem(module, p, step, mass, check_stability,
-                      index2 if check_index else None)
+                      index2 if check_index else None, budget)
     method.check(problem, t_start, x)
     method.warm_up(problem, x)
     module.outputs(t_start, x, p)
@@ -486,7 +692,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     wall = time.perf_counter()
     segs = _segments(t_start, t_end, module.BREAKPOINTS)
     done = -np.inf                # last output time recorded
-    with _one_blas_thread():
+    interrupted = False
+    with _one_blas_thread(), problem.interrupt:
         while segs:
             a, b = segs.pop(0)
             last = not segs
@@ -513,6 +720,11 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                                       f"t = {seg.t_reached:.6g}")
                 hint = _GUARD_HINT
                 break
+            if seg.interrupted:
+                ok, interrupted = False, True
+                message = f"Ctrl-C at t = {seg.t_reached:.6g}: the run stopped there"
+                hint = None
+                break
             if not seg.ok:
                 ok, message = False, f"{method.name} failed at t = {seg.t_reached:.6g}: {seg.message}"
                 break
@@ -527,7 +739,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         # a state gone non-finite has no drift: NaN there, the run's message says why
         stats.drift_position = float(np.nanmax(g_t, initial=0.0))
         stats.drift_velocity = float(np.nanmax(v_t, initial=0.0))
-        singular = None if ok or hint == _SINGULAR_HINT or monitor is None else _singular(
+        singular = None if ok or interrupted or hint == _SINGULAR_HINT or monitor is None \
+            else _singular(
             monitor, seg, consistent.LOST_RANK)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
@@ -538,6 +751,8 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection, p)
+    if interrupted:
+        raise Interrupted(message, result=result, hint=hint)
     if not ok:
         raise SimulationError(message, result=result, hint=hint)
     if not np.all(np.isfinite(x_all)):

@@ -88,7 +88,12 @@ class SundialsSolver(Solver):
 
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
-        solver = self._solver(problem, rtol, atol, list(events), max_step)
+        from .simulate import StopEvent
+        # Ctrl-C stops it at the end of a step (SUNDIALS calls events between steps too,
+        # so they do not count its steps: the step budget is its own MAX_STEPS)
+        stop = StopEvent(problem, stats, budget=False)
+        watched = [*events, stop]
+        solver = self._solver(problem, rtol, atol, watched, max_step)
         # output times: the segment's start and end always, so the end state is exact
         tspan = np.unique(np.concatenate([[t0], np.asarray(t_eval, dtype=float), [t1]]))
         x0 = np.array(x0, dtype=np.float64)
@@ -112,7 +117,7 @@ class SundialsSolver(Solver):
         event = None
         if sol.i_events is not None and len(sol.i_events):
             fired = np.flatnonzero(np.asarray(sol.i_events)[-1])
-            if len(fired) and getattr(events[int(fired[0])], "terminal", True):
+            if len(fired) and getattr(watched[int(fired[0])], "terminal", True):
                 event = int(fired[0])
         t_ok = float(t[-1]) if len(t) else t0
         if event is not None:           # the event point is appended to the outputs
@@ -120,6 +125,9 @@ class SundialsSolver(Solver):
         keep = np.isin(t, t_eval)
         x_eval = y[keep]
         x_end = np.asarray(sol.y_events[-1] if event is not None else y[-1], dtype=float)
+        if event == len(events):        # the stop event: Ctrl-C
+            return Segment(x_eval, x_end.reshape(-1), float(sol.t_events[-1]), False,
+                           "interrupted", interrupted=True)
         if event is not None:
             return Segment(x_eval, x_end.reshape(-1), float(sol.t_events[-1]), False,
                            event=event)

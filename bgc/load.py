@@ -12,7 +12,9 @@ import contextlib
 import hashlib
 import json
 import keyword
+import os
 import re
+import stat
 from pathlib import Path
 
 import sympy as sp
@@ -54,9 +56,109 @@ def _loc(file: str, node) -> Loc:
     return Loc(file, m.line + 1, m.column + 1)
 
 
+# Limits on what a model or scene file may be, so a hostile file is refused at once
+# instead of exhausting time, memory or the Python stack (issue 23). The largest shipped
+# model is ~11 kB and ~2 000 YAML nodes, nested 6 deep; PyYAML composes ~0.5 MB/s.
+MAX_FILE_BYTES = 1 << 20      # 1 MiB: ~100x the largest model, composed in ~2 s
+MAX_NODES = 100_000           # YAML nodes after alias expansion (billion laughs)
+MAX_DEPTH = 64                # nesting of lists and mappings (Python recursion)
+# scalar tags bgc understands (plain YAML scalars); anything else (!!python/..., !!binary,
+# !!set, a local !tag, the merge key '<<') is refused
+_SCALAR_TAGS = {f"tag:yaml.org,2002:{t}": t for t in
+                ("null", "bool", "int", "float", "str", "timestamp")}
+_SEQ_TAG, _MAP_TAG = "tag:yaml.org,2002:seq", "tag:yaml.org,2002:map"
+
+
+def read_source(path: str | Path, what: str = "model file", key: str = "model") -> str:
+    """The text of a model or scene file, refused with a one-line error naming the path
+    if it is missing, not a regular file (a directory, a FIFO that would block, a device
+    such as /dev/zero that never ends), larger than ``MAX_FILE_BYTES`` or not UTF-8.
+    The type and size are checked with ``os.stat`` before the file is opened."""
+    file = str(path)
+    loc = Loc(file, 1)
+
+    def refuse(msg, hint=f"give the path of a YAML {what} (UTF-8 text)", where=loc):
+        raise ModelError(msg, loc=where, key=key, hint=hint)
+    try:
+        st = os.stat(file)
+    except FileNotFoundError:
+        refuse(f"no such {what}")
+    except OSError as exc:
+        refuse(f"cannot read {what}: {exc.strerror or type(exc).__name__}")
+    if stat.S_ISDIR(st.st_mode):
+        refuse(f"is a directory, not a {what}")
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device"
+                if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+        refuse(f"is {kind}, not a regular {what}")
+    if st.st_size > MAX_FILE_BYTES:
+        refuse(f"{what} of {st.st_size} bytes is larger than bgc's limit of "
+               f"{MAX_FILE_BYTES} bytes", hint=f"a {what} is at most "
+               f"{MAX_FILE_BYTES >> 20} MiB; the largest shipped model is ~11 kB")
+    try:
+        with open(file, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        refuse(f"cannot read {what}: {exc.strerror or type(exc).__name__}")
+    if len(data) > MAX_FILE_BYTES:      # grew since the stat
+        refuse(f"{what} is larger than bgc's limit of {MAX_FILE_BYTES} bytes")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        refuse(f"byte 0x{data[exc.start]:02x} is not UTF-8 text", where=Loc(file, line, col),
+               hint="save the file as UTF-8")
+
+
+class _Composer(yaml.SafeLoader):
+    """PyYAML's safe composer, bounded: nesting deeper than ``MAX_DEPTH``, an alias to a
+    node that contains it (a recursive alias) and more than ``MAX_NODES`` nodes once
+    aliases are expanded are refused while composing, before any Python value is built
+    (aliases make the node graph a DAG whose expanded size each node records)."""
+
+    def __init__(self, text: str, file: str):
+        super().__init__(text)
+        self.text, self.file, self.depth, self.open_anchors = text, file, 0, set()
+
+    def refuse(self, msg, mark, hint):
+        raise ModelError(msg, loc=Loc(self.file, mark.line + 1, mark.column + 1),
+                         key=_section_at(self.text, mark.line + 1) or "model", hint=hint)
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            if event.anchor in self.open_anchors:
+                self.refuse(f"alias *{event.anchor} refers to a node that contains it",
+                            event.start_mark, "a recursive alias has no finite value; "
+                            "write the value out")
+            return super().compose_node(parent, index)
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            self.refuse(f"lists and mappings nested more than {MAX_DEPTH} deep",
+                        event.start_mark, "a model nests a few levels; flatten the data")
+        if event.anchor is not None:
+            self.open_anchors.add(event.anchor)
+        node = super().compose_node(parent, index)
+        self.open_anchors.discard(event.anchor)
+        self.depth -= 1
+        if isinstance(node, yaml.SequenceNode):
+            node.size = 1 + sum(c.size for c in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            node.size = 1 + sum(k.size + v.size for k, v in node.value)
+        else:
+            node.size = 1
+        if node.size > MAX_NODES:
+            self.refuse(f"more than {MAX_NODES} YAML values once aliases are expanded",
+                        event.start_mark, "aliases (*name) that repeat large values "
+                        "multiply; write the model without them")
+        return node
+
+
 def _read_yaml(text: str, file: str):
     try:
-        loader = yaml.SafeLoader(text)
+        loader = _Composer(text, file)
         try:
             node = loader.get_single_node()
         finally:
@@ -79,8 +181,32 @@ def _read_yaml(text: str, file: str):
                          hint="a model needs at least 'elements:' and 'bonds:'")
     scalar_loader = yaml.SafeLoader("")
 
+    def refuse_tag(n, what):
+        loc = _loc(file, n)
+        raise ModelError(f"{what} is not supported", loc=loc,
+                         key=_section_at(text, loc.line) or "model",
+                         hint="bgc reads plain YAML: numbers, strings, true/false, lists, "
+                              "mappings and aliases (*name); no tags (!!...) or merge "
+                              "keys (<<)")
+
+    def scalar(n):
+        if n.tag not in _SCALAR_TAGS:
+            refuse_tag(n, "merge key '<<'" if n.tag == "tag:yaml.org,2002:merge"
+                       else f"YAML tag {n.tag!r}")
+        try:
+            return scalar_loader.construct_object(n)
+        except (ValueError, OverflowError, yaml.YAMLError) as exc:
+            loc = _loc(file, n)
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ModelError(f"cannot read {_SCALAR_TAGS[n.tag]} {n.value[:40]!r}: "
+                             f"{reason[:120]}", loc=loc,
+                             key=_section_at(text, loc.line) or "model",
+                             hint="write a plain number such as 1.5 or 2e-3") from None
+
     def build(n, path=""):
         if isinstance(n, yaml.MappingNode):
+            if n.tag != _MAP_TAG:
+                refuse_tag(n, f"YAML tag {n.tag!r}")
             out = YMap()
             out.loc, out.key_locs, out.val_locs = _loc(file, n), {}, {}
             for kn, vn in n.value:
@@ -98,10 +224,12 @@ def _read_yaml(text: str, file: str):
                 out.val_locs[k] = _loc(file, vn)
             return out
         if isinstance(n, yaml.SequenceNode):
+            if n.tag != _SEQ_TAG:
+                refuse_tag(n, f"YAML tag {n.tag!r}")
             out = YList(build(c, f"{path}[{i}]") for i, c in enumerate(n.value))
             out.loc, out.item_locs = _loc(file, n), [_loc(file, c) for c in n.value]
             return out
-        return scalar_loader.construct_object(n)
+        return scalar(n)
 
     return build(node)
 
@@ -955,11 +1083,4 @@ def loads(text: str, file: str = "<string>") -> Model:
 
 def load(path: str | Path) -> Model:
     """Read and parse a model file."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ModelError(f"no such model file: {path}", loc=None) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ModelError(f"cannot read model file {path}: {exc}") from None
-    return loads(text, str(path))
+    return loads(read_source(path), str(path))

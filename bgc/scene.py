@@ -59,11 +59,7 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every mistake is one located line."""
     from .simulate import SOLVERS
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModelError(f"cannot read scene file {path}: {exc}") from None
-    doc = _read_yaml(text, str(path))
+    doc = _read_yaml(load.read_source(path, "scene file", "scene"), str(path))
     ld = _Loader(str(path))
     if not isinstance(doc, YMap):
         raise ModelError("a scene file is a mapping", loc=load.Loc(str(path), 1),
@@ -213,10 +209,9 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
 
 def is_scene(path: str | Path) -> bool:
     """A scene file names a model (``model:``); a model file has bodies or elements."""
-    import yaml
-    try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+    try:        # the same bounded reader as the loader: a hostile file is refused there
+        doc = _read_yaml(load.read_source(path), str(path))
+    except ModelError:
         return False
     return isinstance(doc, dict) and "model" in doc
 

@@ -15,6 +15,7 @@ import keyword
 import os
 import re
 import stat
+import sys
 from pathlib import Path
 
 import sympy as sp
@@ -262,8 +263,14 @@ class _Loader:
         self.point_r0: dict[tuple[str, str], sp.Matrix] = {}   # (body, point) -> exact R0
         self.joints: dict[str, Joint] = {}
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
+        self.pvals: dict = {}               # parameter symbol -> value, once parsed
 
     # helpers -------------------------------------------------------------
+    def parse(self, text, **kw) -> sp.Expr:
+        """``bexpr.parse`` with the parameters' values known, so a part that is constant
+        given them (``1/Z`` with ``Z: 0``, ``log(Z)``) is judged at its line."""
+        return bexpr.parse(text, values=self.pvals, **kw)
+
     def err(self, msg, loc, key, hint=None):
         raise ModelError(msg, loc=loc, key=key, hint=hint)
 
@@ -294,20 +301,30 @@ class _Loader:
                      f"already used by {other} at line {oloc.line}")
         self.names[name] = (what, loc)
 
-    def number(self, v, loc, key, *, positive=False, nonneg=False) -> float:
+    def number(self, v, loc, key, *, positive=False, nonneg=False, divisor=False) -> float:
+        """A finite plain number; ``positive``/``nonneg`` bound it; ``divisor``: it divides
+        in the equations, so it must be a normal float (a subnormal one such as 5e-324 has
+        a reciprocal beyond the float range)."""
         if isinstance(v, str):      # YAML 1.1 reads 1e-3 and 4.0e6 as strings
             with contextlib.suppress(ValueError):
                 v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.err(f"expected a number, got {_kind_of(v)} {v!r}", loc, key,
                      "write a plain number such as 1.5 or 2e-3")
+        try:
+            bexpr.number(v)
+        except ValueError as exc:
+            self.err(f"expected a finite number: {exc}", loc, key,
+                     "write a finite number such as 1.5 or 2e-3")
         v = float(v)
-        if v != v or v in (float("inf"), float("-inf")):
-            self.err(f"expected a finite number, got {v}", loc, key)
         if positive and v <= 0:
-            self.err(f"must be > 0, got {v}", loc, key)
+            self.err(f"must be > 0, got {v}", loc, key, "write a positive number")
         if nonneg and v < 0:
-            self.err(f"must be >= 0, got {v}", loc, key)
+            self.err(f"must be >= 0, got {v}", loc, key, "write a number >= 0")
+        if divisor and 0 < abs(v) < sys.float_info.min:
+            self.err(f"{v:g} is a subnormal float: its reciprocal is beyond the float range",
+                     loc, key, f"a divisor is at least {sys.float_info.min:.4g} in size; "
+                               "rescale the units if the value is really this small")
         return v
 
     # sections ------------------------------------------------------------
@@ -328,6 +345,7 @@ class _Loader:
             if unit == "deg":
                 value = value * 3.141592653589793 / 180.0
             out[name] = Parameter(name, value, loc, unit)
+            self.pvals[symbols.param(name)] = value
         return out
 
     def expr_names(self, params, signals=()) -> dict[str, sp.Expr]:
@@ -367,9 +385,9 @@ class _Loader:
             elif k in bsignals.NUMBER_FIELDS:
                 vals[k] = self.number(v.get(k, optional.get(k)), kloc, kk)
             elif k == "expr":
-                vals[k] = bexpr.parse(v[k], loc=kloc, key=kk, names={**names, "t": symbols.t})
+                vals[k] = self.parse(v[k], loc=kloc, key=kk, names={**names, "t": symbols.t})
             else:
-                vals[k] = bexpr.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
+                vals[k] = self.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
                                       names=names)
         if kind == "table":
             tt, yy = vals["t"], vals["values"]
@@ -500,7 +518,7 @@ class _Loader:
                     el.field_locs[k] = kloc
                     self.check_matrix(el, k, el.fields[k], pvals, kloc, kk)
                     continue
-                e = bexpr.parse(v[k], loc=kloc, key=kk, names=names,
+                e = self.parse(v[k], loc=kloc, key=kk, names=names,
                                 resolve_ref=resolver(kk, kloc) if spec.modulated else None)
                 if law_is_local:
                     own = {symbols.LOCAL[n] for n in spec.local if not (
@@ -521,7 +539,7 @@ class _Loader:
                     if isinstance(v[k], YList):
                         el.initial = self.matrix(v[k], kloc, f"{key}.{k}", pnames, None)
                     else:
-                        el.initial = bexpr.parse(v[k], loc=kloc, key=f"{key}.{k}",
+                        el.initial = self.parse(v[k], loc=kloc, key=f"{key}.{k}",
                                                  names=pnames)
                 else:
                     el.initial = sp.S.Zero
@@ -531,7 +549,7 @@ class _Loader:
     def matrix(self, v: YList, loc, key, names, resolve) -> sp.Matrix:
         """[a, b, c] -> a column vector; [[..], [..], [..]] -> a matrix (rows)."""
         def parse(x, xloc, xkey):
-            return bexpr.parse(x, loc=xloc, key=xkey, names=names, resolve_ref=resolve)
+            return self.parse(x, loc=xloc, key=xkey, names=names, resolve_ref=resolve)
         if v and all(isinstance(r, YList) for r in v):
             if len({len(r) for r in v}) != 1:
                 self.err("the rows of a matrix differ in length", loc, key)
@@ -570,6 +588,11 @@ class _Loader:
             return
         val = float(e.xreplace(pvals))
         bad = {"positive": val <= 0, "nonneg": val < 0, "nonzero": val == 0}[rule]
+        if rule != "nonneg" and 0 < abs(val) < sys.float_info.min:
+            self.err(f"{key} of {el.kind} '{el.name}' is {val:g}, a subnormal float: its "
+                     "reciprocal is beyond the float range", loc, kk,
+                     f"it divides in the equations: at least {sys.float_info.min:.4g} "
+                     "in size; rescale the units if it is really this small")
         if bad:
             what = {"positive": "must be > 0", "nonneg": "must be >= 0",
                     "nonzero": "must not be 0"}[rule]
@@ -641,7 +664,7 @@ class _Loader:
         for name, v in sec.items():
             key, loc = f"outputs.{name}", sec.val_locs[name]
             self.declare(name, f"output '{name}'", sec.key_locs[name], key)
-            e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
+            e = self.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
                             loc=loc: self.resolve_ref(tg, at, kinds, bond_names, key, loc))
             out.append(Output(name, e, loc))
         return out
@@ -674,7 +697,7 @@ class _Loader:
 
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
-            mass = self.number(v["mass"], *at("mass"), nonneg=True)
+            mass = self.number(v["mass"], *at("mass"), nonneg=True, divisor=True)
             com = exact.vector(self.vector(v["com"], *at("com")))
             if "inertia" not in v and mass > 0:
                 self.err("missing 'inertia'", v.loc, key,
@@ -702,9 +725,11 @@ class _Loader:
                 if np.abs(moments).max() > 0:
                     self.err("a body of negligible mass (mass: 0) has no inertia either",
                              loc, kk, "leave 'inertia' out or give the body its mass")
-            elif moments.min() <= 0:
+            elif moments.min() < sys.float_info.min:     # zero, negative or subnormal
                 self.err(f"the inertia tensor must be positive definite (principal moments "
-                         f"{', '.join(f'{m:g}' for m in moments)})", loc, kk)
+                         f"{', '.join(f'{m:g}' for m in moments)})", loc, kk,
+                         "principal moments > 0 (and not subnormal: they divide in the "
+                         "equations)")
             a, b, c = sorted(moments)
             if mass > 0 and a + b < c * (1 - 1e-9):
                 self.err(f"principal moments {a:g}, {b:g}, {c:g} break the triangle "
@@ -811,7 +836,7 @@ class _Loader:
                 self.err(f"a joint actuator cannot read '{target}.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return self.resolve_ref(target, attr, {}, set(), key, loc)
-        return bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
+        return self.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
 
     def joints_section(self, sec: YMap, params, signals, base: Parasitic) -> dict[str, Joint]:
         names = self.expr_names(params, signals)

@@ -27,7 +27,7 @@ from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
 from .joints import JOINT_KINDS, NEEDS_AXIS2
-from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Excitation, Functional, Joint,
+from .model import (FIXED_FRAME, KINDS, MAX_POINTS, Body, Bond, Element, Excitation, Functional, Joint,
                     Model, Output, Parameter, Parasitic, Settings, Signal, Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -326,6 +326,14 @@ class _Loader:
                      loc, key, f"a divisor is at least {sys.float_info.min:.4g} in size; "
                                "rescale the units if the value is really this small")
         return v
+
+    def points(self, v, loc, key) -> int:
+        """A number of output times: an integer from 2 to ``MAX_POINTS``."""
+        n = self.number(v, loc, key)
+        if n != int(n) or not 2 <= n <= MAX_POINTS:
+            self.err(f"expected a whole number of output times from 2 to {MAX_POINTS}, got "
+                     f"{n:g}", loc, key, "e.g. 1001; each point is a row of the result")
+        return int(n)
 
     # sections ------------------------------------------------------------
     def parameters(self, sec: YMap) -> dict[str, Parameter]:
@@ -1022,7 +1030,7 @@ class _Loader:
                 if k == "solver":
                     kw[k] = str(sec[k])
                 elif k == "points":
-                    kw[k] = int(self.number(sec[k], loc, kk, positive=True))
+                    kw[k] = self.points(sec[k], loc, kk)
                 else:
                     kw[k] = self.number(sec[k], loc, kk, positive=True)
         return Settings(**kw)

@@ -119,8 +119,7 @@ def load_scene(path: str | Path) -> Scene:
     t_end = ld.number(tm["end"], at(tm, "end"), "time.end", positive=True)
     if t_end <= t_start:
         ld.err(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
-    points = int(ld.number(tm.get("points", 1001), at(tm, "points"), "time.points",
-                           positive=True))
+    points = ld.points(tm.get("points", 1001), at(tm, "points"), "time.points")
     tol = (ld.mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
            if doc.get("tolerances") is not None else None)
     tols = {}

@@ -276,8 +276,25 @@ class _Loader:
 
     def mapping(self, v, loc, key, what="a mapping") -> YMap:
         if not isinstance(v, YMap):
-            self.err(f"expected {what}, got {_kind_of(v)}", loc, key)
+            self.err(f"expected {what}, got {_kind_of(v)}", loc, key,
+                     "write a mapping such as {name: value}" if what == "a mapping"
+                     else f"write {what}")
         return v
+
+    def string(self, v, loc, key, what="a name") -> str:
+        """A plain string (a name, a path), not a number, list or mapping."""
+        if not isinstance(v, str):
+            self.err(f"expected {what}, got {_kind_of(v)}{_short(v)}", loc, key,
+                     f"write {what} as plain text")
+        return v
+
+    def strings(self, v, loc, key, what="names") -> list[str]:
+        """A list of plain strings."""
+        if not isinstance(v, YList):
+            self.err(f"expected a list of {what}, got {_kind_of(v)}{_short(v)}", loc, key,
+                     "write [a, b, ...]")
+        return [self.string(x, v.item_locs[i], f"{key}[{i}]", "a " + what.rstrip("s"))
+                for i, x in enumerate(v)]
 
     def check_keys(self, m: YMap, allowed, key):
         for k in m:
@@ -1046,6 +1063,15 @@ def joint_params(j: Joint, params: dict):
     for role, val in vals.items():
         pname = f"{j.name}__{role}"
         params[pname] = Parameter(pname, float(val), j.loc)
+
+
+def _short(v) -> str:
+    """A value shown after its kind in a message: ' ' and its repr, cut to 40
+    characters ('' for nothing)."""
+    if v is None:
+        return ""
+    text = " " + repr(_plain(v))
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _kind_of(v) -> str:

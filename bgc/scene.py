@@ -73,16 +73,20 @@ def load_scene(path: str | Path) -> Scene:
     def at(m, key):
         return m.val_locs.get(key, m.loc)
 
-    model_path = (path.parent / str(doc["model"])).resolve()
-    if not model_path.exists():
-        ld.err(f"no such model file: {model_path}", at(doc, "model"), "model",
+    model_path = (path.parent / ld.string(doc["model"], at(doc, "model"), "model",
+                                          "a model file path")).resolve()
+    if not model_path.is_file():
+        ld.err(f"no such model file: {model_path}" if not model_path.exists() else
+               f"{model_path} is not a regular file", at(doc, "model"), "model",
                "a path relative to the scene file")
     model = load.load(model_path)
-    method = doc.get("method", "parasitic")
+    method = ld.string(doc.get("method", "parasitic"), at(doc, "method"), "method",
+                       "a method name")
     if method not in METHODS:
         ld.err(f"unknown method '{method}'", at(doc, "method"), "method",
                "valid methods: " + ", ".join(METHODS))
-    solver = doc.get("solver", "native")
+    solver = ld.string(doc.get("solver", "native"), at(doc, "solver"), "solver",
+                       "a solver name")
     if solver not in SOLVERS:
         ld.err(f"unknown solver '{solver}'", at(doc, "solver"), "solver",
                "valid solvers: " + ", ".join(SOLVERS))
@@ -91,17 +95,22 @@ def load_scene(path: str | Path) -> Scene:
     if not isinstance(outputs, list) or not outputs:
         ld.err("expected a non-empty list of outputs", at(doc, "outputs"), "outputs",
                "model outputs: " + ", ".join(names))
+    ld.strings(outputs, at(doc, "outputs"), "outputs", "output names")
     for k, o in enumerate(outputs):
         if o not in names:
             ld.err(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
                    f"outputs[{k}]", "model outputs: " + ", ".join(names))
+    if doc.get("description") is not None:
+        ld.string(doc["description"], at(doc, "description"), "description", "a text")
     exc = None
     if doc.get("excitation") is not None:
         e = ld.mapping(doc["excitation"], at(doc, "excitation"), "excitation")
         ld.check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
         if model.excitation is None:
-            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation")
-        exc = {"kind": e.get("kind"), "direction": e.get("direction")}
+            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation",
+                   "drop 'excitation:' or name a model that has one")
+        exc = {k: ld.string(e.get(k), at(e, k), f"excitation.{k}", f"a {k} name")
+               for k in ("kind", "direction")}
         for k in ("amplitude", "frequency"):
             if k in e:
                 exc[k] = ld.number(e[k], at(e, k), f"excitation.{k}", positive=True)
@@ -134,8 +143,10 @@ def load_scene(path: str | Path) -> Scene:
     if doc.get("params") is not None:
         pm = ld.mapping(doc["params"], at(doc, "params"), "params")
         for k, v in pm.items():
+            ld.string(k, pm.key_locs[k], "params", "a parameter name")
             params[k] = ld.number(v, at(pm, k), f"params.{k}")
-    expose = list(doc.get("expose") or [])
+    expose = (ld.strings(doc["expose"], at(doc, "expose"), "expose", "parameter names")
+              if doc.get("expose") is not None else [])
     merge = doc.get("merge_relays")
     if merge is not None and not isinstance(merge, bool):
         ld.err(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),

@@ -258,6 +258,23 @@ def _parse_params(module, items, base=None):
     return p
 
 
+def _check_plan(module, p, t_end, step, key):
+    """Refuse a run whose step plan alone exceeds ``signals.MAX_PLANNED_STEPS``: a fixed
+    ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
+    ``key``: the option the error names when the signal is too fast."""
+    from .signals import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
+    if step is not None and t_end / step > MAX_PLANNED_STEPS:
+        raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
+                       f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
+                       key="--step", hint="a larger --step or a shorter --t-end")
+    h = float(module.max_step(p)) if hasattr(module, "max_step") else math.inf
+    why = too_fast(1.0 / (STEPS_PER_PERIOD * h), t_end) if h > 0 else "no step is possible"
+    if why:
+        raise BgcError(f"the fastest input signal: {why}",
+                       key=key,
+                       hint="a lower frequency (--frequency, -p) or a shorter --t-end")
+
+
 def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | None:
     """Set the parameters of the excitation the options choose (in place); what was chosen."""
     if kind is None and direction is None:
@@ -349,6 +366,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
             raise BgcError(f"--separation must be > 1, got {separation}", key="--separation")
         p, choice = parasitic.auto(module, m, module.initial_state(p), p, separation)
         p = _parse_params(module, params, base=p)     # explicit -p values still win
+    _check_plan(module, p, t_end or st.t_end, step,
+                "--frequency" if frequency is not None else "--param" if params else "--t-end")
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                  atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
                  params=p, step=step)

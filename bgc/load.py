@@ -27,8 +27,9 @@ from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
 from .joints import JOINT_KINDS, NEEDS_AXIS2
-from .model import (FIXED_FRAME, KINDS, MAX_POINTS, Body, Bond, Element, Excitation, Functional, Joint,
-                    Model, Output, Parameter, Parasitic, Settings, Signal, Table)
+from .model import (FIXED_FRAME, KINDS, MAX_POINTS, Body, Bond, Element, Excitation,
+                    Functional, Joint, Model, Output, Parameter, Parasitic, Settings, Signal,
+                    Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
@@ -264,6 +265,7 @@ class _Loader:
         self.joints: dict[str, Joint] = {}
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
         self.pvals: dict = {}               # parameter symbol -> value, once parsed
+        self.t_end = Settings.t_end         # the model's, once its settings are read
 
     # helpers -------------------------------------------------------------
     def parse(self, text, **kw) -> sp.Expr:
@@ -423,9 +425,17 @@ class _Loader:
                 self.err("'t' must be strictly increasing", v.val_locs["t"], f"{key}.t")
             tables.append(Table(len(tables), tuple(tt), tuple(yy)))
         for k in ("frequency", "f_start", "f_end"):
-            if k in vals and sp.sympify(vals[k]).is_number and float(vals[k]) <= 0:
-                self.err(f"must be > 0, got {float(vals[k])}", v.val_locs.get(k, v.loc),
-                         f"{key}.{k}")
+            f = (sp.sympify(sp.sympify(vals[k]).xreplace(self.pvals)) if k in vals
+                 else None)
+            if f is None or not f.is_number:
+                continue
+            if float(f) <= 0:
+                self.err(f"must be > 0, got {float(f)}", v.val_locs.get(k, v.loc),
+                         f"{key}.{k}", "a frequency in Hz, > 0")
+            why = bsignals.too_fast(float(f), self.t_end)
+            if why:
+                self.err(why, v.val_locs.get(k, v.loc), f"{key}.{k}",
+                         "lower the frequency or shorten simulation.t_end")
         if kind == "chirp":
             t1, t2, t3 = vals["t1"], vals["t2"], vals["t3"]
             if not 0 < t1 <= t2 < t3:
@@ -1117,6 +1127,8 @@ def loads(text: str, file: str = "<string>") -> Model:
         ld.err(f"model name {problem}", doc.val_locs.get("name", doc.loc), "name",
                f"write name: {suggest_module_name(name)} (it names the generated module "
                "<name>.py)")
+    settings = ld.settings(section("simulation"))
+    ld.t_end = settings.t_end
     params = ld.parameters(section("parameters"))
     tables: list[Table] = []
     sigs = ld.signals(section("signals"), params, tables)
@@ -1130,7 +1142,6 @@ def loads(text: str, file: str = "<string>") -> Model:
     bonds = ld.bonds(section("bonds", YList), headers)
     elements = ld.element_fields(headers, params, sigs, bonds)
     outputs = ld.outputs(section("outputs"), params, sigs, elements, bonds)
-    settings = ld.settings(section("simulation"))
     digest = hashlib.sha256(json.dumps(_plain(doc), sort_keys=True, default=str)
                             .encode()).hexdigest()
     return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,

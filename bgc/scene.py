@@ -24,7 +24,7 @@ import json
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from . import emit, load, reduce
+from . import emit, load, reduce, signals
 from .errors import ModelError
 from .fileio import atomic_write
 from .load import YMap, _Loader, _read_yaml
@@ -129,6 +129,11 @@ def load_scene(path: str | Path) -> Scene:
     if t_end <= t_start:
         ld.err(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
     points = ld.points(tm.get("points", 1001), at(tm, "points"), "time.points")
+    if exc is not None and "frequency" in exc:
+        why = signals.too_fast(exc["frequency"], t_end - t_start)
+        if why:
+            ld.err(why, at(doc["excitation"], "frequency"), "excitation.frequency",
+                   "lower the frequency or shorten time.end")
     tol = (ld.mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
            if doc.get("tolerances") is not None else None)
     tols = {}

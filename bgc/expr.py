@@ -145,7 +145,9 @@ def parse(text, *, loc: Loc, key: str, names: dict[str, sp.Expr],
             raise ModelError(f"expected a finite number: {exc}", loc=loc, key=key,
                              hint="write a finite number such as 1.5 or 2e-3") from None
     if not isinstance(text, str):
-        raise ModelError(f"expected a number or an expression string, got {type(text).__name__}",
+        kind = ("a mapping" if isinstance(text, dict) else "a list" if isinstance(text, list)
+                else "nothing" if text is None else type(text).__name__)
+        raise ModelError(f"expected a number or an expression string, got {kind}",
                          loc=loc, key=key, hint="write e.g. 2.5 or \"k*q + k3*q**3\"")
     hint_split = "split it: give its parts names as parameters, signals or outputs"
     if len(text) > MAX_CHARS:

@@ -299,10 +299,13 @@ class _Loader:
                 for i, x in enumerate(v)]
 
     def check_keys(self, m: YMap, allowed, key):
+        """Every key of ``m`` is one of ``allowed``; a description or unit is text."""
         for k in m:
             if k not in allowed:
                 self.err(f"unknown key '{k}'", m.key_locs[k], f"{key}.{k}",
                          "valid keys: " + ", ".join(allowed))
+            if k in ("description", "unit") and m[k] is not None:
+                self.string(m[k], m.val_locs[k], f"{key}.{k}", f"a {k} text")
 
     def declare(self, name, what, loc, key):
         if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
@@ -395,7 +398,7 @@ class _Loader:
         """One signal and its parsed fields."""
         v = self.mapping(v, loc, key, "a mapping with 'type'")
         kind = v.get("type")
-        if kind not in bsignals.SIGNAL_TYPES:
+        if not isinstance(kind, str) or kind not in bsignals.SIGNAL_TYPES:
             self.err(f"unknown signal type {kind!r}", v.val_locs.get("type", v.loc),
                      f"{key}.type", "valid types: " + ", ".join(bsignals.SIGNAL_TYPES))
         required, optional = bsignals.SIGNAL_TYPES[kind]
@@ -460,7 +463,7 @@ class _Loader:
             v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
             kind = v.get("type")
             kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
-            if kind not in KINDS or not KINDS[kind].user:
+            if not isinstance(kind, str) or kind not in KINDS or not KINDS[kind].user:
                 self.err(f"unknown element type {v.get('type')!r}",
                          v.val_locs.get("type", v.loc), f"{key}.type",
                          "valid types: " + ", ".join(k for k in KINDS if KINDS[k].user))
@@ -498,7 +501,7 @@ class _Loader:
                              f"{self.names[name][0]}", loc, key, "give this bond a name:")
                 self.names[name] = (f"bond '{name}'", loc)
             for end in (src, dst):
-                if end not in elements:
+                if not isinstance(end, str) or end not in elements:
                     self.err(f"bond connects unknown element {end!r}", loc, key,
                              "declared elements: " + ", ".join(elements))
             if src == dst:
@@ -889,7 +892,7 @@ class _Loader:
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
             kind = v["type"]
-            if kind not in JOINT_KINDS:
+            if not isinstance(kind, str) or kind not in JOINT_KINDS:
                 self.err(f"unknown joint type {kind!r}", *at("type"),
                          "valid types: " + ", ".join(JOINT_KINDS))
             spec = JOINT_KINDS[kind]
@@ -899,7 +902,7 @@ class _Loader:
                          f"write [body1, body2]; '{FIXED_FRAME}' is the fixed frame")
             bodies = []
             for i, b in enumerate(pair):
-                if b != FIXED_FRAME and b not in self.bodies:
+                if b != FIXED_FRAME and (not isinstance(b, str) or b not in self.bodies):
                     self.err(f"unknown body {b!r}", pair.item_locs[i], f"{key}.between[{i}]",
                              "declared bodies: " + ", ".join(list(self.bodies) + [FIXED_FRAME]))
                 bodies.append(None if b == FIXED_FRAME else b)
@@ -1022,7 +1025,7 @@ class _Loader:
                 if k not in m:
                     self.err(f"missing '{k}'", m.loc, key,
                              "joint: the joint it acts in, amplitude: force [N] or torque [N m]")
-            j = self.joints.get(m["joint"])
+            j = self.joints.get(m["joint"]) if isinstance(m["joint"], str) else None
             if j is None:
                 self.err(f"unknown joint {m['joint']!r}", m.val_locs["joint"], f"{key}.joint",
                          "declared joints: " + ", ".join(self.joints))
@@ -1055,7 +1058,7 @@ class _Loader:
             if k in sec:
                 loc, kk = sec.val_locs[k], f"simulation.{k}"
                 if k == "solver":
-                    kw[k] = str(sec[k])
+                    kw[k] = self.string(sec[k], loc, kk, "a solver name")
                 elif k == "points":
                     kw[k] = self.points(sec[k], loc, kk)
                 else:

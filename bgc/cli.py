@@ -243,18 +243,28 @@ def compile_cmd(model, out_dir, method, keep_loops, as_json):
                    f"assignments, {info['bytes']} bytes) in {total:.3f} s")
 
 
+def _param_items(ctx, param, items) -> tuple[tuple[str, float], ...]:
+    """``-p NAME=VALUE`` options as (name, value) pairs, checked before any work: VALUE
+    a finite number (the names are checked against the module's)."""
+    out = []
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name:
+            raise click.BadParameter(f"{item!r} is not NAME=VALUE", ctx, param)
+        try:
+            out.append((name, NUMBER.convert(value, param, ctx)))
+        except click.BadParameter as exc:
+            raise click.BadParameter(f"{name}={value}: {exc.message}", ctx, param) from None
+    return tuple(out)
+
+
 def _parse_params(module, items, base=None):
     p = np.array(module.PARAMS if base is None else base, dtype=np.float64)
-    for item in items:
-        name, _, value = item.partition("=")
+    for name, value in items:
         if name not in module.PARAM_NAMES:
             raise BgcError(f"unknown parameter '{name}'", key="--param",
                            hint="parameters: " + ", ".join(module.PARAM_NAMES))
-        try:
-            p[module.PARAM_NAMES.index(name)] = NUMBER.convert(value, None, None)
-        except click.BadParameter as exc:
-            raise BgcError(f"{name}={value}: {exc.message}", key="--param",
-                           hint="write NAME=NUMBER with a finite number") from None
+        p[module.PARAM_NAMES.index(name)] = value
     return p
 
 
@@ -308,7 +318,7 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @click.option("--step", type=POSITIVE, help="fixed-step solvers (rk4): the step [s]")
 @click.option("--points", type=POINTS, help="number of output times (default 1001)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="override a parameter (no recompilation)")
+              callback=_param_items, help="override a parameter (no recompilation)")
 @click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
 @click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
 @click.option("--states/--no-states", default=True, show_default=True,
@@ -433,7 +443,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, params, out, plot, 
 @click.option("--out", type=click.Path(dir_okay=False),
               help="CSV of f, |H|, phase [deg] on a 0.01 Hz grid")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="override a parameter (no recompilation)")
+              callback=_param_items, help="override a parameter (no recompilation)")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
 @_method_opt
@@ -479,7 +489,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
 @click.option("-o", "--gen-dir", default="generated/scenes", show_default=True,
               help="where the scene's reduced module goes")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="set a parameter the scene exposes (repeatable)")
+              callback=_param_items, help="set a parameter the scene exposes (repeatable)")
 @_json_opt
 @_user_errors
 def run_cmd(scene, out_dir, gen_dir, params, as_json):
@@ -488,17 +498,12 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
     from . import scene as bscene
     sc = bscene.load_scene(scene)
     values = {}
-    for item in params:
-        name, _, value = item.partition("=")
+    for name, value in params:
         if name not in sc.expose:
             raise BgcError(f"parameter '{name}' is not exposed by scene {sc.name}",
                            key="-p", hint="exposed: " + (", ".join(sc.expose) or "none; "
                                                        "add it to the scene's expose list"))
-        try:
-            values[name] = NUMBER.convert(value, None, None)
-        except click.BadParameter as exc:
-            raise BgcError(f"{item}: {exc.message}", key="-p",
-                           hint="write NAME=NUMBER with a finite number") from None
+        values[name] = value
     check_writable(out_dir, "--out", directory=True)
     check_writable(gen_dir, "-o", directory=True)
     summary = bscene.run_scene(sc, out_dir, gen_dir, values)

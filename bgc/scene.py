@@ -100,8 +100,6 @@ def load_scene(path: str | Path) -> Scene:
         if o not in names:
             ld.err(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
                    f"outputs[{k}]", "model outputs: " + ", ".join(names))
-    if doc.get("description") is not None:
-        ld.string(doc["description"], at(doc, "description"), "description", "a text")
     exc = None
     if doc.get("excitation") is not None:
         e = ld.mapping(doc["excitation"], at(doc, "excitation"), "excitation")

@@ -98,8 +98,11 @@ def read_source(path: str | Path, what: str = "model file", key: str = "model") 
         refuse(f"{what} of {st.st_size} bytes is larger than bgc's limit of "
                f"{MAX_FILE_BYTES} bytes", hint=f"a {what} is at most "
                f"{MAX_FILE_BYTES >> 20} MiB; the largest shipped model is ~11 kB")
-    try:
-        with open(file, "rb") as fh:
+    try:        # non-blocking, and checked again: it may have been swapped since the stat
+        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                refuse(f"is not a regular {what}")
             data = fh.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         refuse(f"cannot read {what}: {exc.strerror or type(exc).__name__}")

@@ -179,8 +179,16 @@ def _read_yaml(text: str, file: str):
         raise ModelError(f"malformed YAML: {what}", loc=loc, key=_section_at(text, loc.line),
                          hint="check indentation, colons, brackets and quotes near this "
                               "line") from None
+    except yaml.reader.ReaderError as exc:      # a control character: where it stands
+        line = text.count("\n", 0, exc.position) + 1
+        col = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
+        raise ModelError(f"character {exc.character:#06x} is not allowed in YAML",
+                         loc=Loc(file, line, col), key=_section_at(text, line) or "model",
+                         hint="remove the control character; write it escaped in a "
+                              "double-quoted string (\\x07) if it is meant") from None
     except yaml.YAMLError as exc:
-        raise ModelError(f"malformed YAML: {exc}", loc=Loc(file, 1)) from None
+        raise ModelError(f"malformed YAML: {str(exc).splitlines()[0]}", loc=Loc(file, 1),
+                         key="model", hint="check the file is YAML text") from None
     if node is None:
         raise ModelError("the model file is empty", loc=Loc(file, 1),
                          hint="a model needs at least 'elements:' and 'bonds:'")

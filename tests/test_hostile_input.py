@@ -175,6 +175,13 @@ def test_yaml_non_utf8_bytes_are_located(tmp_path):
     assert m["col"] == "17"
 
 
+@pytest.mark.parametrize("char", [b"\x00", b"\x07"], ids=["NUL", "BEL"])
+def test_yaml_control_character_is_located(tmp_path, char):
+    data = BASE.encode().replace(b"name: m", b"name: m\ndescription: a" + char + b"b")
+    m = refused(tmp_path, "check", write(tmp_path, data), line=2, contains=("character",))
+    assert m["col"] == "15"
+
+
 @pytest.mark.parametrize("kind, command", [
     ("fifo", "check"), ("fifo", "compile"), ("directory", "check"), ("/dev/zero", "check"),
     ("/dev/null", "compile")])

@@ -18,7 +18,6 @@ from __future__ import annotations
 import os
 import re
 import stat
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -306,8 +305,8 @@ SINE = "signals:\n  sig: {type: sine, amplitude: 1.0, frequency: 1.0}\n"
     (model(s="  s: {type: Se, effort: sig}") + SINE.replace("frequency: 1.0",
                                                             "frequency: .inf"),
      "signals.sig.frequency"),
-    ("name: m\nbodies:\n  b: {mass: 1, com: [0, 0, 0], inertia: [1, 1, 1], "
-     "velocity: [.nan, 0, 0]}\n", "bodies.b.velocity[0]"),
+    (("name: m\nbodies:\n  b: {mass: 1, com: [0, 0, 0], inertia: [1, 1, 1], "
+      "velocity: [.nan, 0, 0]}\n"), "bodies.b.velocity[0]"),
 ], ids=["param-nan", "initial-nan", "effort-inf", "t_end-inf", "rtol-nan",
         "amplitude-nan", "frequency-inf", "body-velocity-nan"])
 def test_number_nan_and_inf_in_the_model(tmp_path, text, key):

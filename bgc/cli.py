@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from . import __version__, emit
 from .errors import BgcError, SimulationError
 from .fileio import check_writable
 from .joints import JOINT_KINDS
+from .model import MAX_POINTS
 from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
 from .simulate import SOLVERS, Interrupted
@@ -33,6 +35,72 @@ _loops_opt = click.option("--keep-loops", is_flag=True,
 
 # exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it)
 EXIT_INTERRUPTED = 130
+
+
+class _Number(click.ParamType):
+    """A finite number (click's float takes nan and inf); ``positive``: > 0."""
+
+    name = "number"
+
+    def __init__(self, positive: bool = False):
+        self.positive = positive
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float) and math.isfinite(value):
+            v = value
+        else:
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a number", param, ctx)
+            if not math.isfinite(v):
+                self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.positive and not v > 0:
+            self.fail(f"must be > 0, got {value}", param, ctx)
+        return v
+
+
+NUMBER, POSITIVE = _Number(), _Number(positive=True)
+POINTS = click.IntRange(2, MAX_POINTS)
+
+
+class _Bgc(click.Group):
+    """The bgc group; click's own usage errors (a bad option value, an unknown option, a
+    missing argument) are shown as one line in bgc's form, ``error: OPTION: message
+    (hint: ...)``, with exit status 2, instead of click's usage block."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.UsageError as exc:
+            click.echo(_usage_line(exc), err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:         # Ctrl-C outside a command's own handling
+            click.echo("interrupted (Ctrl-C)", err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _usage_line(exc: click.UsageError) -> str:
+    """One line for a click usage error, naming the option or argument."""
+    param = getattr(exc, "param", None)
+    if isinstance(param, click.Option):
+        key = max(param.opts, key=len)
+    elif isinstance(param, click.Argument):
+        key = param.human_readable_name
+    elif getattr(exc, "option_name", None):
+        key = exc.option_name
+    else:
+        key = "COMMAND"
+    where = exc.ctx.command_path if exc.ctx is not None else "bgc"
+    text = f"error: {key}: {exc.message or exc.format_message()} (hint: see '{where} --help')"
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
 
 def _user_errors(fn):
@@ -66,14 +134,14 @@ def _save_partial(result, kwargs):
                    err=True)
 
 
-@click.group()
+@click.group(cls=_Bgc)
 @click.version_option(__version__, prog_name="bgc")
 def main():
     """bgc: compile bond-graph models to fast simulation code."""
 
 
 @main.command()
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @_method_opt
 @_loops_opt
 @_json_opt
@@ -164,7 +232,7 @@ def check(model, method, keep_loops, as_json):
 
 
 @main.command("compile")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="directory for <model>.py")
 @_method_opt
@@ -186,18 +254,46 @@ def compile_cmd(model, out_dir, method, keep_loops, as_json):
                    f"assignments, {info['bytes']} bytes) in {total:.3f} s")
 
 
+def _param_items(ctx, param, items) -> tuple[tuple[str, float], ...]:
+    """``-p NAME=VALUE`` options as (name, value) pairs, checked before any work: VALUE
+    a finite number (the names are checked against the module's)."""
+    out = []
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name:
+            raise click.BadParameter(f"{item!r} is not NAME=VALUE", ctx, param)
+        try:
+            out.append((name, NUMBER.convert(value, param, ctx)))
+        except click.BadParameter as exc:
+            raise click.BadParameter(f"{name}={value}: {exc.message}", ctx, param) from None
+    return tuple(out)
+
+
 def _parse_params(module, items, base=None):
     p = np.array(module.PARAMS if base is None else base, dtype=np.float64)
-    for item in items:
-        name, _, value = item.partition("=")
+    for name, value in items:
         if name not in module.PARAM_NAMES:
             raise BgcError(f"unknown parameter '{name}'", key="--param",
                            hint="parameters: " + ", ".join(module.PARAM_NAMES))
-        try:
-            p[module.PARAM_NAMES.index(name)] = float(value)
-        except ValueError:
-            raise BgcError(f"'{value}' is not a number", key=f"--param {name}") from None
+        p[module.PARAM_NAMES.index(name)] = value
     return p
+
+
+def _check_plan(module, p, t_end, step, key):
+    """Refuse a run whose step plan alone exceeds ``signals.MAX_PLANNED_STEPS``: a fixed
+    ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
+    ``key``: the option the error names when the signal is too fast."""
+    from .signals import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
+    if step is not None and t_end / step > MAX_PLANNED_STEPS:
+        raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
+                       f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
+                       key="--step", hint="a larger --step or a shorter --t-end")
+    h = float(module.max_step(p)) if hasattr(module, "max_step") else math.inf
+    why = too_fast(1.0 / (STEPS_PER_PERIOD * h), t_end) if h > 0 else "no step is possible"
+    if why:
+        raise BgcError(f"the fastest input signal: {why}",
+                       key=key,
+                       hint="a lower frequency (--frequency, -p) or a shorter --t-end")
 
 
 def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | None:
@@ -224,18 +320,18 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 
 
 @main.command()
-@click.argument("model", type=click.Path(dir_okay=False))
-@click.option("--t-end", type=float, help="end time [s] (default: the model's)")
-@click.option("--rtol", type=float, help="relative tolerance (default: the model's or 1e-6)")
-@click.option("--atol", type=float, help="absolute tolerance (default: the model's or 1e-8)")
+@click.argument("model", type=click.Path())
+@click.option("--t-end", type=POSITIVE, help="end time [s] (default: the model's)")
+@click.option("--rtol", type=POSITIVE, help="relative tolerance (default: the model's or 1e-6)")
+@click.option("--atol", type=POSITIVE, help="absolute tolerance (default: the model's or 1e-8)")
 @click.option("--solver", help="integrator (default: the model's, else bdf): "
               + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
-@click.option("--step", type=float, help="fixed-step solvers (rk4): the step [s]")
-@click.option("--points", type=int, help="number of output times (default 1001)")
-@click.option("--max-steps", type=int, help="stop the run after this many steps, keeping "
-              "its results (default: 10^6; rk4: its planned steps)")
+@click.option("--step", type=POSITIVE, help="fixed-step solvers (rk4): the step [s]")
+@click.option("--points", type=POINTS, help="number of output times (default 1001)")
+@click.option("--max-steps", type=click.IntRange(1), help="stop the run after this many "
+              "steps, keeping its results (default: 10^6; rk4: its planned steps)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="override a parameter (no recompilation)")
+              callback=_param_items, help="override a parameter (no recompilation)")
 @click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
 @click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
 @click.option("--states/--no-states", default=True, show_default=True,
@@ -246,15 +342,15 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
               default="given", show_default=True,
               help="method parasitic: the joints' stiffness and damping as the model gives "
                    "them, or chosen from the eigenfrequencies")
-@click.option("--separation", type=float, default=SEPARATION, show_default=True,
+@click.option("--separation", type=NUMBER, default=SEPARATION, show_default=True,
               help="--parasitic auto: parasitic frequencies over the highest functional one")
 @click.option("--excitation", "exc_kind", metavar="KIND",
               help="the model's excitation g(t) (e.g. constant, sine, chirp)")
 @click.option("--direction", "exc_dir", metavar="NAME",
               help="where the excitation acts (e.g. pumping, roll, pitch)")
-@click.option("--amplitude", type=float, help="excitation amplitude (default: the model's)")
-@click.option("--frequency", type=float, help="sine excitation frequency [Hz]")
-@click.option("--zoom", type=(float, float), metavar="T0 T1",
+@click.option("--amplitude", type=NUMBER, help="excitation amplitude (default: the model's)")
+@click.option("--frequency", type=POSITIVE, help="sine excitation frequency [Hz]")
+@click.option("--zoom", type=(NUMBER, NUMBER), metavar="T0 T1",
               help="with --plot: also <plot>_zoom.png over [T0, T1], outputs that differ "
                    "only by a number (F_A1_z, F_A2_z) in one panel")
 @_method_opt
@@ -296,6 +392,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
             raise BgcError(f"--separation must be > 1, got {separation}", key="--separation")
         p, choice = parasitic.auto(module, m, module.initial_state(p), p, separation)
         p = _parse_params(module, params, base=p)     # explicit -p values still win
+    _check_plan(module, p, t_end or st.t_end, step,
+                "--frequency" if frequency is not None else "--param" if params else "--t-end")
     result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                  atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
                  params=p, step=step, max_steps=max_steps)
@@ -352,16 +450,16 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
 
 
 @main.command()
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.option("--input", "direction", required=True, metavar="NAME",
               help="the excitation direction driven (e.g. pumping, roll, pitch)")
 @click.option("--output", "output", required=True, metavar="NAME", help="the model output")
-@click.option("--f-min", type=float, default=5.0, show_default=True, help="band start [Hz]")
-@click.option("--f-max", type=float, default=25.0, show_default=True, help="band end [Hz]")
+@click.option("--f-min", type=POSITIVE, default=5.0, show_default=True, help="band start [Hz]")
+@click.option("--f-max", type=POSITIVE, default=25.0, show_default=True, help="band end [Hz]")
 @click.option("--out", type=click.Path(dir_okay=False),
               help="CSV of f, |H|, phase [deg] on a 0.01 Hz grid")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="override a parameter (no recompilation)")
+              callback=_param_items, help="override a parameter (no recompilation)")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
 @_method_opt
@@ -401,13 +499,13 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
 
 
 @main.command("run")
-@click.argument("scene", type=click.Path(dir_okay=False))
+@click.argument("scene", type=click.Path())
 @click.option("--out", "out_dir", default="results/scenes", show_default=True,
               type=click.Path(file_okay=False), help="where the CSV, PNG and JSON go")
 @click.option("-o", "--gen-dir", default="generated/scenes", show_default=True,
               help="where the scene's reduced module goes")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="set a parameter the scene exposes (repeatable)")
+              callback=_param_items, help="set a parameter the scene exposes (repeatable)")
 @_json_opt
 @_user_errors
 def run_cmd(scene, out_dir, gen_dir, params, as_json):
@@ -416,16 +514,12 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
     from . import scene as bscene
     sc = bscene.load_scene(scene)
     values = {}
-    for item in params:
-        name, _, value = item.partition("=")
+    for name, value in params:
         if name not in sc.expose:
             raise BgcError(f"parameter '{name}' is not exposed by scene {sc.name}",
                            key="-p", hint="exposed: " + (", ".join(sc.expose) or "none; "
                                                        "add it to the scene's expose list"))
-        try:
-            values[name] = float(value)
-        except ValueError:
-            raise BgcError(f"-p {item}: expected NAME=NUMBER", key="-p") from None
+        values[name] = value
     check_writable(out_dir, "--out", directory=True)
     check_writable(gen_dir, "-o", directory=True)
     summary = bscene.run_scene(sc, out_dir, gen_dir, values)
@@ -460,7 +554,7 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
               help="every part at small scale (a slider-crank, a pendulum): minutes")
 @click.option("--repeats", type=int, default=3, show_default=True,
               help="peers: runs per integrator (the median is reported)")
-@click.option("--budget", type=float, default=60.0, show_default=True,
+@click.option("--budget", type=POSITIVE, default=60.0, show_default=True,
               help="work-precision: a series stops after a run longer than this [s]")
 @click.option("--build", type=click.Path(file_okay=False),
               help="where the benchmarks' generated modules go (default: bench/build, "

@@ -15,6 +15,7 @@ import keyword
 import os
 import re
 import stat
+import sys
 from pathlib import Path
 
 import sympy as sp
@@ -26,8 +27,9 @@ from . import signals as bsignals
 from . import symbols
 from .errors import Loc, ModelError
 from .joints import JOINT_KINDS, NEEDS_AXIS2
-from .model import (FIXED_FRAME, KINDS, Body, Bond, Element, Excitation, Functional, Joint,
-                    Model, Output, Parameter, Parasitic, Settings, Signal, Table)
+from .model import (FIXED_FRAME, KINDS, MAX_POINTS, Body, Bond, Element, Excitation,
+                    Functional, Joint, Model, Output, Parameter, Parasitic, Settings, Signal,
+                    Table)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\Z")
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
@@ -56,28 +58,116 @@ def _loc(file: str, node) -> Loc:
     return Loc(file, m.line + 1, m.column + 1)
 
 
-# A model is a few kilobytes of text (the SARIB: 11 kB); these bounds refuse what no model
-# needs before it can cost memory or time: a huge file, an alias bomb (a few lines whose
-# aliases expand to billions of values), nesting deeper than any model's.
-MAX_FILE_BYTES = 4 * 1024 * 1024
-MAX_VALUES = 50_000
-MAX_DEPTH = 64
-# the tags plain YAML resolves to; any other (!!python/..., !custom) is refused, not ignored
-_PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in
-               ("map", "seq", "str", "int", "float", "bool", "null", "timestamp")}
+# Limits on what a model or scene file may be, so a hostile file is refused at once
+# instead of exhausting time, memory or the Python stack (issue 23). The largest shipped
+# model is ~11 kB and ~2 000 YAML nodes, nested 6 deep; PyYAML composes ~0.5 MB/s.
+MAX_FILE_BYTES = 1 << 20      # 1 MiB: ~100x the largest model, composed in ~2 s
+MAX_NODES = 100_000           # YAML nodes after alias expansion (billion laughs)
+MAX_DEPTH = 64                # nesting of lists and mappings (Python recursion)
+# scalar tags bgc understands (plain YAML scalars); anything else (!!python/..., !!binary,
+# !!set, a local !tag, the merge key '<<') is refused
+_SCALAR_TAGS = {f"tag:yaml.org,2002:{t}": t for t in
+                ("null", "bool", "int", "float", "str", "timestamp")}
+_SEQ_TAG, _MAP_TAG = "tag:yaml.org,2002:seq", "tag:yaml.org,2002:map"
+
+
+def read_source(path: str | Path, what: str = "model file", key: str = "model") -> str:
+    """The text of a model or scene file, refused with a one-line error naming the path
+    if it is missing, not a regular file (a directory, a FIFO that would block, a device
+    such as /dev/zero that never ends), larger than ``MAX_FILE_BYTES`` or not UTF-8.
+    The type and size are checked with ``os.stat`` before the file is opened."""
+    file = str(path)
+    loc = Loc(file, 1)
+
+    def refuse(msg, hint=f"give the path of a YAML {what} (UTF-8 text)", where=loc):
+        raise ModelError(msg, loc=where, key=key, hint=hint)
+    try:
+        st = os.stat(file)
+    except FileNotFoundError:
+        refuse(f"no such {what}")
+    except OSError as exc:
+        refuse(f"cannot read {what}: {exc.strerror or type(exc).__name__}")
+    if stat.S_ISDIR(st.st_mode):
+        refuse(f"is a directory, not a {what}")
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device"
+                if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+        refuse(f"is {kind}, not a regular {what}")
+    if st.st_size > MAX_FILE_BYTES:
+        refuse(f"{what} of {st.st_size} bytes is larger than bgc's limit of "
+               f"{MAX_FILE_BYTES} bytes", hint=f"a {what} is at most "
+               f"{MAX_FILE_BYTES >> 20} MiB; the largest shipped model is ~11 kB")
+    try:        # non-blocking, and checked again: it may have been swapped since the stat
+        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                refuse(f"is not a regular {what}")
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        refuse(f"cannot read {what}: {exc.strerror or type(exc).__name__}")
+    if len(data) > MAX_FILE_BYTES:      # grew since the stat
+        refuse(f"{what} is larger than bgc's limit of {MAX_FILE_BYTES} bytes")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        refuse(f"byte 0x{data[exc.start]:02x} is not UTF-8 text", where=Loc(file, line, col),
+               hint="save the file as UTF-8")
+
+
+class _Composer(yaml.SafeLoader):
+    """PyYAML's safe composer, bounded: nesting deeper than ``MAX_DEPTH``, an alias to a
+    node that contains it (a recursive alias) and more than ``MAX_NODES`` nodes once
+    aliases are expanded are refused while composing, before any Python value is built
+    (aliases make the node graph a DAG whose expanded size each node records)."""
+
+    def __init__(self, text: str, file: str):
+        super().__init__(text)
+        self.text, self.file, self.depth, self.open_anchors = text, file, 0, set()
+
+    def refuse(self, msg, mark, hint):
+        raise ModelError(msg, loc=Loc(self.file, mark.line + 1, mark.column + 1),
+                         key=_section_at(self.text, mark.line + 1) or "model", hint=hint)
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            if event.anchor in self.open_anchors:
+                self.refuse(f"alias *{event.anchor} refers to a node that contains it",
+                            event.start_mark, "a recursive alias has no finite value; "
+                            "write the value out")
+            return super().compose_node(parent, index)
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            self.refuse(f"lists and mappings nested more than {MAX_DEPTH} deep",
+                        event.start_mark, "a model nests a few levels; flatten the data")
+        if event.anchor is not None:
+            self.open_anchors.add(event.anchor)
+        node = super().compose_node(parent, index)
+        self.open_anchors.discard(event.anchor)
+        self.depth -= 1
+        if isinstance(node, yaml.SequenceNode):
+            node.size = 1 + sum(c.size for c in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            node.size = 1 + sum(k.size + v.size for k, v in node.value)
+        else:
+            node.size = 1
+        if node.size > MAX_NODES:
+            self.refuse(f"more than {MAX_NODES} YAML values once aliases are expanded",
+                        event.start_mark, "aliases (*name) that repeat large values "
+                        "multiply; write the model without them")
+        return node
 
 
 def _read_yaml(text: str, file: str):
     try:
-        loader = yaml.SafeLoader(text)
+        loader = _Composer(text, file)
         try:
             node = loader.get_single_node()
         finally:
             loader.dispose()
-    except RecursionError:
-        raise ModelError(f"YAML nested too deeply (a model needs at most {MAX_DEPTH} levels)",
-                         loc=Loc(file, 1), key=_section_at(text, 1),
-                         hint="flatten the nesting") from None
     except yaml.MarkedYAMLError as exc:
         # An unclosed [ or { is best shown where it was opened (the context mark).
         opened = exc.context_mark is not None and "flow" in (exc.context or "")
@@ -89,34 +179,47 @@ def _read_yaml(text: str, file: str):
         raise ModelError(f"malformed YAML: {what}", loc=loc, key=_section_at(text, loc.line),
                          hint="check indentation, colons, brackets and quotes near this "
                               "line") from None
+    except yaml.reader.ReaderError as exc:      # a control character: where it stands
+        line = text.count("\n", 0, exc.position) + 1
+        col = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
+        raise ModelError(f"character {exc.character:#06x} is not allowed in YAML",
+                         loc=Loc(file, line, col), key=_section_at(text, line) or "model",
+                         hint="remove the control character; write it escaped in a "
+                              "double-quoted string (\\x07) if it is meant") from None
     except yaml.YAMLError as exc:
-        raise ModelError(f"malformed YAML: {exc}", loc=Loc(file, 1)) from None
+        raise ModelError(f"malformed YAML: {str(exc).splitlines()[0]}", loc=Loc(file, 1),
+                         key="model", hint="check the file is YAML text") from None
     if node is None:
         raise ModelError("the model file is empty", loc=Loc(file, 1),
                          hint="a model needs at least 'elements:' and 'bonds:'")
     scalar_loader = yaml.SafeLoader("")
-    count = [0]
 
-    def _top(path):
-        """The top-level key of a value path such as ``elements.r[0]``."""
-        return re.split(r"[.\[]", path)[0] or None
+    def refuse_tag(n, what):
+        loc = _loc(file, n)
+        raise ModelError(f"{what} is not supported", loc=loc,
+                         key=_section_at(text, loc.line) or "model",
+                         hint="bgc reads plain YAML: numbers, strings, true/false, lists, "
+                              "mappings and aliases (*name); no tags (!!...) or merge "
+                              "keys (<<)")
 
-    def build(n, path="", depth=0):
-        count[0] += 1
-        if count[0] > MAX_VALUES:
-            raise ModelError(f"the YAML expands to more than {MAX_VALUES} values (aliases "
-                             "repeated into each other, or a recursive alias)",
-                             loc=_loc(file, n), key=_top(path),
-                             hint="write the values out, or use fewer nested aliases")
-        if depth > MAX_DEPTH:
-            raise ModelError(f"YAML nested more than {MAX_DEPTH} levels deep",
-                             loc=_loc(file, n), key=_top(path),
-                             hint="flatten the nesting (a recursive alias nests forever)")
-        if n.tag not in _PLAIN_TAGS:
-            raise ModelError(f"YAML tag '{n.tag}' is not allowed", loc=_loc(file, n),
-                             key=_top(path),
-                             hint="plain YAML: mappings, lists, numbers, strings, booleans")
+    def scalar(n):
+        if n.tag not in _SCALAR_TAGS:
+            refuse_tag(n, "merge key '<<'" if n.tag == "tag:yaml.org,2002:merge"
+                       else f"YAML tag {n.tag!r}")
+        try:
+            return scalar_loader.construct_object(n)
+        except (ValueError, OverflowError, yaml.YAMLError) as exc:
+            loc = _loc(file, n)
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ModelError(f"cannot read {_SCALAR_TAGS[n.tag]} {n.value[:40]!r}: "
+                             f"{reason[:120]}", loc=loc,
+                             key=_section_at(text, loc.line) or "model",
+                             hint="write a plain number such as 1.5 or 2e-3") from None
+
+    def build(n, path=""):
         if isinstance(n, yaml.MappingNode):
+            if n.tag != _MAP_TAG:
+                refuse_tag(n, f"YAML tag {n.tag!r}")
             out = YMap()
             out.loc, out.key_locs, out.val_locs = _loc(file, n), {}, {}
             for kn, vn in n.value:
@@ -129,15 +232,17 @@ def _read_yaml(text: str, file: str):
                     raise ModelError(f"duplicate key '{k}'", loc=_loc(file, kn), key=key,
                                      hint=f"'{k}' is already defined at line "
                                           f"{out.key_locs[k].line}")
-                out[k] = build(vn, key, depth + 1)
+                out[k] = build(vn, key)
                 out.key_locs[k] = _loc(file, kn)
                 out.val_locs[k] = _loc(file, vn)
             return out
         if isinstance(n, yaml.SequenceNode):
-            out = YList(build(c, f"{path}[{i}]", depth + 1) for i, c in enumerate(n.value))
+            if n.tag != _SEQ_TAG:
+                refuse_tag(n, f"YAML tag {n.tag!r}")
+            out = YList(build(c, f"{path}[{i}]") for i, c in enumerate(n.value))
             out.loc, out.item_locs = _loc(file, n), [_loc(file, c) for c in n.value]
             return out
-        return scalar_loader.construct_object(n)
+        return scalar(n)
 
     return build(node)
 
@@ -170,21 +275,48 @@ class _Loader:
         self.point_r0: dict[tuple[str, str], sp.Matrix] = {}   # (body, point) -> exact R0
         self.joints: dict[str, Joint] = {}
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
+        self.pvals: dict = {}               # parameter symbol -> value, once parsed
+        self.t_end = Settings.t_end         # the model's, once its settings are read
 
     # helpers -------------------------------------------------------------
+    def parse(self, text, **kw) -> sp.Expr:
+        """``bexpr.parse`` with the parameters' values known, so a part that is constant
+        given them (``1/Z`` with ``Z: 0``, ``log(Z)``) is judged at its line."""
+        return bexpr.parse(text, values=self.pvals, **kw)
+
     def err(self, msg, loc, key, hint=None):
         raise ModelError(msg, loc=loc, key=key, hint=hint)
 
     def mapping(self, v, loc, key, what="a mapping") -> YMap:
         if not isinstance(v, YMap):
-            self.err(f"expected {what}, got {_kind_of(v)}", loc, key)
+            self.err(f"expected {what}, got {_kind_of(v)}", loc, key,
+                     "write a mapping such as {name: value}" if what == "a mapping"
+                     else f"write {what}")
         return v
 
+    def string(self, v, loc, key, what="a name") -> str:
+        """A plain string (a name, a path), not a number, list or mapping."""
+        if not isinstance(v, str):
+            self.err(f"expected {what}, got {_kind_of(v)}{_short(v)}", loc, key,
+                     f"write {what} as plain text")
+        return v
+
+    def strings(self, v, loc, key, what="names") -> list[str]:
+        """A list of plain strings."""
+        if not isinstance(v, YList):
+            self.err(f"expected a list of {what}, got {_kind_of(v)}{_short(v)}", loc, key,
+                     "write [a, b, ...]")
+        return [self.string(x, v.item_locs[i], f"{key}[{i}]", "a " + what.rstrip("s"))
+                for i, x in enumerate(v)]
+
     def check_keys(self, m: YMap, allowed, key):
+        """Every key of ``m`` is one of ``allowed``; a description or unit is text."""
         for k in m:
             if k not in allowed:
                 self.err(f"unknown key '{k}'", m.key_locs[k], f"{key}.{k}",
                          "valid keys: " + ", ".join(allowed))
+            if k in ("description", "unit") and m[k] is not None:
+                self.string(m[k], m.val_locs[k], f"{key}.{k}", f"a {k} text")
 
     def declare(self, name, what, loc, key):
         if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
@@ -202,21 +334,39 @@ class _Loader:
                      f"already used by {other} at line {oloc.line}")
         self.names[name] = (what, loc)
 
-    def number(self, v, loc, key, *, positive=False, nonneg=False) -> float:
+    def number(self, v, loc, key, *, positive=False, nonneg=False, divisor=False) -> float:
+        """A finite plain number; ``positive``/``nonneg`` bound it; ``divisor``: it divides
+        in the equations, so it must be a normal float (a subnormal one such as 5e-324 has
+        a reciprocal beyond the float range)."""
         if isinstance(v, str):      # YAML 1.1 reads 1e-3 and 4.0e6 as strings
             with contextlib.suppress(ValueError):
                 v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.err(f"expected a number, got {_kind_of(v)} {v!r}", loc, key,
                      "write a plain number such as 1.5 or 2e-3")
+        try:
+            bexpr.number(v)
+        except ValueError as exc:
+            self.err(f"expected a finite number: {exc}", loc, key,
+                     "write a finite number such as 1.5 or 2e-3")
         v = float(v)
-        if v != v or v in (float("inf"), float("-inf")):
-            self.err(f"expected a finite number, got {v}", loc, key)
         if positive and v <= 0:
-            self.err(f"must be > 0, got {v}", loc, key)
+            self.err(f"must be > 0, got {v}", loc, key, "write a positive number")
         if nonneg and v < 0:
-            self.err(f"must be >= 0, got {v}", loc, key)
+            self.err(f"must be >= 0, got {v}", loc, key, "write a number >= 0")
+        if divisor and 0 < abs(v) < sys.float_info.min:
+            self.err(f"{v:g} is a subnormal float: its reciprocal is beyond the float range",
+                     loc, key, f"a divisor is at least {sys.float_info.min:.4g} in size; "
+                               "rescale the units if the value is really this small")
         return v
+
+    def points(self, v, loc, key) -> int:
+        """A number of output times: an integer from 2 to ``MAX_POINTS``."""
+        n = self.number(v, loc, key)
+        if n != int(n) or not 2 <= n <= MAX_POINTS:
+            self.err(f"expected a whole number of output times from 2 to {MAX_POINTS}, got "
+                     f"{n:g}", loc, key, "e.g. 1001; each point is a row of the result")
+        return int(n)
 
     # sections ------------------------------------------------------------
     def parameters(self, sec: YMap) -> dict[str, Parameter]:
@@ -236,6 +386,7 @@ class _Loader:
             if unit == "deg":
                 value = value * 3.141592653589793 / 180.0
             out[name] = Parameter(name, value, loc, unit)
+            self.pvals[symbols.param(name)] = value
         return out
 
     def expr_names(self, params, signals=()) -> dict[str, sp.Expr]:
@@ -258,7 +409,7 @@ class _Loader:
         """One signal and its parsed fields."""
         v = self.mapping(v, loc, key, "a mapping with 'type'")
         kind = v.get("type")
-        if kind not in bsignals.SIGNAL_TYPES:
+        if not isinstance(kind, str) or kind not in bsignals.SIGNAL_TYPES:
             self.err(f"unknown signal type {kind!r}", v.val_locs.get("type", v.loc),
                      f"{key}.type", "valid types: " + ", ".join(bsignals.SIGNAL_TYPES))
         required, optional = bsignals.SIGNAL_TYPES[kind]
@@ -275,9 +426,9 @@ class _Loader:
             elif k in bsignals.NUMBER_FIELDS:
                 vals[k] = self.number(v.get(k, optional.get(k)), kloc, kk)
             elif k == "expr":
-                vals[k] = bexpr.parse(v[k], loc=kloc, key=kk, names={**names, "t": symbols.t})
+                vals[k] = self.parse(v[k], loc=kloc, key=kk, names={**names, "t": symbols.t})
             else:
-                vals[k] = bexpr.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
+                vals[k] = self.parse(v.get(k, optional.get(k)), loc=kloc, key=kk,
                                       names=names)
         if kind == "table":
             tt, yy = vals["t"], vals["values"]
@@ -288,9 +439,17 @@ class _Loader:
                 self.err("'t' must be strictly increasing", v.val_locs["t"], f"{key}.t")
             tables.append(Table(len(tables), tuple(tt), tuple(yy)))
         for k in ("frequency", "f_start", "f_end"):
-            if k in vals and sp.sympify(vals[k]).is_number and float(vals[k]) <= 0:
-                self.err(f"must be > 0, got {float(vals[k])}", v.val_locs.get(k, v.loc),
-                         f"{key}.{k}")
+            f = (sp.sympify(sp.sympify(vals[k]).xreplace(self.pvals)) if k in vals
+                 else None)
+            if f is None or not f.is_number:
+                continue
+            if float(f) <= 0:
+                self.err(f"must be > 0, got {float(f)}", v.val_locs.get(k, v.loc),
+                         f"{key}.{k}", "a frequency in Hz, > 0")
+            why = bsignals.too_fast(float(f), self.t_end)
+            if why:
+                self.err(why, v.val_locs.get(k, v.loc), f"{key}.{k}",
+                         "lower the frequency or shorten simulation.t_end")
         if kind == "chirp":
             t1, t2, t3 = vals["t1"], vals["t2"], vals["t3"]
             if not 0 < t1 <= t2 < t3:
@@ -315,7 +474,7 @@ class _Loader:
             v = self.mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
             kind = v.get("type")
             kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
-            if kind not in KINDS or not KINDS[kind].user:
+            if not isinstance(kind, str) or kind not in KINDS or not KINDS[kind].user:
                 self.err(f"unknown element type {v.get('type')!r}",
                          v.val_locs.get("type", v.loc), f"{key}.type",
                          "valid types: " + ", ".join(k for k in KINDS if KINDS[k].user))
@@ -353,7 +512,7 @@ class _Loader:
                              f"{self.names[name][0]}", loc, key, "give this bond a name:")
                 self.names[name] = (f"bond '{name}'", loc)
             for end in (src, dst):
-                if end not in elements:
+                if not isinstance(end, str) or end not in elements:
                     self.err(f"bond connects unknown element {end!r}", loc, key,
                              "declared elements: " + ", ".join(elements))
             if src == dst:
@@ -408,7 +567,7 @@ class _Loader:
                     el.field_locs[k] = kloc
                     self.check_matrix(el, k, el.fields[k], pvals, kloc, kk)
                     continue
-                e = bexpr.parse(v[k], loc=kloc, key=kk, names=names,
+                e = self.parse(v[k], loc=kloc, key=kk, names=names,
                                 resolve_ref=resolver(kk, kloc) if spec.modulated else None)
                 if law_is_local:
                     own = {symbols.LOCAL[n] for n in spec.local if not (
@@ -429,7 +588,7 @@ class _Loader:
                     if isinstance(v[k], YList):
                         el.initial = self.matrix(v[k], kloc, f"{key}.{k}", pnames, None)
                     else:
-                        el.initial = bexpr.parse(v[k], loc=kloc, key=f"{key}.{k}",
+                        el.initial = self.parse(v[k], loc=kloc, key=f"{key}.{k}",
                                                  names=pnames)
                 else:
                     el.initial = sp.S.Zero
@@ -439,7 +598,7 @@ class _Loader:
     def matrix(self, v: YList, loc, key, names, resolve) -> sp.Matrix:
         """[a, b, c] -> a column vector; [[..], [..], [..]] -> a matrix (rows)."""
         def parse(x, xloc, xkey):
-            return bexpr.parse(x, loc=xloc, key=xkey, names=names, resolve_ref=resolve)
+            return self.parse(x, loc=xloc, key=xkey, names=names, resolve_ref=resolve)
         if v and all(isinstance(r, YList) for r in v):
             if len({len(r) for r in v}) != 1:
                 self.err("the rows of a matrix differ in length", loc, key)
@@ -478,6 +637,11 @@ class _Loader:
             return
         val = float(e.xreplace(pvals))
         bad = {"positive": val <= 0, "nonneg": val < 0, "nonzero": val == 0}[rule]
+        if rule != "nonneg" and 0 < abs(val) < sys.float_info.min:
+            self.err(f"{key} of {el.kind} '{el.name}' is {val:g}, a subnormal float: its "
+                     "reciprocal is beyond the float range", loc, kk,
+                     f"it divides in the equations: at least {sys.float_info.min:.4g} "
+                     "in size; rescale the units if it is really this small")
         if bad:
             what = {"positive": "must be > 0", "nonneg": "must be >= 0",
                     "nonzero": "must not be 0"}[rule]
@@ -549,7 +713,7 @@ class _Loader:
         for name, v in sec.items():
             key, loc = f"outputs.{name}", sec.val_locs[name]
             self.declare(name, f"output '{name}'", sec.key_locs[name], key)
-            e = bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
+            e = self.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
                             loc=loc: self.resolve_ref(tg, at, kinds, bond_names, key, loc))
             out.append(Output(name, e, loc))
         return out
@@ -582,7 +746,7 @@ class _Loader:
 
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
-            mass = self.number(v["mass"], *at("mass"), nonneg=True)
+            mass = self.number(v["mass"], *at("mass"), nonneg=True, divisor=True)
             com = exact.vector(self.vector(v["com"], *at("com")))
             if "inertia" not in v and mass > 0:
                 self.err("missing 'inertia'", v.loc, key,
@@ -610,9 +774,11 @@ class _Loader:
                 if np.abs(moments).max() > 0:
                     self.err("a body of negligible mass (mass: 0) has no inertia either",
                              loc, kk, "leave 'inertia' out or give the body its mass")
-            elif moments.min() <= 0:
+            elif moments.min() < sys.float_info.min:     # zero, negative or subnormal
                 self.err(f"the inertia tensor must be positive definite (principal moments "
-                         f"{', '.join(f'{m:g}' for m in moments)})", loc, kk)
+                         f"{', '.join(f'{m:g}' for m in moments)})", loc, kk,
+                         "principal moments > 0 (and not subnormal: they divide in the "
+                         "equations)")
             a, b, c = sorted(moments)
             if mass > 0 and a + b < c * (1 - 1e-9):
                 self.err(f"principal moments {a:g}, {b:g}, {c:g} break the triangle "
@@ -719,7 +885,7 @@ class _Loader:
                 self.err(f"a joint actuator cannot read '{target}.{attr}'", loc, key,
                          "valid: " + ", ".join(f"{target}.{a}" for a in valid))
             return self.resolve_ref(target, attr, {}, set(), key, loc)
-        return bexpr.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
+        return self.parse(v, loc=loc, key=key, names=names, resolve_ref=ref)
 
     def joints_section(self, sec: YMap, params, signals, base: Parasitic) -> dict[str, Joint]:
         names = self.expr_names(params, signals)
@@ -737,7 +903,7 @@ class _Loader:
             def at(k, v=v, key=key):
                 return v.val_locs[k], f"{key}.{k}"
             kind = v["type"]
-            if kind not in JOINT_KINDS:
+            if not isinstance(kind, str) or kind not in JOINT_KINDS:
                 self.err(f"unknown joint type {kind!r}", *at("type"),
                          "valid types: " + ", ".join(JOINT_KINDS))
             spec = JOINT_KINDS[kind]
@@ -747,7 +913,7 @@ class _Loader:
                          f"write [body1, body2]; '{FIXED_FRAME}' is the fixed frame")
             bodies = []
             for i, b in enumerate(pair):
-                if b != FIXED_FRAME and b not in self.bodies:
+                if b != FIXED_FRAME and (not isinstance(b, str) or b not in self.bodies):
                     self.err(f"unknown body {b!r}", pair.item_locs[i], f"{key}.between[{i}]",
                              "declared bodies: " + ", ".join(list(self.bodies) + [FIXED_FRAME]))
                 bodies.append(None if b == FIXED_FRAME else b)
@@ -870,7 +1036,7 @@ class _Loader:
                 if k not in m:
                     self.err(f"missing '{k}'", m.loc, key,
                              "joint: the joint it acts in, amplitude: force [N] or torque [N m]")
-            j = self.joints.get(m["joint"])
+            j = self.joints.get(m["joint"]) if isinstance(m["joint"], str) else None
             if j is None:
                 self.err(f"unknown joint {m['joint']!r}", m.val_locs["joint"], f"{key}.joint",
                          "declared joints: " + ", ".join(self.joints))
@@ -903,9 +1069,9 @@ class _Loader:
             if k in sec:
                 loc, kk = sec.val_locs[k], f"simulation.{k}"
                 if k == "solver":
-                    kw[k] = str(sec[k])
+                    kw[k] = self.string(sec[k], loc, kk, "a solver name")
                 elif k == "points":
-                    kw[k] = int(self.number(sec[k], loc, kk, positive=True))
+                    kw[k] = self.points(sec[k], loc, kk)
                 else:
                     kw[k] = self.number(sec[k], loc, kk, positive=True)
         return Settings(**kw)
@@ -921,6 +1087,15 @@ def joint_params(j: Joint, params: dict):
     for role, val in vals.items():
         pname = f"{j.name}__{role}"
         params[pname] = Parameter(pname, float(val), j.loc)
+
+
+def _short(v) -> str:
+    """A value shown after its kind in a message: ' ' and its repr, cut to 40
+    characters ('' for nothing)."""
+    if v is None:
+        return ""
+    text = " " + repr(_plain(v))
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _kind_of(v) -> str:
@@ -966,6 +1141,8 @@ def loads(text: str, file: str = "<string>") -> Model:
         ld.err(f"model name {problem}", doc.val_locs.get("name", doc.loc), "name",
                f"write name: {suggest_module_name(name)} (it names the generated module "
                "<name>.py)")
+    settings = ld.settings(section("simulation"))
+    ld.t_end = settings.t_end
     params = ld.parameters(section("parameters"))
     tables: list[Table] = []
     sigs = ld.signals(section("signals"), params, tables)
@@ -979,7 +1156,6 @@ def loads(text: str, file: str = "<string>") -> Model:
     bonds = ld.bonds(section("bonds", YList), headers)
     elements = ld.element_fields(headers, params, sigs, bonds)
     outputs = ld.outputs(section("outputs"), params, sigs, elements, bonds)
-    settings = ld.settings(section("simulation"))
     digest = hashlib.sha256(json.dumps(_plain(doc), sort_keys=True, default=str)
                             .encode()).hexdigest()
     return Model(name=name, file=file, digest=digest, parameters=params, signals=sigs,
@@ -989,35 +1165,6 @@ def loads(text: str, file: str = "<string>") -> Model:
                  static_loads=doc.get("parasitic", {}).get("loads") == "static")
 
 
-def read_text(path: str | Path, what: str = "model") -> str:
-    """A model or scene file's text, refusing what is not one before it is read: a directory,
-    a FIFO (opening it would block), a device (it could stream forever), a file over
-    MAX_FILE_BYTES, bytes that are not UTF-8."""
-    path = Path(path)
-    try:
-        info = os.stat(path)
-        if not stat.S_ISREG(info.st_mode):
-            kind = ("a directory" if stat.S_ISDIR(info.st_mode) else
-                    "a FIFO" if stat.S_ISFIFO(info.st_mode) else "a device or special file")
-            raise ModelError(f"{path} is {kind}, not a {what} file", loc=None,
-                             hint=f"give the path of a YAML {what} file")
-        if info.st_size > MAX_FILE_BYTES:
-            raise ModelError(f"{path} has {info.st_size} bytes; a {what} file has at most "
-                             f"{MAX_FILE_BYTES}", loc=None,
-                             hint=f"is this the {what} file you meant?")
-        with open(path, "rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
-        return data.decode("utf-8")
-    except FileNotFoundError:
-        raise ModelError(f"no such {what} file: {path}", loc=None) from None
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise ModelError(f"not UTF-8 text: byte 0x{data[exc.start]:02x} cannot be decoded",
-                         loc=Loc(str(path), line), hint="save the file as UTF-8") from None
-    except OSError as exc:
-        raise ModelError(f"cannot read {what} file {path}: {exc.strerror or exc}") from None
-
-
 def load(path: str | Path) -> Model:
     """Read and parse a model file."""
-    return loads(read_text(path), str(Path(path)))
+    return loads(read_source(path), str(path))

@@ -123,6 +123,12 @@ class Output:
     loc: Loc
 
 
+# At most this many output times (--points, simulation.points, a scene's time.points):
+# the result is a points x (states + outputs) float array; 10 million rows of a
+# 50-column model is 4 GB.
+MAX_POINTS = 10_000_000
+
+
 @dataclass(frozen=True)
 class Settings:
     """Default run settings a model file may carry (``simulation:``)."""

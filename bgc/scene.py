@@ -24,10 +24,10 @@ import json
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from . import emit, load, reduce
+from . import emit, load, reduce, signals
 from .errors import ModelError
 from .fileio import atomic_write
-from .load import YMap, _Loader, _read_yaml, read_text
+from .load import YMap, _Loader, _read_yaml
 from .pipeline import METHODS, build
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
@@ -59,7 +59,7 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every mistake is one located line."""
     from .simulate import SOLVERS
     path = Path(path)
-    doc = _read_yaml(read_text(path, "scene"), str(path))
+    doc = _read_yaml(load.read_source(path, "scene file", "scene"), str(path))
     ld = _Loader(str(path))
     if not isinstance(doc, YMap):
         raise ModelError("a scene file is a mapping", loc=load.Loc(str(path), 1),
@@ -73,16 +73,20 @@ def load_scene(path: str | Path) -> Scene:
     def at(m, key):
         return m.val_locs.get(key, m.loc)
 
-    model_path = (path.parent / str(doc["model"])).resolve()
-    if not model_path.exists():
-        ld.err(f"no such model file: {model_path}", at(doc, "model"), "model",
+    model_path = (path.parent / ld.string(doc["model"], at(doc, "model"), "model",
+                                          "a model file path")).resolve()
+    if not model_path.is_file():
+        ld.err(f"no such model file: {model_path}" if not model_path.exists() else
+               f"{model_path} is not a regular file", at(doc, "model"), "model",
                "a path relative to the scene file")
     model = load.load(model_path)
-    method = doc.get("method", "parasitic")
+    method = ld.string(doc.get("method", "parasitic"), at(doc, "method"), "method",
+                       "a method name")
     if method not in METHODS:
         ld.err(f"unknown method '{method}'", at(doc, "method"), "method",
                "valid methods: " + ", ".join(METHODS))
-    solver = doc.get("solver", "native")
+    solver = ld.string(doc.get("solver", "native"), at(doc, "solver"), "solver",
+                       "a solver name")
     if solver not in SOLVERS:
         ld.err(f"unknown solver '{solver}'", at(doc, "solver"), "solver",
                "valid solvers: " + ", ".join(SOLVERS))
@@ -91,6 +95,7 @@ def load_scene(path: str | Path) -> Scene:
     if not isinstance(outputs, list) or not outputs:
         ld.err("expected a non-empty list of outputs", at(doc, "outputs"), "outputs",
                "model outputs: " + ", ".join(names))
+    ld.strings(outputs, at(doc, "outputs"), "outputs", "output names")
     for k, o in enumerate(outputs):
         if o not in names:
             ld.err(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
@@ -100,8 +105,10 @@ def load_scene(path: str | Path) -> Scene:
         e = ld.mapping(doc["excitation"], at(doc, "excitation"), "excitation")
         ld.check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
         if model.excitation is None:
-            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation")
-        exc = {"kind": e.get("kind"), "direction": e.get("direction")}
+            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation",
+                   "drop 'excitation:' or name a model that has one")
+        exc = {k: ld.string(e.get(k), at(e, k), f"excitation.{k}", f"a {k} name")
+               for k in ("kind", "direction")}
         for k in ("amplitude", "frequency"):
             if k in e:
                 exc[k] = ld.number(e[k], at(e, k), f"excitation.{k}", positive=True)
@@ -119,8 +126,12 @@ def load_scene(path: str | Path) -> Scene:
     t_end = ld.number(tm["end"], at(tm, "end"), "time.end", positive=True)
     if t_end <= t_start:
         ld.err(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
-    points = int(ld.number(tm.get("points", 1001), at(tm, "points"), "time.points",
-                           positive=True))
+    points = ld.points(tm.get("points", 1001), at(tm, "points"), "time.points")
+    if exc is not None and "frequency" in exc:
+        why = signals.too_fast(exc["frequency"], t_end - t_start)
+        if why:
+            ld.err(why, at(doc["excitation"], "frequency"), "excitation.frequency",
+                   "lower the frequency or shorten time.end")
     tol = (ld.mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
            if doc.get("tolerances") is not None else None)
     tols = {}
@@ -135,8 +146,10 @@ def load_scene(path: str | Path) -> Scene:
     if doc.get("params") is not None:
         pm = ld.mapping(doc["params"], at(doc, "params"), "params")
         for k, v in pm.items():
+            ld.string(k, pm.key_locs[k], "params", "a parameter name")
             params[k] = ld.number(v, at(pm, k), f"params.{k}")
-    expose = list(doc.get("expose") or [])
+    expose = (ld.strings(doc["expose"], at(doc, "expose"), "expose", "parameter names")
+              if doc.get("expose") is not None else [])
     merge = doc.get("merge_relays")
     if merge is not None and not isinstance(merge, bool):
         ld.err(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),
@@ -209,10 +222,10 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
 
 def is_scene(path: str | Path) -> bool:
     """A scene file names a model (``model:``); a model file has bodies or elements."""
-    try:
-        doc = _read_yaml(read_text(path), str(path))
+    try:        # the same bounded reader as the loader: a hostile file is refused there
+        doc = _read_yaml(load.read_source(path), str(path))
     except ModelError:
-        return False    # loading it as a model reports the same error
+        return False
     return isinstance(doc, dict) and "model" in doc
 
 

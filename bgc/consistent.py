@@ -107,20 +107,26 @@ def _jacobian(fun, x, cols) -> np.ndarray:
     return J
 
 
-def equilibrate(J: np.ndarray) -> np.ndarray:
-    """``J`` with its columns, then its rows, scaled to unit length (zero ones kept): the
-    rank of the constraint rows on the momenta, J M^-1, must not depend on the units of
-    the rows (m/s, rad/s) nor on the spread of the inverse masses and inertias, which at a
-    millimetre scale spans ten decades and hid real constraints below RANK_TOL. Scaling
-    rows does not move the left null space's support, so the redundant rows stay named.
-    (Only the rank at the start: ``RankMonitor`` watches the rows as they are, since a
-    row that vanishes at a singular pose would be scaled back up.)"""
+def equilibration(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column scales that bring ``J``'s columns, then its rows, to unit length
+    (zero ones kept): the rank of the constraint rows on the momenta, J M^-1, must not
+    depend on the units of the rows (m/s, rad/s) nor on the spread of the inverse masses
+    and inertias, which at a millimetre scale spans ten decades and hid real constraints
+    below RANK_TOL. Scaling rows does not move the left null space's support, so the
+    redundant rows stay named. ``RankMonitor`` keeps the scales of the start fixed, so a
+    row that vanishes at a singular pose is not scaled back up."""
+    c = np.linalg.norm(J, axis=0)
+    c = 1.0 / np.where(c > 0, c, 1.0)
+    r = np.linalg.norm(J * c, axis=1)
+    return 1.0 / np.where(r > 0, r, 1.0), c
+
+
+def equilibrate(J: np.ndarray, scales=None) -> np.ndarray:
+    """``J`` scaled by ``equilibration(J)`` (or the given row and column scales)."""
     if J.size == 0:
         return J
-    c = np.linalg.norm(J, axis=0)
-    J = J / np.where(c > 0, c, 1.0)
-    r = np.linalg.norm(J, axis=1)
-    return J / np.where(r > 0, r, 1.0)[:, None]
+    r, c = equilibration(J) if scales is None else scales
+    return J * r[:, None] * c[None, :]
 
 
 def _dependent(J: np.ndarray, names, rank: int) -> list[str]:
@@ -226,7 +232,7 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
                       _dependent(equilibrate(Kb), free, rank - n_imposed)
                       if rank < len(names) else [],
-                      _conditioning(Kb, rank - n_imposed))
+                      _conditioning(equilibrate(Kb), rank - n_imposed))
     return x, proj
 
 
@@ -269,12 +275,18 @@ class RankMonitor:
         self.module, self.p, self.projection = module, p, projection
         self.rank = projection.rank - int(np.sum(module.IMPOSED))
         self.terminal, self.direction = True, 0
+        self.scales = None
+        self.scales = equilibration(self._rows(x)[0])      # the start's, kept fixed
         U = np.linalg.svd(self._rows(x)[0])[0]
         self.start_null = U[:, self.rank:]          # the consistent redundancy
         self.repick(x)
 
     def _rows(self, x):
-        return _measured_rows(self.module, velocity_jacobian(self.module, x, self.p)[0])
+        K, names, n_imposed = _measured_rows(self.module,
+                                             velocity_jacobian(self.module, x, self.p)[0])
+        if self.scales is not None and K.size:
+            K = equilibrate(K, self.scales)
+        return K, names, n_imposed
 
     def _minor(self, x) -> float:
         K = self._rows(x)[0]

@@ -55,7 +55,7 @@ class ScipySolver(Solver):
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
         kw = {"jac": problem.jac} if self.method in ("BDF", "Radau", "LSODA") else {}
-        stop = StopEvent(problem, stats)
+        stop = StopEvent(problem, stats, span=t1 - t0)
         try:
             sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=rtol,
                             atol=atol, dense_output=True, events=[*events, stop],
@@ -92,32 +92,49 @@ class ScipySolver(Solver):
 
 class StopEvent:
     """A terminal event that stops a Python-driven integrator (scipy, SUNDIALS) at the end
-    of the step where Ctrl-C was pressed (``Problem.interrupt``) or the run's step budget
-    ran out: +1 until then, t - t_stop after (a root exactly at the step's end t_stop).
-    solve_ivp calls it once at the start and once per accepted step; it also keeps the
-    last accepted point (``last``)."""
+    of the step where Ctrl-C was pressed (``Problem.interrupt``), the run's step budget
+    ran out, or the step size collapsed: ``COLLAPSE_STEPS`` accepted steps in a row each
+    shorter than ``TINY_STEP`` of the segment (``span``; scipy's own test, a step below
+    the spacing of t, never fires near t = 0, where BDF can crawl through a million steps
+    of 1e-145 s). +1 until then, t - t_stop after (a root exactly at the step's end
+    t_stop). solve_ivp calls it once at the start and once per accepted step; it also
+    keeps the last accepted point (``last``)."""
 
     terminal, direction = True, 0
 
-    def __init__(self, problem, stats, budget: bool = True):
+    def __init__(self, problem, stats, budget: bool = True, span: float = np.inf):
         self.problem, self.t_stop, self.calls = problem, None, 0
         self.left = problem.budget(stats) if budget else None
         self.interrupted = False
+        self.tiny, self.h, self.floor = 0, None, TINY_STEP * span
         self.last = (None, None)
 
     def __call__(self, t, x):
         if self.t_stop is None:
             self.calls += 1
+            if self.last[0] is not None:
+                self.h = abs(t - self.last[0])
+                self.tiny = self.tiny + 1 if self.h < self.floor else 0
             self.last = (float(t), np.array(x))
             self.interrupted = self.problem.interrupt.requested
-            if self.interrupted or (self.left is not None and self.calls - 1 >= self.left):
+            if (self.interrupted or self.tiny >= COLLAPSE_STEPS
+                    or (self.left is not None and self.calls - 1 >= self.left)):
                 self.t_stop = t
             else:
                 return 1.0
         return t - self.t_stop
 
     def why(self, t, x) -> str:
-        return "interrupted" if self.interrupted else budget_message(self.problem, t, x)
+        if self.interrupted:
+            return "interrupted"
+        if self.tiny >= COLLAPSE_STEPS:
+            return collapse_message(self.problem, t, x, self.h)
+        return budget_message(self.problem, t, x)
+
+
+# a collapsed step size: so many accepted steps in a row, each below this part of the
+# segment's length (1e-14: below any step that resolves anything over the segment)
+TINY_STEP, COLLAPSE_STEPS = 1e-14, 100
 
 
 def _dense(sol, ts, n: int) -> np.ndarray:

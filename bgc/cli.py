@@ -46,17 +46,13 @@ class _Number(click.ParamType):
         self.positive = positive
 
     def convert(self, value, param, ctx):
-        if isinstance(value, float) and math.isfinite(value):
-            v = value
-        else:
-            try:
-                v = float(value)
-            except (TypeError, ValueError):
-                self.fail(f"{value!r} is not a number", param, ctx)
-            if not math.isfinite(v):
-                self.fail(f"{value!r} is not a finite number", param, ctx)
-        if self.positive and not v > 0:
-            self.fail(f"must be > 0, got {value}", param, ctx)
+        want = "a finite number" + (" > 0" if self.positive else "")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            v = math.nan
+        if not math.isfinite(v) or (self.positive and not v > 0):
+            self.fail(f"expected {want}, got {value!r}", param, ctx)
         return v
 
 
@@ -279,6 +275,22 @@ def _parse_params(module, items, base=None):
     return p
 
 
+def _check_overrides(model, items) -> None:
+    """Refuse ``-p`` values that the model's own checks refuse (a capacitance, inertance
+    or mass not > 0, a constant that becomes infinite or complex): the model is read
+    again with them, and its error is told as the option's."""
+    from . import load
+    if not items:
+        return
+    try:
+        load.load(model, overrides=dict(items))
+    except BgcError as exc:
+        given = ", ".join(f"{n}={v:g}" for n, v in items)
+        where = f" ({exc.key} at {exc.loc})" if exc.loc else ""
+        raise BgcError(f"{given}: {exc.message}{where}", key="--param",
+                       hint=exc.hint) from None
+
+
 def _check_plan(module, p, t_end, step, key):
     """Refuse a run whose step plan alone exceeds ``signals.MAX_PLANNED_STEPS``: a fixed
     ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
@@ -378,6 +390,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         plot_format(plot, "--plot")
     module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
+    _check_overrides(model, params)
     p, choice = _parse_params(module, params), None
     exc = _excitation(module, m, p, exc_kind, exc_dir, amplitude, frequency)
     if exc:
@@ -476,6 +489,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
     if output not in module.OUTPUT_NAMES:
         raise BgcError(f"unknown output '{output}'", key="--output",
                        hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
+    _check_overrides(model, params)
     lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
     f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
     anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)

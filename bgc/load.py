@@ -9,6 +9,7 @@ Graph-level checks (arity, power direction) belong to ``expand``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
 import keyword
@@ -276,6 +277,7 @@ class _Loader:
         self.joints: dict[str, Joint] = {}
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
         self.pvals: dict = {}               # parameter symbol -> value, once parsed
+        self.overridden: set = set()        # parameters given by -p (``loads`` overrides)
         self.t_end = Settings.t_end         # the model's, once its settings are read
 
     # helpers -------------------------------------------------------------
@@ -646,8 +648,9 @@ class _Loader:
             what = {"positive": "must be > 0", "nonneg": "must be >= 0",
                     "nonzero": "must not be 0"}[rule]
             src = [p for p in params if symbols.param(p) in e.free_symbols]
-            origin = "".join(f"; parameter '{p}' is set at line {params[p].loc.line}"
-                             for p in src)
+            origin = "".join(f"; parameter '{p}' is set " + (
+                "by -p" if p in self.overridden else f"at line {params[p].loc.line}")
+                for p in src)
             hint = {"positive": "it divides in the law; use a small positive value",
                     "nonneg": "a negative value generates energy; write a law if intended",
                     "nonzero": "a zero ratio divides in the other causality"}[rule]
@@ -1108,8 +1111,11 @@ def _kind_of(v) -> str:
     return type(v).__name__
 
 
-def loads(text: str, file: str = "<string>") -> Model:
-    """Parse model text; ``file`` is used in error locations and for the default name."""
+def loads(text: str, file: str = "<string>", overrides: dict | None = None) -> Model:
+    """Parse model text; ``file`` is used in error locations and for the default name.
+    ``overrides``: parameter values that replace the file's (``-p NAME=VALUE``) before
+    anything uses them, so that every check of the model (a positive capacitance, a
+    finite constant) holds for them too."""
     doc = _read_yaml(text, file)
     ld = _Loader(file)
     if not isinstance(doc, YMap):
@@ -1144,6 +1150,11 @@ def loads(text: str, file: str = "<string>") -> Model:
     settings = ld.settings(section("simulation"))
     ld.t_end = settings.t_end
     params = ld.parameters(section("parameters"))
+    ld.overridden = set(overrides or ())
+    for name, value in (overrides or {}).items():
+        if name in params:
+            params[name] = dataclasses.replace(params[name], value=float(value))
+            ld.pvals[symbols.param(name)] = float(value)
     tables: list[Table] = []
     sigs = ld.signals(section("signals"), params, tables)
     gravity = ld.gravity(doc)
@@ -1165,6 +1176,6 @@ def loads(text: str, file: str = "<string>") -> Model:
                  static_loads=doc.get("parasitic", {}).get("loads") == "static")
 
 
-def load(path: str | Path) -> Model:
-    """Read and parse a model file."""
-    return loads(read_source(path), str(path))
+def load(path: str | Path, overrides: dict | None = None) -> Model:
+    """Read and parse a model file (``overrides``: as in ``loads``)."""
+    return loads(read_source(path), str(path), overrides)

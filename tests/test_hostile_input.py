@@ -385,6 +385,23 @@ def test_number_run_that_would_plan_billions_of_steps(msd, args, key):
     assert f"{signals.MAX_PLANNED_STEPS:.0e}" in m["msg"]
 
 
+
+@pytest.mark.parametrize("param, rule", [
+    ("m=0", "inertance I of I 'mass' must be > 0"),
+    ("m=-1.5", "inertance I of I 'mass' must be > 0"),
+    ("k=-600", "'spring' must be > 0"),
+    ("c=-6", "resistance R of R 'damper' must be >= 0"),
+])
+def test_number_parameter_overrides_obey_the_models_checks(msd, param, rule):
+    """-p values go through the same checks as the model file's own values (a mass, a
+    capacitance not > 0), refused as the option's error naming the element's line."""
+    m = refused(msd.parent, "simulate", MODELS / "msd_forced.yaml", "-o", msd, "-p", param,
+                "--out", msd.parent / "r.csv", key="--param", option=True)
+    assert m["msg"].startswith(param + ": "), m["msg"]
+    assert rule in m["msg"] and "set by -p" in m["msg"], m["msg"]
+    assert "msd_forced.yaml:" in m["msg"]
+
+
 # --------------------------------------------------------------------------- scenes
 SCENE = "model: {model}\noutputs: [current]\ntime: {{end: 0.01}}\n"
 

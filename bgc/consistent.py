@@ -275,18 +275,20 @@ class RankMonitor:
         self.module, self.p, self.projection = module, p, projection
         self.rank = projection.rank - int(np.sum(module.IMPOSED))
         self.terminal, self.direction = True, 0
-        self.scales = None
-        self.scales = equilibration(self._rows(x)[0])      # the start's, kept fixed
-        U = np.linalg.svd(self._rows(x)[0])[0]
+        # the rank is judged on the rows scaled as at the start (kept fixed, so a row that
+        # vanishes at a dead point still shows); the event's minor is picked on the rows
+        # as they are, where its determinant has a simple zero at the dead point
+        self.scales = equilibration(self._rows(x)[0])
+        U = np.linalg.svd(self._scaled(x)[0])[0]
         self.start_null = U[:, self.rank:]          # the consistent redundancy
         self.repick(x)
 
     def _rows(self, x):
-        K, names, n_imposed = _measured_rows(self.module,
-                                             velocity_jacobian(self.module, x, self.p)[0])
-        if self.scales is not None and K.size:
-            K = equilibrate(K, self.scales)
-        return K, names, n_imposed
+        return _measured_rows(self.module, velocity_jacobian(self.module, x, self.p)[0])
+
+    def _scaled(self, x):
+        K, names, n_imposed = self._rows(x)
+        return (equilibrate(K, self.scales) if K.size else K), names, n_imposed
 
     def _minor(self, x) -> float:
         K = self._rows(x)[0]
@@ -305,7 +307,7 @@ class RankMonitor:
         """If the constraints at ``x`` have lost (or nearly lost: conditioning ``drop``
         times worse than at the start) the rank they had, the joint directions of the new
         dependency (left out: the redundancy there was at the start)."""
-        K, names, _ = self._rows(x)
+        K, names, _ = self._scaled(x)
         if _conditioning(K, self.rank) > max(RANK_TOL, self.projection.conditioning / drop):
             return None
         near = np.linalg.svd(K)[0][:, self.rank - 1:]

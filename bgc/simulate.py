@@ -95,14 +95,14 @@ class StopEvent:
     of the step where Ctrl-C was pressed (``Problem.interrupt``), the run's step budget
     ran out, or the step size collapsed: ``COLLAPSE_STEPS`` accepted steps in a row each
     shorter than ``TINY_STEP`` of the segment (``span``; scipy's own test, a step below
-    the spacing of t, never fires near t = 0, where BDF can crawl through a million steps
-    of 1e-145 s). +1 until then, t - t_stop after (a root exactly at the step's end
+    the spacing of t, never fires near t = 0, where BDF crawled through a million steps
+    of 1e-145 s on a millimetre mechanism, nor for LSODA chattering in steps of 1e-13 s). +1 until then, t - t_stop after (a root exactly at the step's end
     t_stop). solve_ivp calls it once at the start and once per accepted step; it also
     keeps the last accepted point (``last``)."""
 
     terminal, direction = True, 0
 
-    def __init__(self, problem, stats, budget: bool = True, span: float = np.inf):
+    def __init__(self, problem, stats, budget: bool = True, span: float = 0.0):
         self.problem, self.t_stop, self.calls = problem, None, 0
         self.left = problem.budget(stats) if budget else None
         self.interrupted = False
@@ -133,8 +133,10 @@ class StopEvent:
 
 
 # a collapsed step size: so many accepted steps in a row, each below this part of the
-# segment's length (1e-14: below any step that resolves anything over the segment)
-TINY_STEP, COLLAPSE_STEPS = 1e-14, 100
+# segment's length. A run that advanced less than 1e-7 of its segment in a thousand steps
+# would need more than 1e10 steps at that pace (a chattering switch, a state pressed
+# against a singularity); no healthy start or event takes a thousand such steps in a row.
+TINY_STEP, COLLAPSE_STEPS = 1e-10, 1000
 
 
 def _dense(sol, ts, n: int) -> np.ndarray:

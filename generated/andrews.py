@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "3ae4f959bda86ba28cae239786331230"
+MODEL_HASH = "f457defec0bb08036c5621a3a4c31843"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_andrews_3ae4f959bda86ba28cae239786331230", sys.modules[__name__])
-__name__ = "_bgc_andrews_3ae4f959bda86ba28cae239786331230"
+    sys.modules.setdefault("_bgc_andrews_f457defec0bb08036c5621a3a4c31843", sys.modules[__name__])
+__name__ = "_bgc_andrews_f457defec0bb08036c5621a3a4c31843"
 
 STATE_NAMES = ("body1.m.px", "body1.m.py", "body1.m.pz", "body1.J.px", "body1.J.py", "body1.J.pz", "body2.m.px", "body2.m.py", "body2.m.pz", "body2.J.px", "body2.J.py", "body2.J.pz", "body3.m.px", "body3.m.py", "body3.m.pz", "body3.J.px", "body3.J.py", "body3.J.pz", "body4.m.px", "body4.m.py", "body4.m.pz", "body4.J.px", "body4.J.py", "body4.J.pz", "body5.m.px", "body5.m.py", "body5.m.pz", "body5.J.px", "body5.J.py", "body5.J.pz", "body6.m.px", "body6.m.py", "body6.m.pz", "body6.J.px", "body6.J.py", "body6.J.pz", "body7.m.px", "body7.m.py", "body7.m.pz", "body7.J.px", "body7.J.py", "body7.J.pz", "body1.x", "body1.ax", "body1.y", "body1.ay", "body1.z", "body1.az", "body2.x", "body2.ax", "body2.y", "body2.ay", "body2.z", "body2.az", "body3.x", "body3.ax", "body3.y", "body3.ay", "body3.z", "body3.az", "body4.x", "body4.ax", "body4.y", "body4.ay", "body4.z", "body4.az", "body5.x", "body5.ax", "body5.y", "body5.ay", "body5.z", "body5.az", "body6.x", "body6.ax", "body6.y", "body6.ay", "body6.z", "body6.az", "body7.x", "body7.ax", "body7.y", "body7.ay", "body7.z", "body7.az", )
 PARAM_NAMES = ("mom", "beta0", "Theta0", "gamma0", "Phi0", "delta0", "Omega0", "epsilon0", "c0", "l0", "xb", "yb", "xc", "yc", "sc", "sd", "pivot_O__stiffness", "pivot_O__damping", "pivot_O__rot_stiffness", "pivot_O__rot_damping", "pivot_O__tx_load", "pivot_O__ty_load", "pivot_O__tz_load", "pivot_O__ry_load", "pivot_O__rz_load", "pivot_O__rx_k", "pivot_O__rx_c", "pivot_O__rx_preload", "pin_F__stiffness", "pin_F__damping", "pin_F__rot_stiffness", "pin_F__rot_damping", "pin_F__ty_load", "pin_F__tz_load", "pin_E3__stiffness", "pin_E3__damping", "pin_E3__rot_stiffness", "pin_E3__rot_damping", "pin_E3__ty_load", "pin_E3__tz_load", "pin_E4__stiffness", "pin_E4__damping", "pin_E4__rot_stiffness", "pin_E4__rot_damping", "pin_E4__ty_load", "pin_E4__tz_load", "pin_E6__stiffness", "pin_E6__damping", "pin_E6__rot_stiffness", "pin_E6__rot_damping", "pin_E6__ty_load", "pin_E6__tz_load", "pivot_B__stiffness", "pivot_B__damping", "pivot_B__rot_stiffness", "pivot_B__rot_damping", "pivot_B__tx_load", "pivot_B__ty_load", "pivot_B__tz_load", "pivot_B__ry_load", "pivot_B__rz_load", "pivot_B__rx_k", "pivot_B__rx_c", "pivot_B__rx_preload", "pivot_A5__stiffness", "pivot_A5__damping", "pivot_A5__rot_stiffness", "pivot_A5__rot_damping", "pivot_A5__tx_load", "pivot_A5__ty_load", "pivot_A5__tz_load", "pivot_A5__ry_load", "pivot_A5__rz_load", "pin_H__stiffness", "pin_H__damping", "pin_H__rot_stiffness", "pin_H__rot_damping", "pin_H__ty_load", "pin_H__tz_load", "pivot_A7__stiffness", "pivot_A7__damping", "pivot_A7__rot_stiffness", "pivot_A7__rot_damping", "pivot_A7__tx_load", "pivot_A7__ty_load", "pivot_A7__tz_load", "pivot_A7__ry_load", "pivot_A7__rz_load", "pin_G__stiffness", "pin_G__damping", "pin_G__rot_stiffness", "pin_G__rot_damping", "pin_G__ty_load", "pin_G__tz_load", "plane_2__stiffness", "plane_2__damping", "plane_2__rot_stiffness", "plane_2__rot_damping", "plane_2__tx_load", "plane_2__ry_load", "plane_2__rz_load", "plane_4__stiffness", "plane_4__damping", "plane_4__rot_stiffness", "plane_4__rot_damping", "plane_4__tx_load", "plane_4__ry_load", "plane_4__rz_load", "plane_6__stiffness", "plane_6__damping", "plane_6__rot_stiffness", "plane_6__rot_damping", "plane_6__tx_load", "plane_6__ry_load", "plane_6__rz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_mom = p[0]
@@ -1422,7 +1422,7 @@ JAC_ROW = np.array([194, 194, 194, 194, 194, 194, 194, 194, 194, 194, 194, 194, 
 JAC_COLOUR = np.array([44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 44, 45, 46, 36, 37, 47, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 52, 53, 54, 42, 55, 40, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 48, 49, 50, 38, 39, 51, 8, 9, 10, 3, 11, 2, 56, 57, 58, 43, 59, 41, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 8, 9, 10, 3, 11, 2, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 20, 21, 22, 12, 13, 23, 24, 25, 26, 14, 15, 27, 28, 29, 30, 18, 31, 16, 32, 33, 34, 19, 35, 17, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 4, 5, 6, 0, 1, 7, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 8, 9, 10, 3, 11, 2, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 24, 25, 26, 14, 15, 27, 20, 21, 22, 12, 13, 23, 32, 33, 34, 19, 35, 17, 28, 29, 30, 18, 31, 16, 44, 36, 37, 42, 40, 45, 36, 37, 40, 46, 36, 37, 47, 42, 40, 4, 0, 1, 3, 2, 5, 0, 1, 2, 6, 0, 1, 7, 3, 2, 48, 38, 39, 43, 41, 49, 38, 39, 41, 50, 38, 39, 51, 43, 41, 20, 12, 13, 18, 16, 21, 12, 13, 16, 22, 12, 13, 23, 18, 16, 24, 14, 15, 19, 17, 25, 14, 15, 17, 26, 14, 15, 27, 19, 17, 24, 14, 15, 19, 17, 25, 14, 15, 17, 26, 14, 15, 27, 19, 17, 20, 12, 13, 18, 16, 21, 12, 13, 16, 22, 12, 13, 23, 18, 16], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -1436,7 +1436,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_mom = p[0]
@@ -3682,7 +3682,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_beta0 = p[1]
@@ -3710,7 +3710,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -3718,7 +3718,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_body1__ay = x[45]

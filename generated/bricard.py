@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "f36bc6976f6c1b9876376b931da0a35c"
+MODEL_HASH = "294d07c13350f4629ca337b3de37c646"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_bricard_f36bc6976f6c1b9876376b931da0a35c", sys.modules[__name__])
-__name__ = "_bgc_bricard_f36bc6976f6c1b9876376b931da0a35c"
+    sys.modules.setdefault("_bgc_bricard_294d07c13350f4629ca337b3de37c646", sys.modules[__name__])
+__name__ = "_bgc_bricard_294d07c13350f4629ca337b3de37c646"
 
 STATE_NAMES = ("bar1.m.px", "bar1.m.py", "bar1.m.pz", "bar1.J.px", "bar1.J.py", "bar1.J.pz", "bar2.m.px", "bar2.m.py", "bar2.m.pz", "bar2.J.px", "bar2.J.py", "bar2.J.pz", "bar3.m.px", "bar3.m.py", "bar3.m.pz", "bar3.J.px", "bar3.J.py", "bar3.J.pz", "bar4.m.px", "bar4.m.py", "bar4.m.pz", "bar4.J.px", "bar4.J.py", "bar4.J.pz", "bar5.m.px", "bar5.m.py", "bar5.m.pz", "bar5.J.px", "bar5.J.py", "bar5.J.pz", "bar1.x", "bar1.ax", "bar1.y", "bar1.ay", "bar1.z", "bar1.az", "bar2.x", "bar2.ax", "bar2.y", "bar2.ay", "bar2.z", "bar2.az", "bar3.x", "bar3.ax", "bar3.y", "bar3.ay", "bar3.z", "bar3.az", "bar4.x", "bar4.ax", "bar4.y", "bar4.ay", "bar4.z", "bar4.az", "bar5.x", "bar5.ax", "bar5.y", "bar5.ay", "bar5.z", "bar5.az", )
 PARAM_NAMES = ("J1__stiffness", "J1__damping", "J1__rot_stiffness", "J1__rot_damping", "J1__tx_load", "J1__ty_load", "J1__tz_load", "J1__ry_load", "J1__rz_load", "J2__stiffness", "J2__damping", "J2__rot_stiffness", "J2__rot_damping", "J2__tx_load", "J2__ty_load", "J2__tz_load", "J2__ry_load", "J2__rz_load", "J3__stiffness", "J3__damping", "J3__rot_stiffness", "J3__rot_damping", "J3__tx_load", "J3__ty_load", "J3__tz_load", "J3__ry_load", "J3__rz_load", "J4__stiffness", "J4__damping", "J4__rot_stiffness", "J4__rot_damping", "J4__tx_load", "J4__ty_load", "J4__tz_load", "J4__ry_load", "J4__rz_load", "J5__stiffness", "J5__damping", "J5__rot_stiffness", "J5__rot_damping", "J5__tx_load", "J5__ty_load", "J5__tz_load", "J5__ry_load", "J5__rz_load", "J6__stiffness", "J6__damping", "J6__rot_stiffness", "J6__rot_damping", "J6__tx_load", "J6__ty_load", "J6__tz_load", "J6__ry_load", "J6__rz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_J1__stiffness = p[0]
@@ -848,7 +848,7 @@ JAC_ROW = np.array([168, 168, 168, 168, 168, 168, 168, 168, 168, 168, 168, 168, 
 JAC_COLOUR = np.array([24, 2, 11, 18, 0, 9, 33, 8, 5, 27, 12, 6, 3, 25, 2, 11, 19, 0, 9, 14, 34, 8, 5, 28, 6, 3, 26, 2, 11, 20, 0, 9, 14, 8, 35, 5, 12, 6, 29, 3, 17, 2, 11, 15, 0, 9, 14, 8, 5, 12, 6, 3, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 24, 2, 11, 18, 0, 9, 21, 1, 10, 33, 8, 5, 27, 12, 6, 3, 30, 13, 7, 4, 25, 2, 11, 19, 0, 9, 22, 1, 10, 14, 34, 8, 5, 28, 6, 3, 13, 31, 7, 4, 26, 2, 11, 20, 0, 9, 23, 1, 10, 14, 8, 35, 5, 12, 6, 29, 3, 7, 32, 4, 17, 2, 11, 15, 0, 9, 16, 1, 10, 14, 8, 5, 12, 6, 3, 13, 7, 4, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 21, 22, 23, 16, 1, 10, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 30, 13, 31, 7, 32, 4, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 21, 22, 23, 16, 1, 10, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 30, 13, 31, 7, 32, 4, 18, 0, 9, 21, 1, 10, 24, 2, 11, 27, 12, 6, 3, 30, 13, 7, 4, 33, 8, 5, 19, 0, 9, 22, 1, 10, 25, 2, 11, 28, 6, 3, 13, 31, 7, 4, 14, 34, 8, 5, 20, 0, 9, 23, 1, 10, 26, 2, 11, 12, 6, 29, 3, 7, 32, 4, 14, 8, 35, 5, 15, 0, 9, 16, 1, 10, 17, 2, 11, 12, 6, 3, 13, 7, 4, 14, 8, 5, 18, 19, 20, 15, 0, 9, 21, 22, 23, 16, 1, 10, 24, 25, 26, 17, 2, 11, 27, 12, 28, 6, 29, 3, 30, 13, 31, 7, 32, 4, 33, 14, 34, 8, 35, 5, 18, 19, 20, 15, 0, 9, 21, 22, 23, 16, 1, 10, 24, 25, 26, 17, 2, 11, 27, 12, 28, 6, 29, 3, 30, 13, 31, 7, 32, 4, 33, 14, 34, 8, 35, 5, 21, 1, 10, 24, 2, 11, 18, 0, 9, 30, 13, 7, 4, 33, 8, 5, 27, 12, 6, 3, 22, 1, 10, 25, 2, 11, 19, 0, 9, 13, 31, 7, 4, 14, 34, 8, 5, 28, 6, 3, 23, 1, 10, 26, 2, 11, 20, 0, 9, 7, 32, 4, 14, 8, 35, 5, 12, 6, 29, 3, 16, 1, 10, 17, 2, 11, 15, 0, 9, 13, 7, 4, 14, 8, 5, 12, 6, 3, 21, 22, 23, 16, 1, 10, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 30, 13, 31, 7, 32, 4, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 21, 22, 23, 16, 1, 10, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 30, 13, 31, 7, 32, 4, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 24, 2, 11, 18, 0, 9, 33, 8, 5, 27, 12, 6, 3, 25, 2, 11, 19, 0, 9, 14, 34, 8, 5, 28, 6, 3, 26, 2, 11, 20, 0, 9, 14, 8, 35, 5, 12, 6, 29, 3, 17, 2, 11, 15, 0, 9, 14, 8, 5, 12, 6, 3, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 24, 25, 26, 17, 2, 11, 18, 19, 20, 15, 0, 9, 33, 14, 34, 8, 35, 5, 27, 12, 28, 6, 29, 3, 24, 17, 2, 8, 5, 25, 17, 2, 5, 26, 17, 2, 11, 8, 5, 18, 15, 0, 6, 3, 19, 15, 0, 3, 20, 15, 0, 9, 6, 3, 21, 16, 1, 7, 4, 22, 16, 1, 4, 23, 16, 1, 10, 7, 4, 24, 17, 2, 8, 5, 25, 17, 2, 5, 26, 17, 2, 11, 8, 5, 18, 15, 0, 6, 3, 19, 15, 0, 3, 20, 15, 0, 9, 6, 3], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -862,7 +862,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_J1__stiffness = p[0]
@@ -1817,7 +1817,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_bar1__m__px = x[0]
@@ -1980,7 +1980,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -1988,7 +1988,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_bar1__ay = x[33]

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "d528d3fb5ff37c12ad3fb8f7279f358b"
+MODEL_HASH = "7486f881baa89fd9ee08a61b26b99a94"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_dc_motor_d528d3fb5ff37c12ad3fb8f7279f358b", sys.modules[__name__])
-__name__ = "_bgc_dc_motor_d528d3fb5ff37c12ad3fb8f7279f358b"
+    sys.modules.setdefault("_bgc_dc_motor_7486f881baa89fd9ee08a61b26b99a94", sys.modules[__name__])
+__name__ = "_bgc_dc_motor_7486f881baa89fd9ee08a61b26b99a94"
 
 STATE_NAMES = ("L_a.p", "J.p", )
 PARAM_NAMES = ("Ra", "La", "km", "b_m", "ratio", "J_load", "b_load", "T_load", "U", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_Ra = p[0]
@@ -118,7 +118,7 @@ JAC_ROW = np.array([6, 6, 13, 13], dtype=np.int64)
 JAC_COLOUR = np.array([0, 1, 0, 1], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -132,7 +132,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_Ra = p[0]
@@ -159,7 +159,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_La = p[1]
@@ -181,7 +181,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -189,7 +189,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "1f66b51953637ab6378fefb570063f12"
+MODEL_HASH = "14fd46a9bf4e94e81b57a30d3911bf39"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_double_pendulum_1f66b51953637ab6378fefb570063f12", sys.modules[__name__])
-__name__ = "_bgc_double_pendulum_1f66b51953637ab6378fefb570063f12"
+    sys.modules.setdefault("_bgc_double_pendulum_14fd46a9bf4e94e81b57a30d3911bf39", sys.modules[__name__])
+__name__ = "_bgc_double_pendulum_14fd46a9bf4e94e81b57a30d3911bf39"
 
 STATE_NAMES = ("rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", )
 PARAM_NAMES = ("shoulder__stiffness", "shoulder__damping", "shoulder__rot_stiffness", "shoulder__rot_damping", "shoulder__tx_load", "shoulder__ty_load", "shoulder__tz_load", "shoulder__ry_load", "shoulder__rz_load", "elbow__stiffness", "elbow__damping", "elbow__rot_stiffness", "elbow__rot_damping", "elbow__tx_load", "elbow__ty_load", "elbow__tz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_shoulder__stiffness = p[0]
@@ -313,7 +313,7 @@ JAC_ROW = np.array([126, 126, 126, 126, 126, 126, 126, 126, 126, 126, 126, 126, 
 JAC_COLOUR = np.array([12, 0, 1, 8, 15, 2, 3, 9, 18, 10, 6, 4, 21, 7, 5, 13, 0, 1, 8, 16, 2, 3, 9, 19, 6, 4, 11, 22, 7, 5, 14, 0, 1, 8, 17, 2, 3, 9, 10, 6, 20, 4, 11, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 0, 1, 8, 15, 2, 3, 9, 18, 10, 6, 4, 21, 7, 5, 13, 0, 1, 8, 16, 2, 3, 9, 19, 6, 4, 11, 22, 7, 5, 14, 0, 1, 8, 17, 2, 3, 9, 10, 6, 20, 4, 11, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 13, 14, 0, 1, 8, 15, 16, 17, 2, 3, 9, 18, 10, 19, 6, 20, 4, 21, 11, 22, 7, 23, 5, 12, 0, 1, 6, 4, 13, 0, 1, 4, 14, 0, 1, 8, 6, 4, 15, 2, 3, 7, 5, 16, 2, 3, 5, 17, 2, 3, 9, 7, 5], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -327,7 +327,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_shoulder__stiffness = p[0]
@@ -608,7 +608,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_rod1__m__px = x[0]
@@ -675,7 +675,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -683,7 +683,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_rod1__ay = x[15]

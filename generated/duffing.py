@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "a270d498549f20d2d79a448b3c015430"
+MODEL_HASH = "7683abd3b638e32cadf5d55a0ba58254"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_duffing_a270d498549f20d2d79a448b3c015430", sys.modules[__name__])
-__name__ = "_bgc_duffing_a270d498549f20d2d79a448b3c015430"
+    sys.modules.setdefault("_bgc_duffing_7683abd3b638e32cadf5d55a0ba58254", sys.modules[__name__])
+__name__ = "_bgc_duffing_7683abd3b638e32cadf5d55a0ba58254"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )
@@ -70,7 +70,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_m = p[0]
@@ -102,7 +102,7 @@ JAC_ROW = np.array([2, 3], dtype=np.int64)
 JAC_COLOUR = np.array([0, 0], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -116,7 +116,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_m = p[0]
@@ -135,7 +135,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_m = p[0]
@@ -151,7 +151,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -159,7 +159,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "6b4a515d232ad4f9333e72fcbf2ce5d1"
+MODEL_HASH = "b2f9221b66c09d035b0252aab81e6bab"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_four_bar_6b4a515d232ad4f9333e72fcbf2ce5d1", sys.modules[__name__])
-__name__ = "_bgc_four_bar_6b4a515d232ad4f9333e72fcbf2ce5d1"
+    sys.modules.setdefault("_bgc_four_bar_b2f9221b66c09d035b0252aab81e6bab", sys.modules[__name__])
+__name__ = "_bgc_four_bar_b2f9221b66c09d035b0252aab81e6bab"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "coupler.m.px", "coupler.m.py", "coupler.m.pz", "coupler.J.px", "coupler.J.py", "coupler.J.pz", "rocker.m.px", "rocker.m.py", "rocker.m.pz", "rocker.J.px", "rocker.J.py", "rocker.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "coupler.x", "coupler.ax", "coupler.y", "coupler.ay", "coupler.z", "coupler.az", "rocker.x", "rocker.ax", "rocker.y", "rocker.ay", "rocker.z", "rocker.az", )
 PARAM_NAMES = ("crank_pivot__stiffness", "crank_pivot__damping", "crank_pivot__rot_stiffness", "crank_pivot__rot_damping", "crank_pivot__tx_load", "crank_pivot__ty_load", "crank_pivot__tz_load", "crank_pivot__ry_load", "crank_pivot__rz_load", "ball_A__stiffness", "ball_A__damping", "ball_A__rot_stiffness", "ball_A__rot_damping", "ball_A__tx_load", "ball_A__ty_load", "ball_A__tz_load", "ball_B__stiffness", "ball_B__damping", "ball_B__rot_stiffness", "ball_B__rot_damping", "ball_B__tx_load", "ball_B__ty_load", "ball_B__tz_load", "rocker_pivot__stiffness", "rocker_pivot__damping", "rocker_pivot__rot_stiffness", "rocker_pivot__rot_damping", "rocker_pivot__tx_load", "rocker_pivot__ty_load", "rocker_pivot__tz_load", "rocker_pivot__ry_load", "rocker_pivot__rz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_crank_pivot__stiffness = p[0]
@@ -480,7 +480,7 @@ JAC_ROW = np.array([132, 132, 132, 132, 132, 132, 132, 132, 132, 132, 132, 132, 
 JAC_COLOUR = np.array([24, 6, 7, 14, 15, 0, 1, 4, 30, 12, 10, 19, 5, 3, 2, 25, 6, 7, 14, 16, 0, 1, 4, 22, 31, 12, 10, 5, 20, 3, 2, 26, 6, 7, 14, 17, 0, 1, 4, 22, 12, 32, 10, 5, 3, 21, 2, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 24, 6, 7, 14, 15, 0, 1, 4, 27, 8, 9, 18, 30, 12, 10, 19, 5, 3, 2, 33, 23, 13, 11, 25, 6, 7, 14, 16, 0, 1, 4, 28, 8, 9, 18, 22, 31, 12, 10, 5, 20, 3, 2, 23, 34, 13, 11, 26, 6, 7, 14, 17, 0, 1, 4, 29, 8, 9, 18, 22, 12, 32, 10, 5, 3, 21, 2, 13, 35, 11, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 24, 25, 26, 6, 7, 14, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 30, 22, 31, 12, 32, 10, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 15, 0, 1, 4, 27, 8, 9, 18, 19, 5, 3, 2, 33, 23, 13, 11, 16, 0, 1, 4, 28, 8, 9, 18, 5, 20, 3, 2, 23, 34, 13, 11, 17, 0, 1, 4, 29, 8, 9, 18, 5, 3, 21, 2, 13, 35, 11, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 15, 16, 17, 0, 1, 4, 27, 28, 29, 8, 9, 18, 19, 5, 20, 3, 21, 2, 33, 23, 34, 13, 35, 11, 24, 6, 7, 12, 10, 25, 6, 7, 10, 26, 6, 7, 14, 12, 10, 15, 0, 1, 3, 2, 16, 0, 1, 2, 17, 0, 1, 4, 3, 2, 27, 8, 9, 13, 11, 28, 8, 9, 11, 29, 8, 9, 18, 13, 11], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -494,7 +494,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_crank_pivot__stiffness = p[0]
@@ -977,7 +977,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_crank__m__px = x[0]
@@ -1089,7 +1089,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -1097,7 +1097,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_crank__ay = x[21]

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "2d2f610550a351634b3ea13408887d97"
+MODEL_HASH = "5e1ff0cb9ca5c689862da1acd774b833"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_2d2f610550a351634b3ea13408887d97", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_2d2f610550a351634b3ea13408887d97"
+    sys.modules.setdefault("_bgc_geared_inertias_5e1ff0cb9ca5c689862da1acd774b833", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_5e1ff0cb9ca5c689862da1acd774b833"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_T0 = p[0]
@@ -108,7 +108,7 @@ JAC_ROW = np.array([5, 5, 6], dtype=np.int64)
 JAC_COLOUR = np.array([0, 1, 0], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -122,7 +122,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_J_rotor = p[1]
@@ -145,7 +145,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_J_rotor = p[1]
@@ -164,7 +164,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -172,7 +172,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "e9f74ba4ad9b279ce5ab46678545ceba"
+MODEL_HASH = "ab4be0ac5ca1dc9e141ad8e45c570e07"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_e9f74ba4ad9b279ce5ab46678545ceba", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_e9f74ba4ad9b279ce5ab46678545ceba"
+    sys.modules.setdefault("_bgc_heavy_top_ab4be0ac5ca1dc9e141ad8e45c570e07", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_ab4be0ac5ca1dc9e141ad8e45c570e07"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_pivot__stiffness = p[0]
@@ -178,7 +178,7 @@ JAC_ROW = np.array([47, 47, 47, 47, 47, 47, 47, 47, 48, 48, 48, 48, 48, 48, 48, 
 JAC_COLOUR = np.array([6, 0, 1, 4, 9, 5, 3, 2, 7, 0, 1, 4, 5, 10, 3, 2, 8, 0, 1, 4, 5, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 7, 8, 0, 1, 4, 9, 5, 10, 3, 11, 2, 6, 0, 1, 3, 2, 7, 0, 1, 2, 8, 0, 1, 4, 3, 2], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -192,7 +192,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_pivot__stiffness = p[0]
@@ -311,7 +311,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_top__x = x[6]
@@ -340,7 +340,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -348,7 +348,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_top__ay = x[9]

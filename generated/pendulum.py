@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "9efd7925f4d1d97772ead3bfea15f0b6"
+MODEL_HASH = "1d48864eea1b6f0afd1facb0ed06f97e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_9efd7925f4d1d97772ead3bfea15f0b6", sys.modules[__name__])
-__name__ = "_bgc_pendulum_9efd7925f4d1d97772ead3bfea15f0b6"
+    sys.modules.setdefault("_bgc_pendulum_1d48864eea1b6f0afd1facb0ed06f97e", sys.modules[__name__])
+__name__ = "_bgc_pendulum_1d48864eea1b6f0afd1facb0ed06f97e"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_hinge__stiffness = p[0]
@@ -205,7 +205,7 @@ JAC_ROW = np.array([70, 70, 70, 70, 70, 70, 70, 70, 71, 71, 71, 71, 71, 71, 71, 
 JAC_COLOUR = np.array([5, 0, 1, 4, 9, 8, 3, 2, 6, 0, 1, 4, 10, 3, 2, 7, 0, 1, 4, 8, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 6, 7, 0, 1, 4, 9, 8, 10, 3, 11, 2, 5, 0, 1, 3, 2, 6, 0, 1, 2, 7, 0, 1, 4, 3, 2], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -219,7 +219,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_hinge__stiffness = p[0]
@@ -368,7 +368,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_hinge__stiffness = p[0]
@@ -475,7 +475,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -483,7 +483,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_rod__ay = x[9]

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "2367df342eba1e6dbadd18e3e4a2c778"
+MODEL_HASH = "9f3afea476caedbc27af61d48340244b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_2367df342eba1e6dbadd18e3e4a2c778", sys.modules[__name__])
-__name__ = "_bgc_rc_table_2367df342eba1e6dbadd18e3e4a2c778"
+    sys.modules.setdefault("_bgc_rc_table_9f3afea476caedbc27af61d48340244b", sys.modules[__name__])
+__name__ = "_bgc_rc_table_9f3afea476caedbc27af61d48340244b"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
@@ -50,7 +50,7 @@ STATIC_LOADS = False
 TABLE_T0 = np.array([0.0, 0.01, 0.03])
 TABLE_Y0 = np.array([0.0, 5.0, 5.0])
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _table_slope(t, tt, yy):
     k = np.searchsorted(tt, t, side="right") - 1
     if k < 0 or k >= tt.shape[0] - 1:
@@ -78,7 +78,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_R = p[0]
@@ -108,7 +108,7 @@ JAC_ROW = np.array([3], dtype=np.int64)
 JAC_COLOUR = np.array([0], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -122,7 +122,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_R = p[0]
@@ -139,7 +139,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_C = p[1]
@@ -152,7 +152,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -160,7 +160,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

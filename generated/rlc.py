@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "471f3639ee3196d0fa60416242e998b0"
+MODEL_HASH = "da791a3635fdfef57f2d46f3051d3292"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rlc_471f3639ee3196d0fa60416242e998b0", sys.modules[__name__])
-__name__ = "_bgc_rlc_471f3639ee3196d0fa60416242e998b0"
+    sys.modules.setdefault("_bgc_rlc_da791a3635fdfef57f2d46f3051d3292", sys.modules[__name__])
+__name__ = "_bgc_rlc_da791a3635fdfef57f2d46f3051d3292"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_V = p[0]
@@ -105,7 +105,7 @@ JAC_ROW = np.array([4, 4, 5], dtype=np.int64)
 JAC_COLOUR = np.array([0, 1, 0], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -119,7 +119,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_R = p[1]
@@ -138,7 +138,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_R = p[1]
@@ -156,7 +156,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -164,7 +164,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

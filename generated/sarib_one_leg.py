@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "8bcea589e9dc8c0646d1171fb6673fb7"
+MODEL_HASH = "3eefefb41c615e2e0222d7ad1737b184"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_one_leg_8bcea589e9dc8c0646d1171fb6673fb7", sys.modules[__name__])
-__name__ = "_bgc_sarib_one_leg_8bcea589e9dc8c0646d1171fb6673fb7"
+    sys.modules.setdefault("_bgc_sarib_one_leg_3eefefb41c615e2e0222d7ad1737b184", sys.modules[__name__])
+__name__ = "_bgc_sarib_one_leg_3eefefb41c615e2e0222d7ad1737b184"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "beater_1.m.px", "beater_1.m.py", "beater_1.m.pz", "beater_1.J.px", "beater_1.J.py", "beater_1.J.pz", "bar_1.m.px", "bar_1.m.py", "bar_1.m.pz", "bar_1.J.px", "bar_1.J.py", "bar_1.J.pz", "attach_pumping.tx.spring.q", "membrane_pumping.tx.spring.q", "hinge_1.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "beater_1.x", "beater_1.ax", "beater_1.y", "beater_1.ay", "beater_1.z", "beater_1.az", "bar_1.x", "bar_1.ax", "bar_1.y", "bar_1.ay", "bar_1.z", "bar_1.az", )
 PARAM_NAMES = ("attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_pumping__tx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "hinge_1__stiffness", "hinge_1__damping", "hinge_1__rot_stiffness", "hinge_1__rot_damping", "hinge_1__tx_load", "hinge_1__ty_load", "hinge_1__tz_load", "hinge_1__ry_load", "hinge_1__rz_load", "hinge_1__rx_k", "hinge_1__rx_c", "hinge_1__rx_preload", "bar_bottom_1__stiffness", "bar_bottom_1__damping", "bar_bottom_1__rot_stiffness", "bar_bottom_1__rot_damping", "bar_bottom_1__tx_load", "bar_bottom_1__ty_load", "bar_bottom_1__tz_load", "bar_top_1__stiffness", "bar_top_1__damping", "bar_top_1__rot_stiffness", "bar_top_1__rot_damping", "bar_top_1__tx_load", "bar_top_1__ty_load", "bar_top_1__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", )
@@ -72,7 +72,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_attach_pumping__stiffness = p[0]
@@ -795,7 +795,7 @@ JAC_ROW = np.array([279, 279, 279, 279, 279, 279, 279, 279, 279, 279, 279, 279, 
 JAC_COLOUR = np.array([22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 35, 6, 12, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 42, 18, 10, 9, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 36, 6, 12, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 18, 43, 10, 9, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 37, 6, 12, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 18, 10, 44, 9, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 35, 36, 37, 48, 6, 12, 41, 49, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 42, 18, 43, 10, 44, 9, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 35, 36, 37, 48, 6, 12, 41, 49, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 42, 18, 43, 10, 44, 9, 22, 23, 24, 0, 1, 25, 2, 3, 11, 35, 36, 37, 48, 6, 12, 49, 29, 16, 30, 7, 31, 4, 17, 8, 5, 42, 18, 43, 10, 44, 9, 22, 23, 24, 0, 1, 26, 27, 20, 2, 3, 11, 38, 13, 14, 21, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 45, 28, 19, 15, 22, 23, 24, 0, 1, 26, 27, 20, 2, 3, 11, 39, 13, 14, 21, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 28, 46, 19, 15, 22, 23, 24, 0, 1, 26, 27, 20, 2, 3, 11, 40, 13, 14, 21, 6, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 28, 19, 47, 15, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 38, 39, 40, 13, 14, 21, 6, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 45, 28, 46, 19, 47, 15, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 38, 39, 40, 13, 14, 21, 6, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 45, 28, 46, 19, 47, 15, 22, 23, 24, 0, 1, 25, 26, 27, 20, 2, 3, 11, 38, 39, 40, 13, 14, 21, 41, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 45, 28, 46, 19, 47, 15, 22, 0, 1, 25, 35, 6, 12, 38, 13, 14, 21, 29, 7, 4, 42, 18, 10, 9, 45, 28, 19, 15, 23, 0, 1, 25, 36, 6, 12, 39, 13, 14, 21, 16, 30, 7, 4, 18, 43, 10, 9, 28, 46, 19, 15, 24, 0, 1, 25, 37, 6, 12, 40, 13, 14, 21, 16, 7, 31, 4, 18, 10, 44, 9, 28, 19, 47, 15, 0, 1, 25, 48, 6, 12, 49, 16, 7, 4, 18, 10, 9, 22, 23, 24, 0, 1, 25, 35, 36, 37, 48, 6, 12, 38, 39, 40, 13, 14, 21, 49, 29, 16, 30, 7, 31, 4, 42, 18, 43, 10, 44, 9, 45, 28, 46, 19, 47, 15, 22, 23, 24, 0, 1, 25, 35, 36, 37, 48, 6, 12, 38, 39, 40, 13, 14, 21, 49, 29, 16, 30, 7, 31, 4, 42, 18, 43, 10, 44, 9, 45, 28, 46, 19, 47, 15, 26, 2, 3, 11, 35, 6, 12, 38, 13, 14, 21, 32, 8, 5, 42, 18, 10, 9, 45, 28, 19, 15, 27, 2, 3, 11, 36, 6, 12, 39, 13, 14, 21, 17, 33, 8, 5, 18, 43, 10, 9, 28, 46, 19, 15, 20, 2, 3, 11, 37, 6, 12, 40, 13, 14, 21, 17, 8, 34, 5, 18, 10, 44, 9, 28, 19, 47, 15, 26, 27, 20, 2, 3, 11, 35, 36, 37, 6, 12, 38, 39, 40, 13, 14, 21, 32, 17, 33, 8, 34, 5, 42, 18, 43, 10, 44, 9, 45, 28, 46, 19, 47, 15, 26, 27, 20, 2, 3, 11, 35, 36, 37, 6, 12, 38, 39, 40, 13, 14, 21, 32, 17, 33, 8, 34, 5, 42, 18, 43, 10, 44, 9, 45, 28, 46, 19, 47, 15, 26, 27, 20, 2, 3, 11, 35, 36, 37, 6, 12, 38, 39, 40, 13, 14, 21, 32, 17, 33, 8, 34, 5, 42, 18, 43, 10, 44, 9, 45, 28, 46, 19, 47, 15, 20, 2, 3, 17, 8, 5, 22, 23, 24, 0, 1, 26, 27, 20, 2, 3, 11, 29, 16, 30, 7, 31, 4, 32, 17, 33, 8, 34, 5, 0, 1, 25, 48, 6, 12, 16, 7, 4, 18, 10, 9, 22, 0, 1, 7, 4, 23, 0, 1, 4, 24, 0, 1, 25, 7, 4, 26, 2, 3, 8, 5, 27, 2, 3, 5, 20, 2, 3, 11, 8, 5, 35, 48, 6, 10, 9, 36, 48, 6, 9, 37, 48, 6, 12, 10, 9, 38, 13, 14, 19, 15, 39, 13, 14, 15, 40, 13, 14, 21, 19, 15], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -809,7 +809,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_attach_pumping__stiffness = p[0]
@@ -1714,7 +1714,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_membrane_pumping__stiffness = p[12]
@@ -2063,7 +2063,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -2071,7 +2071,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_fuselage__ay = x[30]

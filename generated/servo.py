@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "50dad3355b2256895d774b6d5725fb45"
+MODEL_HASH = "9ac59594b997d66ebefc9283dd047b49"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_servo_50dad3355b2256895d774b6d5725fb45", sys.modules[__name__])
-__name__ = "_bgc_servo_50dad3355b2256895d774b6d5725fb45"
+    sys.modules.setdefault("_bgc_servo_9ac59594b997d66ebefc9283dd047b49", sys.modules[__name__])
+__name__ = "_bgc_servo_9ac59594b997d66ebefc9283dd047b49"
 
 STATE_NAMES = ("L_a.p", "J_rotor.p", "angle.q", )
 PARAM_NAMES = ("Ra", "La", "km", "J_m", "ratio", "J_load", "b_load", "Kp", "Kd", "target", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_Ra = p[0]
@@ -120,7 +120,7 @@ JAC_ROW = np.array([7, 7, 7, 11, 11, 12], dtype=np.int64)
 JAC_COLOUR = np.array([1, 0, 2, 1, 0, 0], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -134,7 +134,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_Ra = p[0]
@@ -166,7 +166,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     P_La = p[1]
@@ -191,7 +191,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -199,7 +199,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     g = np.empty(0)

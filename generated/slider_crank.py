@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "86c51e3f59e190515d4eb2a34c6d3a94"
+MODEL_HASH = "4e525e8e584c90404553e069a805beb3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_slider_crank_86c51e3f59e190515d4eb2a34c6d3a94", sys.modules[__name__])
-__name__ = "_bgc_slider_crank_86c51e3f59e190515d4eb2a34c6d3a94"
+    sys.modules.setdefault("_bgc_slider_crank_4e525e8e584c90404553e069a805beb3", sys.modules[__name__])
+__name__ = "_bgc_slider_crank_4e525e8e584c90404553e069a805beb3"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", )
 PARAM_NAMES = ("main__stiffness", "main__damping", "main__rot_stiffness", "main__rot_damping", "main__tx_load", "main__ty_load", "main__tz_load", "main__ry_load", "main__rz_load", "crank_pin__stiffness", "crank_pin__damping", "crank_pin__rot_stiffness", "crank_pin__rot_damping", "crank_pin__tx_load", "crank_pin__ty_load", "crank_pin__tz_load", "crank_pin__ry_load", "crank_pin__rz_load", "wrist_pin__stiffness", "wrist_pin__damping", "wrist_pin__rot_stiffness", "wrist_pin__rot_damping", "wrist_pin__tx_load", "wrist_pin__ty_load", "wrist_pin__tz_load", "wrist_pin__ry_load", "wrist_pin__rz_load", "guide__stiffness", "guide__damping", "guide__rot_stiffness", "guide__rot_damping", "guide__ty_load", "guide__tz_load", "guide__rx_load", "guide__ry_load", "guide__rz_load", )
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     P_main__stiffness = p[0]
@@ -540,7 +540,7 @@ JAC_ROW = np.array([167, 167, 167, 167, 167, 167, 167, 167, 167, 167, 167, 167, 
 JAC_COLOUR = np.array([15, 5, 6, 10, 11, 0, 1, 4, 24, 14, 9, 7, 20, 8, 3, 2, 16, 5, 6, 10, 12, 0, 1, 4, 25, 9, 7, 21, 3, 2, 17, 5, 6, 10, 13, 0, 1, 4, 14, 9, 26, 7, 8, 3, 22, 2, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 15, 5, 6, 10, 11, 0, 1, 4, 29, 24, 14, 9, 7, 20, 8, 3, 2, 33, 16, 5, 6, 10, 12, 0, 1, 4, 30, 25, 9, 7, 21, 3, 2, 34, 17, 5, 6, 10, 13, 0, 1, 4, 31, 14, 9, 26, 7, 8, 3, 22, 2, 35, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 29, 30, 31, 18, 19, 28, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 33, 32, 34, 27, 35, 23, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 29, 30, 31, 18, 19, 28, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 33, 32, 34, 27, 35, 23, 15, 16, 17, 5, 6, 10, 11, 12, 13, 0, 1, 4, 29, 30, 31, 18, 19, 28, 24, 14, 25, 9, 26, 7, 20, 8, 21, 3, 22, 2, 33, 32, 34, 27, 35, 23, 11, 0, 1, 4, 29, 20, 8, 3, 2, 33, 12, 0, 1, 4, 30, 21, 3, 2, 34, 13, 0, 1, 4, 31, 8, 3, 22, 2, 35, 0, 1, 4, 18, 19, 28, 8, 3, 2, 32, 27, 23, 0, 1, 4, 18, 19, 28, 8, 3, 2, 32, 27, 23, 0, 1, 4, 18, 19, 28, 8, 3, 2, 32, 27, 23, 15, 5, 6, 9, 7, 16, 5, 6, 7, 17, 5, 6, 10, 9, 7, 11, 0, 1, 3, 2, 12, 0, 1, 2, 13, 0, 1, 4, 3, 2, 29, 18, 19, 27, 23, 30, 18, 19, 23, 31, 18, 19, 28, 27, 23], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -554,7 +554,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     P_main__stiffness = p[0]
@@ -1154,7 +1154,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_crank__m__px = x[0]
@@ -1235,7 +1235,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -1243,7 +1243,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_crank__ay = x[21]

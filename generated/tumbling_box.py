@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "f136bcda583e1af9d65c1f4587a95567"
+MODEL_HASH = "1e2513c79864a0930ebf26a7d5393994"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_tumbling_box_f136bcda583e1af9d65c1f4587a95567", sys.modules[__name__])
-__name__ = "_bgc_tumbling_box_f136bcda583e1af9d65c1f4587a95567"
+    sys.modules.setdefault("_bgc_tumbling_box_1e2513c79864a0930ebf26a7d5393994", sys.modules[__name__])
+__name__ = "_bgc_tumbling_box_1e2513c79864a0930ebf26a7d5393994"
 
 STATE_NAMES = ("box.m.px", "box.m.py", "box.m.pz", "box.J.px", "box.J.py", "box.J.pz", "box.x", "box.ax", "box.y", "box.ay", "box.z", "box.az", )
 PARAM_NAMES = ()
@@ -69,7 +69,7 @@ def max_step(p):
     return 1.0 / (STEPS_PER_PERIOD * f) if f > 0 else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(t, x, p):
     """dx/dt = f(t, x, p)."""
     X_box__m__px = x[0]
@@ -135,7 +135,7 @@ JAC_ROW = np.array([13, 13, 14, 14, 15, 15, 16, 17, 17, 17, 17, 18, 19, 19, 19, 
 JAC_COLOUR = np.array([1, 2, 0, 2, 0, 1, 0, 0, 1, 4, 3, 0, 0, 1, 3, 0, 0, 1, 2, 4, 3], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _tape(d, pv, start, stop):
     """Accumulate rows start..stop of the compressed sensitivities, in order."""
     for r in range(start, stop):
@@ -149,7 +149,7 @@ def _tape(d, pv, start, stop):
                     d[r, c] += w * d[s, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac(t, x, p):
     """J[i, j] = d f_i / d x_j, exact, by the compressed forward-mode tape."""
     X_box__J__px = x[3]
@@ -194,7 +194,7 @@ def jac(t, x, p):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs(t, x, p):
     """The model's named outputs at one instant."""
     X_box__m__px = x[0]
@@ -219,7 +219,7 @@ def outputs(t, x, p):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
     then every rate dg/dt."""
@@ -227,7 +227,7 @@ def constraints(t, x, p):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
     X_box__ay = x[9]

@@ -127,7 +127,8 @@ def test_class4_loop_kept_closed_is_an_index2_dae_for_native_radau_only(compiled
         simulate(closed, t_end=0.5, solver="ida")
     with pytest.raises(SimulationError, match="ida failed at t = 0"):
         simulate(closed, t_end=0.5, solver="ida", check_index=False)
-    with pytest.raises(SimulationError, match="step size too small"):
+    with pytest.raises(SimulationError, match=r"the step size collapsed to .* s at t = "
+                       r"[0-9.]+; largest error in ball_B\.t[xyz]\.lambda"):
         simulate(closed, t_end=0.5, rtol=1e-6, atol=1e-8, solver="native", check_index=False)
     sc, _, _ = ensure_module(MODELS / "slider_crank.yaml", tmp_path, "zcp", open_loops=False)
     with pytest.raises(SimulationError, match="5 algebraic equations of rank 2") as err:

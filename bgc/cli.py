@@ -380,9 +380,6 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",
                        hint="valid solvers: " + ", ".join(SOLVERS))
-    if max_steps is not None and max_steps < 1:
-        raise BgcError(f"--max-steps must be >= 1, got {max_steps}", key="--max-steps",
-                       hint="a whole number of steps, e.g. --max-steps 1000000")
     check_writable(out, "--out")       # before the run: a bad path fails at once
     check_writable(plot, "--plot")
     if plot:

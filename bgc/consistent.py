@@ -219,7 +219,8 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
         x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
     Kb, free, n_imposed = _measured_rows(module, K)
-    rank = n_imposed + _rank(equilibrate(Kb))
+    Ke = equilibrate(Kb)
+    rank = n_imposed + _rank(Ke)
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):
         worst = int(np.argmax(np.abs(r)))
         raise SimulationError(
@@ -230,9 +231,9 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     dx = x - x_user
     proj = Projection(float(np.abs(dx[pose]).max(initial=0.0)),
                       float(np.abs(dx[other]).max(initial=0.0)), it, rank, len(names),
-                      _dependent(equilibrate(Kb), free, rank - n_imposed)
+                      _dependent(Ke, free, rank - n_imposed)
                       if rank < len(names) else [],
-                      _conditioning(equilibrate(Kb), rank - n_imposed))
+                      _conditioning(Ke, rank - n_imposed))
     return x, proj
 
 
@@ -278,8 +279,9 @@ class RankMonitor:
         # the rank is judged on the rows scaled as at the start (kept fixed, so a row that
         # vanishes at a dead point still shows); the event's minor is picked on the rows
         # as they are, where its determinant has a simple zero at the dead point
-        self.scales = equilibration(self._rows(x)[0])
-        U = np.linalg.svd(self._scaled(x)[0])[0]
+        K = self._rows(x)[0]
+        self.scales = equilibration(K)
+        U = np.linalg.svd(equilibrate(K, self.scales))[0]
         self.start_null = U[:, self.rank:]          # the consistent redundancy
         self.repick(x)
 

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "294d07c13350f4629ca337b3de37c646"
+MODEL_HASH = "1e0538909c4c753ae34adbaa7f811099"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_bricard_294d07c13350f4629ca337b3de37c646", sys.modules[__name__])
-__name__ = "_bgc_bricard_294d07c13350f4629ca337b3de37c646"
+    sys.modules.setdefault("_bgc_bricard_1e0538909c4c753ae34adbaa7f811099", sys.modules[__name__])
+__name__ = "_bgc_bricard_1e0538909c4c753ae34adbaa7f811099"
 
 STATE_NAMES = ("bar1.m.px", "bar1.m.py", "bar1.m.pz", "bar1.J.px", "bar1.J.py", "bar1.J.pz", "bar2.m.px", "bar2.m.py", "bar2.m.pz", "bar2.J.px", "bar2.J.py", "bar2.J.pz", "bar3.m.px", "bar3.m.py", "bar3.m.pz", "bar3.J.px", "bar3.J.py", "bar3.J.pz", "bar4.m.px", "bar4.m.py", "bar4.m.pz", "bar4.J.px", "bar4.J.py", "bar4.J.pz", "bar5.m.px", "bar5.m.py", "bar5.m.pz", "bar5.J.px", "bar5.J.py", "bar5.J.pz", "bar1.x", "bar1.ax", "bar1.y", "bar1.ay", "bar1.z", "bar1.az", "bar2.x", "bar2.ax", "bar2.y", "bar2.ay", "bar2.z", "bar2.az", "bar3.x", "bar3.ax", "bar3.y", "bar3.ay", "bar3.z", "bar3.az", "bar4.x", "bar4.ax", "bar4.y", "bar4.ay", "bar4.z", "bar4.az", "bar5.x", "bar5.ax", "bar5.y", "bar5.ay", "bar5.z", "bar5.az", )
 PARAM_NAMES = ("J1__stiffness", "J1__damping", "J1__rot_stiffness", "J1__rot_damping", "J1__tx_load", "J1__ty_load", "J1__tz_load", "J1__ry_load", "J1__rz_load", "J2__stiffness", "J2__damping", "J2__rot_stiffness", "J2__rot_damping", "J2__tx_load", "J2__ty_load", "J2__tz_load", "J2__ry_load", "J2__rz_load", "J3__stiffness", "J3__damping", "J3__rot_stiffness", "J3__rot_damping", "J3__tx_load", "J3__ty_load", "J3__tz_load", "J3__ry_load", "J3__rz_load", "J4__stiffness", "J4__damping", "J4__rot_stiffness", "J4__rot_damping", "J4__tx_load", "J4__ty_load", "J4__tz_load", "J4__ry_load", "J4__rz_load", "J5__stiffness", "J5__damping", "J5__rot_stiffness", "J5__rot_damping", "J5__tx_load", "J5__ty_load", "J5__tz_load", "J5__ry_load", "J5__rz_load", "J6__stiffness", "J6__damping", "J6__rot_stiffness", "J6__rot_damping", "J6__tx_load", "J6__ty_load", "J6__tz_load", "J6__ry_load", "J6__rz_load", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "7486f881baa89fd9ee08a61b26b99a94"
+MODEL_HASH = "fecf036e58cf16850ef0f2998c69c675"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_dc_motor_7486f881baa89fd9ee08a61b26b99a94", sys.modules[__name__])
-__name__ = "_bgc_dc_motor_7486f881baa89fd9ee08a61b26b99a94"
+    sys.modules.setdefault("_bgc_dc_motor_fecf036e58cf16850ef0f2998c69c675", sys.modules[__name__])
+__name__ = "_bgc_dc_motor_fecf036e58cf16850ef0f2998c69c675"
 
 STATE_NAMES = ("L_a.p", "J.p", )
 PARAM_NAMES = ("Ra", "La", "km", "b_m", "ratio", "J_load", "b_load", "T_load", "U", )

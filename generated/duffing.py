@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "7683abd3b638e32cadf5d55a0ba58254"
+MODEL_HASH = "7f96232c4635e18b17e2920f3a185a03"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_duffing_7683abd3b638e32cadf5d55a0ba58254", sys.modules[__name__])
-__name__ = "_bgc_duffing_7683abd3b638e32cadf5d55a0ba58254"
+    sys.modules.setdefault("_bgc_duffing_7f96232c4635e18b17e2920f3a185a03", sys.modules[__name__])
+__name__ = "_bgc_duffing_7f96232c4635e18b17e2920f3a185a03"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "5e1ff0cb9ca5c689862da1acd774b833"
+MODEL_HASH = "a5d38cbbb51e5ced98b49c1938feea48"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_5e1ff0cb9ca5c689862da1acd774b833", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_5e1ff0cb9ca5c689862da1acd774b833"
+    sys.modules.setdefault("_bgc_geared_inertias_a5d38cbbb51e5ced98b49c1938feea48", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_a5d38cbbb51e5ced98b49c1938feea48"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )

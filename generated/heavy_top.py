@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "ab4be0ac5ca1dc9e141ad8e45c570e07"
+MODEL_HASH = "f86cad84b3acf474a8a1005554e7afa2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_ab4be0ac5ca1dc9e141ad8e45c570e07", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_ab4be0ac5ca1dc9e141ad8e45c570e07"
+    sys.modules.setdefault("_bgc_heavy_top_f86cad84b3acf474a8a1005554e7afa2", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_f86cad84b3acf474a8a1005554e7afa2"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "486db52dbe2d40cfa1d418a7e2403f87"
+MODEL_HASH = "8d7f5de5daba3bd0ccb43ac008b25c96"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_forced_486db52dbe2d40cfa1d418a7e2403f87", sys.modules[__name__])
-__name__ = "_bgc_msd_forced_486db52dbe2d40cfa1d418a7e2403f87"
+    sys.modules.setdefault("_bgc_msd_forced_8d7f5de5daba3bd0ccb43ac008b25c96", sys.modules[__name__])
+__name__ = "_bgc_msd_forced_8d7f5de5daba3bd0ccb43ac008b25c96"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "F0", "f_drive", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "d6f7d1da9f834109b935d6d6a276eb8d"
+MODEL_HASH = "f8915fef127c30b7f097bc71c6146a41"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_d6f7d1da9f834109b935d6d6a276eb8d", sys.modules[__name__])
-__name__ = "_bgc_msd_free_d6f7d1da9f834109b935d6d6a276eb8d"
+    sys.modules.setdefault("_bgc_msd_free_f8915fef127c30b7f097bc71c6146a41", sys.modules[__name__])
+__name__ = "_bgc_msd_free_f8915fef127c30b7f097bc71c6146a41"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "1d48864eea1b6f0afd1facb0ed06f97e"
+MODEL_HASH = "cc33f32fb5666b595a34ec0c47f40c52"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_1d48864eea1b6f0afd1facb0ed06f97e", sys.modules[__name__])
-__name__ = "_bgc_pendulum_1d48864eea1b6f0afd1facb0ed06f97e"
+    sys.modules.setdefault("_bgc_pendulum_cc33f32fb5666b595a34ec0c47f40c52", sys.modules[__name__])
+__name__ = "_bgc_pendulum_cc33f32fb5666b595a34ec0c47f40c52"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "9f3afea476caedbc27af61d48340244b"
+MODEL_HASH = "68e5c42345bf54208e99c5021b6f4ec4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_9f3afea476caedbc27af61d48340244b", sys.modules[__name__])
-__name__ = "_bgc_rc_table_9f3afea476caedbc27af61d48340244b"
+    sys.modules.setdefault("_bgc_rc_table_68e5c42345bf54208e99c5021b6f4ec4", sys.modules[__name__])
+__name__ = "_bgc_rc_table_68e5c42345bf54208e99c5021b6f4ec4"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "7966b2cfe79d2f2a7ba5bf39bdb5e23c"
+MODEL_HASH = "26221e4508a56f091699f67c9f584749"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rectifier_7966b2cfe79d2f2a7ba5bf39bdb5e23c", sys.modules[__name__])
-__name__ = "_bgc_rectifier_7966b2cfe79d2f2a7ba5bf39bdb5e23c"
+    sys.modules.setdefault("_bgc_rectifier_26221e4508a56f091699f67c9f584749", sys.modules[__name__])
+__name__ = "_bgc_rectifier_26221e4508a56f091699f67c9f584749"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("Vpk", "f_line", "Is", "Vt", "C", "R_load", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "da791a3635fdfef57f2d46f3051d3292"
+MODEL_HASH = "6aa0c0930139330c56020e67639c83a5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rlc_da791a3635fdfef57f2d46f3051d3292", sys.modules[__name__])
-__name__ = "_bgc_rlc_da791a3635fdfef57f2d46f3051d3292"
+    sys.modules.setdefault("_bgc_rlc_6aa0c0930139330c56020e67639c83a5", sys.modules[__name__])
+__name__ = "_bgc_rlc_6aa0c0930139330c56020e67639c83a5"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )

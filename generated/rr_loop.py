@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "c72779d09eba4b00b9f2461968198eea"
+MODEL_HASH = "1c8424fb2232d829f814d81d968b8f5c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rr_loop_c72779d09eba4b00b9f2461968198eea", sys.modules[__name__])
-__name__ = "_bgc_rr_loop_c72779d09eba4b00b9f2461968198eea"
+    sys.modules.setdefault("_bgc_rr_loop_1c8424fb2232d829f814d81d968b8f5c", sys.modules[__name__])
+__name__ = "_bgc_rr_loop_1c8424fb2232d829f814d81d968b8f5c"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )

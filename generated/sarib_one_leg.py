@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "3eefefb41c615e2e0222d7ad1737b184"
+MODEL_HASH = "8595200078a7973894cfa4a5b2fa23c7"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_one_leg_3eefefb41c615e2e0222d7ad1737b184", sys.modules[__name__])
-__name__ = "_bgc_sarib_one_leg_3eefefb41c615e2e0222d7ad1737b184"
+    sys.modules.setdefault("_bgc_sarib_one_leg_8595200078a7973894cfa4a5b2fa23c7", sys.modules[__name__])
+__name__ = "_bgc_sarib_one_leg_8595200078a7973894cfa4a5b2fa23c7"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "beater_1.m.px", "beater_1.m.py", "beater_1.m.pz", "beater_1.J.px", "beater_1.J.py", "beater_1.J.pz", "bar_1.m.px", "bar_1.m.py", "bar_1.m.pz", "bar_1.J.px", "bar_1.J.py", "bar_1.J.pz", "attach_pumping.tx.spring.q", "membrane_pumping.tx.spring.q", "hinge_1.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "beater_1.x", "beater_1.ax", "beater_1.y", "beater_1.ay", "beater_1.z", "beater_1.az", "bar_1.x", "bar_1.ax", "bar_1.y", "bar_1.ay", "bar_1.z", "bar_1.az", )
 PARAM_NAMES = ("attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_pumping__tx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "hinge_1__stiffness", "hinge_1__damping", "hinge_1__rot_stiffness", "hinge_1__rot_damping", "hinge_1__tx_load", "hinge_1__ty_load", "hinge_1__tz_load", "hinge_1__ry_load", "hinge_1__rz_load", "hinge_1__rx_k", "hinge_1__rx_c", "hinge_1__rx_preload", "bar_bottom_1__stiffness", "bar_bottom_1__damping", "bar_bottom_1__rot_stiffness", "bar_bottom_1__rot_damping", "bar_bottom_1__tx_load", "bar_bottom_1__ty_load", "bar_bottom_1__tz_load", "bar_top_1__stiffness", "bar_top_1__damping", "bar_top_1__rot_stiffness", "bar_top_1__rot_damping", "bar_top_1__tx_load", "bar_top_1__ty_load", "bar_top_1__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "9ac59594b997d66ebefc9283dd047b49"
+MODEL_HASH = "31cfd08c7d5ae2093b53cfde6416599c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_servo_9ac59594b997d66ebefc9283dd047b49", sys.modules[__name__])
-__name__ = "_bgc_servo_9ac59594b997d66ebefc9283dd047b49"
+    sys.modules.setdefault("_bgc_servo_31cfd08c7d5ae2093b53cfde6416599c", sys.modules[__name__])
+__name__ = "_bgc_servo_31cfd08c7d5ae2093b53cfde6416599c"
 
 STATE_NAMES = ("L_a.p", "J_rotor.p", "angle.q", )
 PARAM_NAMES = ("Ra", "La", "km", "J_m", "ratio", "J_load", "b_load", "Kp", "Kd", "target", )

@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "slider_crank"
 MODEL_FILE = "slider_crank.yaml"
-MODEL_HASH = "4e525e8e584c90404553e069a805beb3"
+MODEL_HASH = "55fe4681395ce43ccf44abe031f90675"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_slider_crank_4e525e8e584c90404553e069a805beb3", sys.modules[__name__])
-__name__ = "_bgc_slider_crank_4e525e8e584c90404553e069a805beb3"
+    sys.modules.setdefault("_bgc_slider_crank_55fe4681395ce43ccf44abe031f90675", sys.modules[__name__])
+__name__ = "_bgc_slider_crank_55fe4681395ce43ccf44abe031f90675"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", )
 PARAM_NAMES = ("main__stiffness", "main__damping", "main__rot_stiffness", "main__rot_damping", "main__tx_load", "main__ty_load", "main__tz_load", "main__ry_load", "main__rz_load", "crank_pin__stiffness", "crank_pin__damping", "crank_pin__rot_stiffness", "crank_pin__rot_damping", "crank_pin__tx_load", "crank_pin__ty_load", "crank_pin__tz_load", "crank_pin__ry_load", "crank_pin__rz_load", "wrist_pin__stiffness", "wrist_pin__damping", "wrist_pin__rot_stiffness", "wrist_pin__rot_damping", "wrist_pin__tx_load", "wrist_pin__ty_load", "wrist_pin__tz_load", "wrist_pin__ry_load", "wrist_pin__rz_load", "guide__stiffness", "guide__damping", "guide__rot_stiffness", "guide__rot_damping", "guide__ty_load", "guide__tz_load", "guide__rx_load", "guide__ry_load", "guide__rz_load", )

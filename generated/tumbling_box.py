@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "1e2513c79864a0930ebf26a7d5393994"
+MODEL_HASH = "312e63c1ede420d46d5b945daacc2086"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_tumbling_box_1e2513c79864a0930ebf26a7d5393994", sys.modules[__name__])
-__name__ = "_bgc_tumbling_box_1e2513c79864a0930ebf26a7d5393994"
+    sys.modules.setdefault("_bgc_tumbling_box_312e63c1ede420d46d5b945daacc2086", sys.modules[__name__])
+__name__ = "_bgc_tumbling_box_312e63c1ede420d46d5b945daacc2086"
 
 STATE_NAMES = ("box.m.px", "box.m.py", "box.m.pz", "box.J.px", "box.J.py", "box.J.pz", "box.x", "box.ax", "box.y", "box.ay", "box.z", "box.az", )
 PARAM_NAMES = ()

@@ -21,7 +21,7 @@ from pathlib import Path
 import jinja2
 import sympy as sp
 
-from . import __version__, symbols
+from . import __version__, kernels, symbols
 from .equations import EquationSystem, LinearBlock
 from .errors import BgcError
 from .fileio import atomic_write
@@ -75,7 +75,16 @@ def _doc(text: str) -> str:
     return text if re.fullmatch(r"[A-Za-z0-9_.\[\]]+", str(text)) else py_str(text)
 
 
+def _ir_block(text: str) -> str:
+    """LLVM IR as a triple-quoted literal: bgc's IR holds no quote and no backslash (it
+    names nothing from the model), which this checks rather than assumes."""
+    if '"' in text or "\\" in text:
+        return py_str(text)
+    return '"""\\\n' + text + '"""'
+
+
 _ENV.filters["pystr"] = py_str
+_ENV.filters["irblock"] = _ir_block
 _ENV.filters["doc"] = _doc
 _ENV.filters["ident"] = _ident
 _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
@@ -123,64 +132,6 @@ def _cone(assignments, targets):
             keep.append(item)
             need |= _free(item)
     return keep[::-1], need
-
-
-def _body(assignments):
-    lines = []
-    for item in assignments:
-        if isinstance(item, LinearBlock):
-            k, n = item.index, len(item.unknowns)
-            lines += [f"{v.name} = {code(e)}" for v, e in item.pre]
-            if item.factors is not None:        # A = -K B
-                d, K, B = item.factors
-                lines.append(f"_K{k} = np.zeros(({n}, {d}))")
-                lines += [f"_K{k}[{i}, {j}] = {code(e)}" for i, j, e in K]
-                lines.append(f"_B{k} = np.zeros(({d}, {n}))")
-                lines += [f"_B{k}[{i}, {j}] = {code(e)}" for i, j, e in B]
-                lines.append(f"_A{k} = -(_K{k} @ _B{k})")
-            else:
-                lines.append(f"_A{k} = np.zeros(({n}, {n}))")
-                lines += [f"_A{k}[{i}, {j}] = {code(e)}" for i, j, e in item.A]
-            lines.append(f"_b{k} = np.empty({n})")
-            if item.b is None:      # the right-hand side at u = 0, through the chain
-                lines += [f"{v.name} = 0.0" for v in item.unknowns]
-                lines += [f"{v.name} = {code(e)}" for v, e in item.chain]
-                lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.tear_eqs)]
-            else:
-                lines += [f"_b{k}[{i}] = {code(e)}" for i, e in enumerate(item.b)]
-            rank = str(n) if item.rank is None else code(item.rank)
-            lines.append(f"_u{k} = _block_solve(_A{k}, _b{k}.reshape(({n}, 1)), {rank})[:, 0]")
-            lines += [f"{v.name} = _u{k}[{i}]" for i, v in enumerate(item.unknowns)]
-        else:
-            v, e = item
-            lines.append(f"{v.name} = {code(e)}")
-    return lines
-
-
-def _prologue(system, used):
-    params = [f"{s.name} = p[{i}]" for i, (s, _, _) in enumerate(system.params) if s in used]
-    unpack = [f"{st.sym.name} = x[{i}]" for i, st in enumerate(system.states)
-              if st.sym in used]
-    return params, unpack
-
-
-def _jac_lines(jt, ranks: dict) -> list[str]:
-    """The jac tail: run-time partials, the tape segments with block solves between
-    (``ranks``: index -> rank expression of the constraint blocks; an algebraic loop's
-    block has full rank)."""
-    lines = [f"_pv = np.empty({len(jt.partials) + 1})", "_pv[0] = 1.0"]
-    lines += [f"_pv[{k}] = {code(d)}" for k, d in jt.partials]
-    lines.append(f"_d = np.zeros(({jt.n_rows}, {jt.n_colours}))")
-    for seg in jt.segments:
-        if seg[0] == "tape":
-            lines.append(f"_tape(_d, _pv, {seg[1]}, {seg[2]})")
-        else:
-            b = seg[1]
-            r, n = b.start, b.n
-            R = f"_d[{r}:{r + n}, :]"
-            rank = code(ranks[b.index]) if b.index in ranks else str(n)
-            lines.append(f"_d[{r + n}:{r + 2 * n}, :] = _block_solve(_A{b.index}, {R}, {rank})")
-    return lines
 
 
 # elementary functions of one variable that are hoisted out of the expressions
@@ -231,41 +182,43 @@ def render(system: EquationSystem) -> str:
     system, hoisted = hoist_calls(system)
     m = system.model
     dx = [st.dsym for st in system.states]
-    rhs_asg, rhs_used = _cone(system.assignments, dx)
+    rhs_asg, _ = _cone(system.assignments, dx)
     jt = tape(rhs_asg, system.states)
     jt.partials = [(k, d.xreplace(hoisted)) for k, d in jt.partials]
     solved = {b.index for b in jt.blocks}
     jac_targets = [d for _, d in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
-    jac_all, jac_used = _cone(system.assignments, jac_targets)
+    jac_all, _ = _cone(system.assignments, jac_targets)
     out_exprs = [e for _, e in system.outputs]
-    out_asg, out_used = _cone(system.assignments, out_exprs)
+    out_asg, _ = _cone(system.assignments, out_exprs)
     guard_exprs = [e for _, e in system.guards]
-    guard_asg, guard_used = _cone(system.assignments, guard_exprs)
+    guard_asg, _ = _cone(system.assignments, guard_exprs)
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
-    con_asg, con_used = _cone(system.assignments, con_exprs)
-    ranks = {it.index: it.rank for it in system.assignments
-             if isinstance(it, LinearBlock) and it.rank is not None}
-    blocks = any(isinstance(it, LinearBlock) for it in system.assignments)
+    con_asg, _ = _cone(system.assignments, con_exprs)
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     # every name the code assigns or reads is written as is: each must be an identifier
     for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
-    funcs = {}
-    for key, asg, used in (("rhs", rhs_asg, rhs_used | set(dx)),
-                           ("jac", jac_all, jac_used),
-                           ("out", out_asg, out_used),
-                           ("guard", guard_asg, guard_used),
-                           ("con", con_asg, con_used)):
-        params, unpack = _prologue(system, used)
-        funcs[key] = (params, unpack, _body(asg))
+    canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
+    kern = kernels.lower(system, canonical, {
+        "rhs": (rhs_asg, list(enumerate(dx))),
+        "jac": (jac_all, [(0, sp.S.One)] + list(jt.partials)),
+        "out": (out_asg, list(enumerate(out_exprs))),
+        "guard": (guard_asg, list(enumerate(guard_exprs))),
+        "con": (con_asg, list(enumerate(con_exprs)))}, jt)
+    blk = {f: [getattr(b, f) for b in kern.blocks] for f in ("n", "a", "rank", "d", "k", "kb")}
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=f"_bgc_{m.name}_{model_hash(m.digest, system.variant)}",
+        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, blk=blk,
+        lstsq=any(b.rank >= 0 for b in kern.blocks), blocks=bool(kern.blocks),
+        ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
+        tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
+                 "y": [_float(v) for v in tb.y]} for tb in system.tables],
+        jac_i=[i for i, _, _ in jt.pattern], jac_j=[j for _, j, _ in jt.pattern],
         state_names=[st.name for st in system.states],
         param_names=[name for _, name, _ in system.params],
         output_names=[name for name, _ in system.outputs],
@@ -277,31 +230,15 @@ def render(system: EquationSystem) -> str:
         x0=[code(st.initial) for st in system.states],
         p0=[_float(v) for _, _, v in system.params],
         breakpoints=[_float(b) for b in system.breakpoints],
-        tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
-                 "y": [_float(v) for v in tb.y]}
-                for tb in system.tables],
         n=len(system.states),
-        rhs_out=[f"dx[{i}] = {code(st.dsym)}" for i, st in enumerate(system.states)],
-        jac_out=_jac_lines(jt, ranks),
-        blocks=blocks,
         constraint_names=[n for n, _, _ in system.constraints],
         has_position=[int(g is not None) for _, g, _ in system.constraints],
         imposed=[int(n in system.imposed) for n, _, _ in system.constraints],
         algebraic=system.algebraic,
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
-        con_out=[f"c[{k}] = {code(e)}" for k, e in enumerate(con_exprs)],
-        tape=dict(ptr=jt.ptr, src=jt.src, slot=jt.slot, scale=[_float(c) for c in jt.scale],
-                  i=[i for i, _, _ in jt.pattern],
-                  row=[r for _, _, r in jt.pattern],
-                  j=[j for _, j, _ in jt.pattern],
-                  colour=[jt.colours[j] for _, j, _ in jt.pattern]),
-        out_out=[f"y[{k}] = {code(e)}" for k, e in enumerate(out_exprs)],
         guard_names=[what for what, _ in system.guards],
         static_loads=bool(m.static_loads and system.method == "parasitic"),
-        guard_out=[f"g[{k}] = {code(e)}" for k, e in enumerate(guard_exprs)],
     )
-    for key, (params, unpack, body) in funcs.items():
-        ctx[f"{key}_body"] = params + unpack + body
     return _ENV.get_template("module.py.j2").render(**ctx)
 
 

@@ -1,0 +1,695 @@
+"""Stage **kernels**: the straight-line code of an EquationSystem as LLVM IR.
+
+numba's compile time for one straight-line function grows faster than its length (the
+SARIB's Jacobian: minutes); LLVM alone, given the same operations as IR, compiles them in
+seconds. So the generated module keeps numba for what is small and has loops (block solves,
+the Jacobian tape, the C entry points) and hands the assignments to LLVM as IR functions of
+at most ``CHUNK`` assignments each, which keeps LLVM's cost linear in the model's size.
+
+Every function the module offers (``rhs``, ``jac``'s run-time partials, ``outputs``,
+``guards``, ``constraints``) is a **program**: its cone of assignments cut into
+**segments** at the linear blocks. A segment computes its assignments, then the entries of
+the next block's matrix and right-hand side; the numba side solves the block and writes
+the unknowns back; the next segment goes on. Values cross segments and chunks through one
+workspace array ``w`` (a slot per assigned symbol, a region per block); within a chunk
+they stay in registers. The IR is plain text, target-independent (no triple, no CPU),
+with numbers written exactly (hexadecimal doubles), so it is the same on every machine.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import sympy as sp
+
+from . import symbols
+from .equations import LinearBlock
+from .errors import BgcError
+from .signals import table, table_slope
+
+CHUNK = 300          # assignments (or stores) per IR function
+# LLVM's IR passes at -O1 and instruction selection at -O0 (fast, local register
+# allocation): on the SARIB's lagrange module 1 s instead of 11 s at -O2/-O2, and the
+# rhs and Jacobian run as fast as numba's -O3 build of the same code did
+IR_OPT, CODEGEN_OPT = 1, 0
+
+DBL, PTR = "double", "double*"
+ARGS = "double %t, double* noalias %x, double* noalias %p, double* noalias %w, " \
+       "double* noalias %out"
+# sympy function -> LLVM intrinsic or C library function of one double
+_UNARY = {sp.sin: "llvm.sin.f64", sp.cos: "llvm.cos.f64", sp.exp: "llvm.exp.f64",
+          sp.log: "llvm.log.f64", sp.Abs: "llvm.fabs.f64", sp.tan: "tan", sp.asin: "asin",
+          sp.acos: "acos", sp.atan: "atan", sp.sinh: "sinh", sp.cosh: "cosh",
+          sp.tanh: "tanh"}
+_CMP = {sp.StrictLessThan: "olt", sp.LessThan: "ole", sp.StrictGreaterThan: "ogt",
+        sp.GreaterThan: "oge", sp.Equality: "oeq", sp.Unequality: "une"}
+
+
+def double(v: float) -> str:
+    """A double as an LLVM constant: its exact bits in hexadecimal (canonical, no noise)."""
+    return "0x%016X" % struct.unpack("<Q", struct.pack("<d", float(v)))[0]
+
+
+@dataclass
+class Block:
+    """Where linear block ``index`` lives in the workspace: A (n x n, row-major), b (n),
+    u (n, the unknowns' slots), the rank's slot (-1: full rank, LU) and, for a block
+    ``A = -K B``, K (n x d) and B (d x n)."""
+    index: int
+    n: int
+    a: int
+    b: int
+    u: int
+    rank: int = -1
+    d: int = 0
+    k: int = 0
+    kb: int = 0
+
+
+@dataclass
+class Kernels:
+    """The IR module and what the numba side needs to know of it: the workspace size,
+    the linear blocks (in the order of the solver's tables) and the tables' slots."""
+    ir: str
+    n_work: int
+    blocks: list[Block]
+
+
+class Layout:
+    """Workspace slots: one per assigned symbol (a block's unknowns side by side), then a
+    region per linear block, then each table's value and slope at the current t."""
+
+    def __init__(self, system):
+        self.slot: dict[sp.Symbol, int] = {}
+        self.blocks: dict[int, Block] = {}
+        self.size = 0
+        for item in system.assignments:
+            if isinstance(item, LinearBlock):
+                for u in item.unknowns:
+                    self._take(u)
+                for v, _ in item.pre + item.chain:
+                    self._take(v)
+            else:
+                self._take(item[0])
+        for item in system.assignments:
+            if isinstance(item, LinearBlock):
+                n = len(item.unknowns)
+                blk = Block(item.index, n, self._region(n * n), self._region(n),
+                            self.slot[item.unknowns[0]])
+                if item.rank is not None:
+                    blk.rank = self._region(1)
+                if item.factors is not None:
+                    blk.d = d = item.factors[0]
+                    blk.k, blk.kb = self._region(n * d), self._region(d * n)
+                self.blocks[item.index] = blk
+        self.tables = {tb.index: (self._region(1), self._region(1))
+                       for tb in system.tables}
+        # a block's place in the module's block tables (by index)
+        self.position = {k: i for i, k in enumerate(sorted(self.blocks))}
+
+    def _take(self, v):
+        if v not in self.slot:
+            self.slot[v] = self.size
+            self.size += 1
+
+    def _region(self, n: int) -> int:
+        self.size += n
+        return self.size - n
+
+
+class _Function:
+    """One IR function under construction: ``val`` lowers an expression to an SSA value,
+    reusing what this function has already computed."""
+
+    def __init__(self, name: str, layout: Layout, states: dict, params: dict, decls: set):
+        self.name, self.layout, self.states, self.params = name, layout, states, params
+        self.decls = decls
+        self.body: list[str] = []
+        self.n = 0
+        self.env: dict = {}
+        self.memo: dict = {}
+
+    def op(self, text: str) -> str:
+        self.n += 1
+        r = f"%v{self.n}"
+        self.body.append(f"  {r} = {text}")
+        return r
+
+    def ptr(self, base: str, i: int) -> str:
+        return self.op(f"getelementptr inbounds double, double* {base}, i64 {i}")
+
+    def load(self, base: str, i: int) -> str:
+        return self.op(f"load double, double* {self.ptr(base, i)}, align 8")
+
+    def store(self, base: str, i: int, value: str):
+        self.body.append(f"  store double {value}, double* {self.ptr(base, i)}, align 8")
+
+    def call(self, fn: str, *args: str) -> str:
+        self.decls.add(f"declare double @{fn}({', '.join([DBL] * len(args))})")
+        return self.op(f"call double @{fn}({', '.join(f'double {a}' for a in args)})")
+
+    def symbol(self, s) -> str:
+        if s in self.env:
+            return self.env[s]
+        if s is symbols.t:
+            v = "%t"
+        elif s in self.states:
+            v = self.load("%x", self.states[s])
+        elif s in self.params:
+            v = self.load("%p", self.params[s])
+        elif s in self.layout.slot:
+            v = self.load("%w", self.layout.slot[s])
+        else:
+            raise BgcError(f"internal: symbol {s} has no value in generated code")
+        self.env[s] = v
+        return v
+
+    def assign(self, v, e):
+        value = self.val(e)
+        if v in self.env:               # assigned again (a loop's chain after u = 0)
+            self.memo.clear()
+        self.env[v] = value
+        self.store("%w", self.layout.slot[v], value)
+
+    def val(self, e) -> str:
+        if e.is_Symbol:
+            return self.symbol(e)
+        if e.is_Number or e.is_NumberSymbol:
+            return double(float(e)) if e is not sp.zoo else double(float("nan"))
+        hit = self.memo.get(e)
+        if hit is None:
+            hit = self.memo[e] = self._lower(e)
+        return hit
+
+    def _fold(self, opcode: str, values: list[str]) -> str:
+        acc = values[0]
+        for v in values[1:]:
+            acc = self.op(f"{opcode} double {acc}, {v}")
+        return acc
+
+    def _power(self, base: str, n: int) -> str:
+        """base**n for an integer n >= 1 by repeated squaring."""
+        result, square = None, base
+        while True:
+            if n & 1:
+                result = square if result is None else self.op(f"fmul double {result}, {square}")
+            n >>= 1
+            if not n:
+                return result
+            square = self.op(f"fmul double {square}, {square}")
+
+    def _lower(self, e) -> str:
+        if e.is_Add:
+            return self._fold("fadd", [self.val(a) for a in e.args])
+        if e.is_Mul:
+            coeff, rest = e.as_coeff_Mul()
+            num, den = [], []
+            for a in sp.Mul.make_args(rest):
+                if a.is_Pow and a.exp.is_Integer and a.exp < 0:
+                    den.append(self.val(a.base) if a.exp == -1 else self.val(a.base ** -a.exp))
+                else:
+                    num.append(self.val(a))
+            if coeff not in (1, -1):
+                num.insert(0, self.val(coeff))
+            value = self._fold("fmul", num) if num else double(1.0)
+            if den:
+                value = self.op(f"fdiv double {value}, {self._fold('fmul', den)}")
+            return self.op(f"fneg double {value}") if coeff == -1 else value
+        if e.is_Pow:
+            base, ex = e.args
+            if base is sp.E:
+                return self.call("llvm.exp.f64", self.val(ex))
+            b = self.val(base)
+            if ex.is_Integer and 0 < abs(int(ex)) <= 64:
+                n = int(ex)
+                pos = self._power(b, abs(n))
+                return pos if n > 0 else self.op(f"fdiv double {double(1.0)}, {pos}")
+            if ex == sp.S.Half:
+                return self.call("llvm.sqrt.f64", b)
+            if ex == -sp.S.Half:
+                return self.op(f"fdiv double {double(1.0)}, "
+                               f"{self.call('llvm.sqrt.f64', b)}")
+            return self.call("llvm.pow.f64", b, self.val(ex))
+        fn = type(e)
+        if fn in _UNARY:
+            return self.call(_UNARY[fn], self.val(e.args[0]))
+        if fn is sp.atan2:
+            return self.call("atan2", self.val(e.args[0]), self.val(e.args[1]))
+        if fn is sp.Piecewise:
+            pieces = list(e.args)
+            out = double(float("nan"))
+            if pieces[-1].cond == sp.true:
+                out = self.val(pieces.pop().expr)
+            for piece in reversed(pieces):
+                out = self.select(self.cond(piece.cond), self.val(piece.expr), out)
+            return out
+        if fn in (sp.Min, sp.Max):          # Python's min/max, folded left to right
+            pred = "olt" if fn is sp.Min else "ogt"
+            acc = self.val(e.args[0])
+            for a in e.args[1:]:
+                v = self.val(a)
+                acc = self.select(self.op(f"fcmp {pred} double {v}, {acc}"), v, acc)
+            return acc
+        if fn is sp.sign:
+            x = self.val(e.args[0])
+            zero = self.select(self.op(f"fcmp oeq double {x}, {double(0.0)}"),
+                               double(0.0), double(float("nan")))
+            neg = self.select(self.op(f"fcmp olt double {x}, {double(0.0)}"),
+                              double(-1.0), zero)
+            return self.select(self.op(f"fcmp ogt double {x}, {double(0.0)}"),
+                               double(1.0), neg)
+        if fn is sp.Heaviside:
+            x = self.val(e.args[0])
+            h0 = float(e.args[1]) if len(e.args) > 1 else 0.5
+            at0 = self.select(self.op(f"fcmp oeq double {x}, {double(0.0)}"),
+                              double(h0), double(0.0))
+            return self.select(self.op(f"fcmp ogt double {x}, {double(0.0)}"),
+                               double(1.0), at0)
+        if fn is sp.DiracDelta:
+            return double(0.0)      # zero almost everywhere; no impulse in a Jacobian
+        if fn in (table, table_slope):
+            if e.args[1] is not symbols.t:
+                raise BgcError(f"internal: a table of {e.args[1]}, not of t")
+            value, slope = self.layout.tables[int(e.args[0])]
+            return self.load("%w", value if fn is table else slope)
+        raise BgcError(f"internal: no code for {fn.__name__} in {e}")
+
+    def select(self, c: str, a: str, b: str) -> str:
+        return self.op(f"select i1 {c}, double {a}, double {b}")
+
+    def cond(self, c) -> str:
+        """An i1 value for a condition (relations, and/or/not, true/false)."""
+        if c == sp.true or c == sp.false:
+            return "true" if c == sp.true else "false"
+        if type(c) in _CMP:
+            return self.op(f"fcmp {_CMP[type(c)]} double {self.val(c.lhs)}, "
+                           f"{self.val(c.rhs)}")
+        if isinstance(c, (sp.And, sp.Or)):
+            parts = [self.cond(a) for a in c.args]
+            opcode = "and" if isinstance(c, sp.And) else "or"
+            acc = parts[0]
+            for q in parts[1:]:
+                acc = self.op(f"{opcode} i1 {acc}, {q}")
+            return acc
+        if isinstance(c, sp.Not):
+            return self.op(f"xor i1 {self.cond(c.args[0])}, true")
+        raise BgcError(f"internal: no code for the condition {c}")
+
+    def text(self) -> str:
+        return "\n".join([f"define internal void @{self.name}({ARGS}) noinline nounwind {{",
+                          "entry:", *self.body, "  ret void", "}"])
+
+
+def _steps(items, outputs, layout: Layout):
+    """A program's work as (kind, ...) steps, and where it is cut: ``("solve", index)``
+    after the stores of each linear block."""
+    for item in items:
+        if not isinstance(item, LinearBlock):
+            yield ("set", item[0], item[1])
+            continue
+        blk = layout.blocks[item.index]
+        n = blk.n
+        for v, e in item.pre:
+            yield ("set", v, e)
+        if item.factors is not None:        # A = -K B, formed by the numba side
+            _, K, B = item.factors
+            yield ("zero", blk.k, n * blk.d)
+            yield ("zero", blk.kb, blk.d * n)
+            for i, j, e in K:
+                yield ("store", blk.k + i * blk.d + j, e)
+            for i, j, e in B:
+                yield ("store", blk.kb + i * n + j, e)
+        else:
+            yield ("zero", blk.a, n * n)
+            for i, j, e in item.A:
+                yield ("store", blk.a + i * n + j, e)
+        if item.b is None:      # the right-hand side at u = 0, through the chain
+            for u in item.unknowns:
+                yield ("set", u, sp.S.Zero)
+            for v, e in item.chain:
+                yield ("set", v, e)
+            for i, e in enumerate(item.tear_eqs):
+                yield ("store", blk.b + i, e)
+        else:
+            for i, e in enumerate(item.b):
+                yield ("store", blk.b + i, e)
+        if item.rank is not None:
+            yield ("store", blk.rank, item.rank)
+        yield ("solve", item.index)
+    for i, e in outputs:
+        yield ("out", i, e)
+
+
+# The Jacobian tape as a loop (see bgc.jacobian): row r of the compressed sensitivities d
+# (n_rows x nc) is the sum over its entries m of scale[m] * pv[slot[m]] times row src[m],
+# or, for src[m] < 0, added into column -src[m]-1. @{P} is the module's prefix.
+_TAPE = """\
+define internal void @{P}_tape(double* noalias %d, double* noalias %pv, i64 %start, \
+i64 %stop, i64 %nc, i64* %ptr, i64* %src, i64* %slot, double* %scale) nounwind {
+entry:
+  %none = icmp sge i64 %start, %stop
+  br i1 %none, label %exit, label %row
+row:
+  %r = phi i64 [ %start, %entry ], [ %r.next, %row.end ]
+  %m0.a = getelementptr inbounds i64, i64* %ptr, i64 %r
+  %m0 = load i64, i64* %m0.a, align 8
+  %r.next = add i64 %r, 1
+  %m1.a = getelementptr inbounds i64, i64* %ptr, i64 %r.next
+  %m1 = load i64, i64* %m1.a, align 8
+  %rbase = mul i64 %r, %nc
+  %some = icmp slt i64 %m0, %m1
+  br i1 %some, label %edge, label %row.end
+edge:
+  %m = phi i64 [ %m0, %row ], [ %m.next, %edge.end ]
+  %s.a = getelementptr inbounds i64, i64* %src, i64 %m
+  %s = load i64, i64* %s.a, align 8
+  %k.a = getelementptr inbounds i64, i64* %slot, i64 %m
+  %k = load i64, i64* %k.a, align 8
+  %c.a = getelementptr inbounds double, double* %scale, i64 %m
+  %c = load double, double* %c.a, align 8
+  %pk.a = getelementptr inbounds double, double* %pv, i64 %k
+  %pk = load double, double* %pk.a, align 8
+  %wv = fmul double %c, %pk
+  %seed = icmp slt i64 %s, 0
+  br i1 %seed, label %state, label %chain
+state:
+  %col = sub i64 -1, %s
+  %i.s = add i64 %rbase, %col
+  %p.s = getelementptr inbounds double, double* %d, i64 %i.s
+  %v.s = load double, double* %p.s, align 8
+  %v.s1 = fadd double %v.s, %wv
+  store double %v.s1, double* %p.s, align 8
+  br label %edge.end
+chain:
+  %sbase = mul i64 %s, %nc
+  %nocol = icmp sle i64 %nc, 0
+  br i1 %nocol, label %edge.end, label %cols
+cols:
+  %j = phi i64 [ 0, %chain ], [ %j.next, %cols ]
+  %i.d = add i64 %rbase, %j
+  %i.r = add i64 %sbase, %j
+  %p.d = getelementptr inbounds double, double* %d, i64 %i.d
+  %p.r = getelementptr inbounds double, double* %d, i64 %i.r
+  %v.d = load double, double* %p.d, align 8
+  %v.r = load double, double* %p.r, align 8
+  %prod = fmul double %wv, %v.r
+  %sum = fadd double %v.d, %prod
+  store double %sum, double* %p.d, align 8
+  %j.next = add i64 %j, 1
+  %jdone = icmp sge i64 %j.next, %nc
+  br i1 %jdone, label %edge.end, label %cols
+edge.end:
+  %m.next = add i64 %m, 1
+  %mdone = icmp sge i64 %m.next, %m1
+  br i1 %mdone, label %row.end, label %edge
+row.end:
+  %rdone = icmp sge i64 %r.next, %stop
+  br i1 %rdone, label %exit, label %row
+exit:
+  ret void
+}
+
+define internal void @{P}_scatter(double* noalias %J, double* noalias %d, i64 %nnz, \
+i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+entry:
+  %none = icmp sle i64 %nnz, 0
+  br i1 %none, label %exit, label %loop
+loop:
+  %k = phi i64 [ 0, %entry ], [ %k.next, %loop ]
+  %i.a = getelementptr inbounds i64, i64* %ii, i64 %k
+  %i = load i64, i64* %i.a, align 8
+  %j.a = getelementptr inbounds i64, i64* %jj, i64 %k
+  %j = load i64, i64* %j.a, align 8
+  %r.a = getelementptr inbounds i64, i64* %row, i64 %k
+  %r = load i64, i64* %r.a, align 8
+  %c.a = getelementptr inbounds i64, i64* %col, i64 %k
+  %c = load i64, i64* %c.a, align 8
+  %in = mul i64 %i, %n
+  %to = add i64 %in, %j
+  %rn = mul i64 %r, %nc
+  %from = add i64 %rn, %c
+  %p.from = getelementptr inbounds double, double* %d, i64 %from
+  %v = load double, double* %p.from, align 8
+  %p.to = getelementptr inbounds double, double* %J, i64 %to
+  store double %v, double* %p.to, align 8
+  %k.next = add i64 %k, 1
+  %done = icmp sge i64 %k.next, %nnz
+  br i1 %done, label %exit, label %loop
+exit:
+  ret void
+}
+
+; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
+; the slope of the segment t lies in (0 outside), as the numba code had it
+define internal double @{P}_interp(double %t, double* %tt, double* %yy, i64 %n, \
+i1 %slope) nounwind {
+entry:
+  br label %scan
+scan:
+  %k = phi i64 [ -1, %entry ], [ %k1, %next ]
+  %k1 = add i64 %k, 1
+  %end = icmp sge i64 %k1, %n
+  br i1 %end, label %found, label %test
+test:
+  %tk.a = getelementptr inbounds double, double* %tt, i64 %k1
+  %tk = load double, double* %tk.a, align 8
+  %le = fcmp ole double %tk, %t
+  br i1 %le, label %next, label %found
+next:
+  br label %scan
+found:
+  %last = add i64 %n, -1
+  %below = icmp slt i64 %k, 0
+  %above = icmp sge i64 %k, %last
+  %out = or i1 %below, %above
+  br i1 %out, label %outside, label %inside
+inside:
+  %t0.a = getelementptr inbounds double, double* %tt, i64 %k
+  %t0 = load double, double* %t0.a, align 8
+  %t1.a = getelementptr inbounds double, double* %tt, i64 %k1
+  %t1 = load double, double* %t1.a, align 8
+  %y0.a = getelementptr inbounds double, double* %yy, i64 %k
+  %y0 = load double, double* %y0.a, align 8
+  %y1.a = getelementptr inbounds double, double* %yy, i64 %k1
+  %y1 = load double, double* %y1.a, align 8
+  %dy = fsub double %y1, %y0
+  %dt = fsub double %t1, %t0
+  %m = fdiv double %dy, %dt
+  br i1 %slope, label %ret.m, label %value
+ret.m:
+  ret double %m
+value:
+  %u = fsub double %t, %t0
+  %mu = fmul double %m, %u
+  %v = fadd double %mu, %y0
+  ret double %v
+outside:
+  br i1 %slope, label %ret.zero, label %clamp
+ret.zero:
+  ret double 0.0
+clamp:
+  %nan = fcmp uno double %t, %t
+  br i1 %nan, label %ret.t, label %ends
+ret.t:
+  ret double %t
+ends:
+  %at = select i1 %below, i64 0, i64 %last
+  %ye.a = getelementptr inbounds double, double* %yy, i64 %at
+  %ye = load double, double* %ye.a, align 8
+  ret double %ye
+}
+"""
+
+_MEMSET = "declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)"
+_MEMCPY = "declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)"
+
+
+class _Module:
+    """The IR module: chunk functions, one function per program, the Jacobian's tape
+    and the C entry points of the native integrators."""
+
+    def __init__(self, prefix: str, system, layout: Layout):
+        self.prefix, self.layout = prefix, layout
+        self.states = {st.sym: i for i, st in enumerate(system.states)}
+        self.params = {s: i for i, (s, _, _) in enumerate(system.params)}
+        self.decls: set[str] = set()
+        self.functions: list[str] = []
+        self.globals: list[str] = []
+
+    def _region(self, fn: _Function, offset: int) -> str:
+        """An i8* to w[offset] (for memset and memcpy)."""
+        return fn.op(f"bitcast double* {fn.ptr('%w', offset)} to i8*")
+
+    def zero(self, fn: _Function, base: str, offset: int, count: int):
+        if count:
+            self.decls.add(_MEMSET)
+            p = fn.op(f"bitcast double* {fn.ptr(base, offset)} to i8*")
+            fn.body.append(f"  call void @llvm.memset.p0i8.i64(i8* {p}, i8 0, "
+                           f"i64 {8 * count}, i1 false)")
+
+    def copy(self, fn: _Function, to: int, frm: int, count: int):
+        if count:
+            self.decls.add(_MEMCPY)
+            fn.body.append(f"  call void @llvm.memcpy.p0i8.p0i8.i64(i8* "
+                           f"{self._region(fn, to)}, i8* {self._region(fn, frm)}, "
+                           f"i64 {8 * count}, i1 false)")
+
+    def solve(self, fn: _Function, blk: Block, at: int, columns: int, assemble: int):
+        """Call the numba-compiled block solver: A_blk X = B for B (n x columns) at w[at],
+        in place (``assemble``: first form A = -K B)."""
+        self.decls.add(f"declare void @{self.prefix}_solve(double*, i64, double*, i64, i64)")
+        fn.body.append(f"  call void @{self.prefix}_solve(double* %w, "
+                       f"i64 {self.layout.position[blk.index]}, double* "
+                       f"{fn.ptr('%w', at)}, i64 {columns}, i64 {assemble})")
+
+    def program(self, name: str, items, outputs):
+        """``@<prefix>_<name>(t, x, p, w, out)``: the assignments in chunks, each linear
+        block solved where the causal order reaches it."""
+        chunks: list[str] = []       # calls, in order
+        fn = None
+        count = 0
+
+        def flush():
+            nonlocal fn, count
+            if fn is not None and (fn.body or not chunks):
+                self.functions.append(fn.text())
+                chunks.append(f"  call void @{fn.name}(double %t, double* %x, double* %p, "
+                              f"double* %w, double* %out)")
+            fn = _Function(f"{self.prefix}_{name}_{len(chunks)}", self.layout, self.states,
+                           self.params, self.decls)
+            count = 0
+
+        flush()
+        for step in _steps(items, outputs, self.layout):
+            kind = step[0]
+            if kind == "solve":
+                blk = self.layout.blocks[step[1]]
+                self.solve(fn, blk, blk.b, 1, int(blk.d > 0))
+                self.copy(fn, blk.u, blk.b, blk.n)
+                flush()                 # what follows reads the unknowns from w
+                continue
+            if count >= CHUNK:
+                flush()
+            count += 1
+            if kind == "set":
+                fn.assign(step[1], step[2])
+            elif kind == "store":
+                fn.store("%w", step[1], fn.val(step[2]))
+            elif kind == "out":
+                fn.store("%out", step[1], fn.val(step[2]))
+            else:
+                self.zero(fn, "%w", step[1], step[2])
+        flush()
+        if self.layout.tables:
+            chunks.insert(0, f"  call void @{self.prefix}_tables(double %t, double* %w)")
+        self.functions.append("\n".join(
+            [f"define void @{self.prefix}_{name}({ARGS}) nounwind {{", "entry:", *chunks,
+             "  ret void", "}"]))
+
+    def tables(self, tables):
+        """``@<prefix>_tables(t, w)``: each table's value and slope at t into w."""
+        if not tables:
+            return
+        body = []
+        for tb in tables:
+            value, slope = self.layout.tables[tb.index]
+            tt = self.array(f"table_t{tb.index}", DBL, tb.t)
+            yy = self.array(f"table_y{tb.index}", DBL, tb.y)
+            for at, flag in ((value, "false"), (slope, "true")):
+                body += [f"  %v{at} = call double @{self.prefix}_interp(double %t, {tt}, "
+                         f"{yy}, i64 {len(tb.t)}, i1 {flag})",
+                         f"  %p{at} = getelementptr inbounds double, double* %w, i64 {at}",
+                         f"  store double %v{at}, double* %p{at}, align 8"]
+        self.functions.append("\n".join(
+            [f"define internal void @{self.prefix}_tables(double %t, double* %w) nounwind {{",
+             "entry:", *body, "  ret void", "}"]))
+
+    def array(self, name: str, kind: str, values) -> str:
+        """A constant global array; returns a pointer to its first element."""
+        values = list(values) or [0]
+        n = len(values)
+        items = ", ".join(f"{kind} {double(v) if kind == DBL else int(v)}" for v in values)
+        self.globals.append(f"@{self.prefix}_{name} = internal constant [{n} x {kind}] "
+                            f"[{items}]")
+        return (f"{kind}* getelementptr inbounds ([{n} x {kind}], [{n} x {kind}]* "
+                f"@{self.prefix}_{name}, i64 0, i64 0)")
+
+    def jacobian(self, jt, n: int):
+        """``@<prefix>_jac_full(t, x, p, w, J)``: the run-time partials (program jac)
+        into w, the tape through them, J (n x n) scattered from its compressed rows."""
+        P, lay = self.prefix, self.layout
+        nc = jt.n_colours
+        ptr = self.array("tape_ptr", "i64", jt.ptr)
+        src = self.array("tape_src", "i64", jt.src)
+        slot = self.array("tape_slot", "i64", jt.slot)
+        scale = self.array("tape_scale", DBL, jt.scale)
+        fn = _Function(f"{P}_jac_full", lay, {}, {}, self.decls)
+        pv, d = fn.ptr("%w", lay.pv), fn.ptr("%w", lay.d)
+        fn.body.append(f"  call void @{P}_jac(double %t, double* %x, double* %p, "
+                       f"double* %w, double* {pv})")
+        self.zero(fn, "%w", lay.d, jt.n_rows * nc)
+        for seg in jt.segments:
+            if seg[0] == "tape":
+                fn.body.append(f"  call void @{P}_tape(double* {d}, double* {pv}, "
+                               f"i64 {seg[1]}, i64 {seg[2]}, i64 {nc}, {ptr}, {src}, "
+                               f"{slot}, {scale})")
+            else:                        # u's rows: A^-1 R, R in the rows before them
+                b = seg[1]
+                blk = lay.blocks[b.index]
+                self.copy(fn, lay.d + (b.start + b.n) * nc, lay.d + b.start * nc, b.n * nc)
+                self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, 0)
+        self.zero(fn, "%J", 0, n * n)
+        pattern = jt.pattern
+        args = [self.array(k, "i64", v) for k, v in (
+            ("jac_i", [i for i, _, _ in pattern]), ("jac_j", [j for _, j, _ in pattern]),
+            ("jac_row", [r for _, _, r in pattern]),
+            ("jac_col", [jt.colours[j] for _, j, _ in pattern]))]
+        fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
+                       f"i64 {len(pattern)}, i64 {n}, i64 {nc}, {', '.join(args)})")
+        self.functions.append(_TAPE.replace("{P}", P))
+        self.functions.append(fn.text().replace("define internal", "define", 1)
+                              .replace("double* noalias %out", "double* noalias %J", 1))
+
+    def entry(self, name: str, program: str):
+        """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
+        with a workspace of its own (malloc'ed: the SARIB's is ~100 kB, too large for a
+        stack)."""
+        self.decls |= {"declare i8* @malloc(i64)", "declare void @free(i8*)"}
+        size = 8 * max(self.layout.size, 1)
+        self.functions.append("\n".join([
+            f"define void @{self.prefix}_{name}(double %t, double* %x, double* %p, "
+            f"double* %out) nounwind {{",
+            "entry:",
+            f"  %raw = call i8* @malloc(i64 {size})",
+            "  %w = bitcast i8* %raw to double*",
+            f"  call void @{self.prefix}_{program}(double %t, double* %x, double* %p, "
+            f"double* %w, double* %out)",
+            "  call void @free(i8* %raw)",
+            "  ret void", "}"]))
+
+    def text(self) -> str:
+        return "\n\n".join(sorted(self.decls) + self.globals + self.functions) + "\n"
+
+
+# the programs a module has, and the C entry points of the native integrators
+PROGRAMS = ("rhs", "jac", "out", "guard", "con")
+ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"))
+
+
+def lower(system, prefix: str, programs: dict, jt) -> Kernels:
+    """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)]))
+    and for the Jacobian from its tape ``jt`` (program ``jac`` computes the tape's
+    partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
+    layout = Layout(system)
+    layout.pv = layout._region(len(jt.partials) + 1)
+    layout.d = layout._region(jt.n_rows * jt.n_colours)
+    mod = _Module(prefix, system, layout)
+    mod.tables(system.tables)
+    for name in PROGRAMS:
+        mod.program(name, *programs[name])
+    mod.jacobian(jt, len(system.states))
+    for name, program in ENTRIES:
+        mod.entry(name, program)
+    return Kernels(mod.text(), layout.size,
+                   [layout.blocks[k] for k in sorted(layout.blocks)])

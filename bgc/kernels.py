@@ -65,6 +65,12 @@ class Block:
     d: int = 0
     k: int = 0
     kb: int = 0
+    lu: int = 0         # room for its LU factors (blocks solved in the IR)
+
+    @property
+    def numba(self) -> bool:
+        """Solved by the numba side (least squares through the SVD, or A = -K B)?"""
+        return self.rank >= 0 or self.d > 0
 
 
 @dataclass
@@ -102,6 +108,8 @@ class Layout:
                 if item.factors is not None:
                     blk.d = d = item.factors[0]
                     blk.k, blk.kb = self._region(n * d), self._region(d * n)
+                if not blk.numba:
+                    blk.lu = self._region(n * n)
                 self.blocks[item.index] = blk
         self.tables = {tb.index: (self._region(1), self._region(1))
                        for tb in system.tables}
@@ -501,6 +509,291 @@ ends:
 }
 """
 
+_LU = """\
+; Solve A X = B in place (B: n x m, row-major) by LU with partial pivoting, as the numba
+; code before it: A is copied to LU; a pivot not above 1e-13 of the largest |A| (or a
+; NaN in A) is a singular configuration and fills X with NaN, which stops the run where
+; the simulator reports it.
+define internal void @{P}_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, \
+double* noalias %LU) nounwind {
+entry:
+  %k.v = alloca i64
+  %i.v = alloca i64
+  %j.v = alloca i64
+  %piv.v = alloca i64
+  %mx.v = alloca double
+  %nn = mul i64 %n, %n
+  %nbytes = mul i64 %nn, 8
+  %lu8 = bitcast double* %LU to i8*
+  %a8 = bitcast double* %A to i8*
+  call void @llvm.memcpy.p0i8.p0i8.i64(i8* %lu8, i8* %a8, i64 %nbytes, i1 false)
+  store double 0.0, double* %mx.v
+  store i64 0, i64* %i.v
+  br label %max.head
+max.head:
+  %mi = load i64, i64* %i.v
+  %mc = icmp slt i64 %mi, %nn
+  br i1 %mc, label %max.body, label %max.end
+max.body:
+  %ma = getelementptr inbounds double, double* %A, i64 %mi
+  %mv = load double, double* %ma
+  %mabs = call double @llvm.fabs.f64(double %mv)
+  %macc = load double, double* %mx.v
+  %mnan = fcmp uno double %macc, %macc
+  %mgt = fcmp ugt double %mabs, %macc
+  %mpick = select i1 %mgt, double %mabs, double %macc
+  %mnew = select i1 %mnan, double %macc, double %mpick
+  store double %mnew, double* %mx.v
+  %mi1 = add i64 %mi, 1
+  store i64 %mi1, i64* %i.v
+  br label %max.head
+max.end:
+  %mxf = load double, double* %mx.v
+  %tiny = fmul double {TINY}, %mxf
+  store i64 0, i64* %k.v
+  br label %k.head
+k.head:
+  %k = load i64, i64* %k.v
+  %kc = icmp slt i64 %k, %n
+  br i1 %kc, label %k.body, label %back.start
+k.body:
+  %kn = mul i64 %k, %n
+  %k1 = add i64 %k, 1
+  store i64 %k, i64* %piv.v
+  store i64 %k1, i64* %i.v
+  br label %p.head
+p.head:
+  %pi = load i64, i64* %i.v
+  %pc = icmp slt i64 %pi, %n
+  br i1 %pc, label %p.body, label %p.end
+p.body:
+  %pin = mul i64 %pi, %n
+  %pik = add i64 %pin, %k
+  %pia = getelementptr inbounds double, double* %LU, i64 %pik
+  %piv0 = load double, double* %pia
+  %piabs = call double @llvm.fabs.f64(double %piv0)
+  %pp = load i64, i64* %piv.v
+  %ppn = mul i64 %pp, %n
+  %ppk = add i64 %ppn, %k
+  %ppa = getelementptr inbounds double, double* %LU, i64 %ppk
+  %ppv = load double, double* %ppa
+  %ppabs = call double @llvm.fabs.f64(double %ppv)
+  %better = fcmp ogt double %piabs, %ppabs
+  %pnew = select i1 %better, i64 %pi, i64 %pp
+  store i64 %pnew, i64* %piv.v
+  %pi1 = add i64 %pi, 1
+  store i64 %pi1, i64* %i.v
+  br label %p.head
+p.end:
+  %piv = load i64, i64* %piv.v
+  %pvn = mul i64 %piv, %n
+  %pvk = add i64 %pvn, %k
+  %pva = getelementptr inbounds double, double* %LU, i64 %pvk
+  %pvv = load double, double* %pva
+  %pvabs = call double @llvm.fabs.f64(double %pvv)
+  %ok = fcmp ogt double %pvabs, %tiny
+  br i1 %ok, label %swap.test, label %singular
+swap.test:
+  %same = icmp eq i64 %piv, %k
+  br i1 %same, label %elim.start, label %swap.lu
+swap.lu:
+  store i64 0, i64* %j.v
+  br label %sl.head
+sl.head:
+  %sj = load i64, i64* %j.v
+  %sc = icmp slt i64 %sj, %n
+  br i1 %sc, label %sl.body, label %swap.b
+sl.body:
+  %sa.i = add i64 %kn, %sj
+  %sb.i = add i64 %pvn, %sj
+  %sa = getelementptr inbounds double, double* %LU, i64 %sa.i
+  %sb = getelementptr inbounds double, double* %LU, i64 %sb.i
+  %sav = load double, double* %sa
+  %sbv = load double, double* %sb
+  store double %sbv, double* %sa
+  store double %sav, double* %sb
+  %sj1 = add i64 %sj, 1
+  store i64 %sj1, i64* %j.v
+  br label %sl.head
+swap.b:
+  store i64 0, i64* %j.v
+  %km = mul i64 %k, %m
+  %pm = mul i64 %piv, %m
+  br label %sb.head
+sb.head:
+  %tj = load i64, i64* %j.v
+  %tc = icmp slt i64 %tj, %m
+  br i1 %tc, label %sb.body, label %elim.start
+sb.body:
+  %ta.i = add i64 %km, %tj
+  %tb.i = add i64 %pm, %tj
+  %ta = getelementptr inbounds double, double* %B, i64 %ta.i
+  %tb = getelementptr inbounds double, double* %B, i64 %tb.i
+  %tav = load double, double* %ta
+  %tbv = load double, double* %tb
+  store double %tbv, double* %ta
+  store double %tav, double* %tb
+  %tj1 = add i64 %tj, 1
+  store i64 %tj1, i64* %j.v
+  br label %sb.head
+elim.start:
+  %kk.i = add i64 %kn, %k
+  %kk.a = getelementptr inbounds double, double* %LU, i64 %kk.i
+  %kkm = mul i64 %k, %m
+  store i64 %k1, i64* %i.v
+  br label %e.head
+e.head:
+  %ei = load i64, i64* %i.v
+  %ec = icmp slt i64 %ei, %n
+  br i1 %ec, label %e.body, label %k.next
+e.body:
+  %ein = mul i64 %ei, %n
+  %eik.i = add i64 %ein, %k
+  %eik.a = getelementptr inbounds double, double* %LU, i64 %eik.i
+  %eik = load double, double* %eik.a
+  %ekk = load double, double* %kk.a
+  %f = fdiv double %eik, %ekk
+  %fz = fcmp une double %f, 0.0
+  br i1 %fz, label %row.lu, label %e.next
+row.lu:
+  store i64 %k1, i64* %j.v
+  br label %rl.head
+rl.head:
+  %rj = load i64, i64* %j.v
+  %rc = icmp slt i64 %rj, %n
+  br i1 %rc, label %rl.body, label %row.b
+rl.body:
+  %rij.i = add i64 %ein, %rj
+  %rkj.i = add i64 %kn, %rj
+  %rij.a = getelementptr inbounds double, double* %LU, i64 %rij.i
+  %rkj.a = getelementptr inbounds double, double* %LU, i64 %rkj.i
+  %rij = load double, double* %rij.a
+  %rkj = load double, double* %rkj.a
+  %rfk = fmul double %f, %rkj
+  %rnew = fsub double %rij, %rfk
+  store double %rnew, double* %rij.a
+  %rj1 = add i64 %rj, 1
+  store i64 %rj1, i64* %j.v
+  br label %rl.head
+row.b:
+  %eim = mul i64 %ei, %m
+  store i64 0, i64* %j.v
+  br label %rb.head
+rb.head:
+  %bj = load i64, i64* %j.v
+  %bc = icmp slt i64 %bj, %m
+  br i1 %bc, label %rb.body, label %e.next
+rb.body:
+  %bij.i = add i64 %eim, %bj
+  %bkj.i = add i64 %kkm, %bj
+  %bij.a = getelementptr inbounds double, double* %B, i64 %bij.i
+  %bkj.a = getelementptr inbounds double, double* %B, i64 %bkj.i
+  %bij = load double, double* %bij.a
+  %bkj = load double, double* %bkj.a
+  %bfk = fmul double %f, %bkj
+  %bnew = fsub double %bij, %bfk
+  store double %bnew, double* %bij.a
+  %bj1 = add i64 %bj, 1
+  store i64 %bj1, i64* %j.v
+  br label %rb.head
+e.next:
+  %ei1 = add i64 %ei, 1
+  store i64 %ei1, i64* %i.v
+  br label %e.head
+k.next:
+  store i64 %k1, i64* %k.v
+  br label %k.head
+back.start:
+  %last = add i64 %n, -1
+  store i64 %last, i64* %k.v
+  br label %u.head
+u.head:
+  %uk = load i64, i64* %k.v
+  %uc = icmp sge i64 %uk, 0
+  br i1 %uc, label %u.body, label %done
+u.body:
+  %ukn = mul i64 %uk, %n
+  %ukm = mul i64 %uk, %m
+  %uk1 = add i64 %uk, 1
+  store i64 %uk1, i64* %i.v
+  br label %ui.head
+ui.head:
+  %ui = load i64, i64* %i.v
+  %uic = icmp slt i64 %ui, %n
+  br i1 %uic, label %ui.body, label %ud.start
+ui.body:
+  %uki.i = add i64 %ukn, %ui
+  %uki.a = getelementptr inbounds double, double* %LU, i64 %uki.i
+  %uf = load double, double* %uki.a
+  %ufz = fcmp une double %uf, 0.0
+  br i1 %ufz, label %us.start, label %ui.next
+us.start:
+  %uim = mul i64 %ui, %m
+  store i64 0, i64* %j.v
+  br label %us.head
+us.head:
+  %sj2 = load i64, i64* %j.v
+  %sc2 = icmp slt i64 %sj2, %m
+  br i1 %sc2, label %us.body, label %ui.next
+us.body:
+  %xkj.i = add i64 %ukm, %sj2
+  %xij.i = add i64 %uim, %sj2
+  %xkj.a = getelementptr inbounds double, double* %B, i64 %xkj.i
+  %xij.a = getelementptr inbounds double, double* %B, i64 %xij.i
+  %xkj = load double, double* %xkj.a
+  %xij = load double, double* %xij.a
+  %xfx = fmul double %uf, %xij
+  %xnew = fsub double %xkj, %xfx
+  store double %xnew, double* %xkj.a
+  %sj3 = add i64 %sj2, 1
+  store i64 %sj3, i64* %j.v
+  br label %us.head
+ui.next:
+  %ui1 = add i64 %ui, 1
+  store i64 %ui1, i64* %i.v
+  br label %ui.head
+ud.start:
+  %ukk.i = add i64 %ukn, %uk
+  %ukk.a = getelementptr inbounds double, double* %LU, i64 %ukk.i
+  %ukk = load double, double* %ukk.a
+  store i64 0, i64* %j.v
+  br label %ud.head
+ud.head:
+  %dj = load i64, i64* %j.v
+  %dc = icmp slt i64 %dj, %m
+  br i1 %dc, label %ud.body, label %u.next
+ud.body:
+  %dkj.i = add i64 %ukm, %dj
+  %dkj.a = getelementptr inbounds double, double* %B, i64 %dkj.i
+  %dkj = load double, double* %dkj.a
+  %dnew = fdiv double %dkj, %ukk
+  store double %dnew, double* %dkj.a
+  %dj1 = add i64 %dj, 1
+  store i64 %dj1, i64* %j.v
+  br label %ud.head
+u.next:
+  %uk0 = add i64 %uk, -1
+  store i64 %uk0, i64* %k.v
+  br label %u.head
+singular:
+  %nm = mul i64 %n, %m
+  store i64 0, i64* %j.v
+  br label %nan.head
+nan.head:
+  %nj = load i64, i64* %j.v
+  %nc = icmp slt i64 %nj, %nm
+  br i1 %nc, label %nan.body, label %done
+nan.body:
+  %na = getelementptr inbounds double, double* %B, i64 %nj
+  store double 0x7FF8000000000000, double* %na
+  %nj1 = add i64 %nj, 1
+  store i64 %nj1, i64* %j.v
+  br label %nan.head
+done:
+  ret void
+}
+"""
+
 _MEMSET = "declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)"
 _MEMCPY = "declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)"
 
@@ -536,12 +829,18 @@ class _Module:
                            f"i64 {8 * count}, i1 false)")
 
     def solve(self, fn: _Function, blk: Block, at: int, columns: int, assemble: int):
-        """Call the numba-compiled block solver: A_blk X = B for B (n x columns) at w[at],
-        in place (``assemble``: first form A = -K B)."""
+        """A_blk X = B for B (n x columns) at w[at], in place: by the LU below, or by the
+        numba side's solver (least squares; ``assemble``: first form A = -K B)."""
+        B = fn.ptr("%w", at)
+        if not blk.numba:
+            fn.body.append(f"  call void @{self.prefix}_lu(i64 {blk.n}, i64 {columns}, "
+                           f"double* {fn.ptr('%w', blk.a)}, double* {B}, "
+                           f"double* {fn.ptr('%w', blk.lu)})")
+            return
         self.decls.add(f"declare void @{self.prefix}_solve(double*, i64, double*, i64, i64)")
         fn.body.append(f"  call void @{self.prefix}_solve(double* %w, "
-                       f"i64 {self.layout.position[blk.index]}, double* "
-                       f"{fn.ptr('%w', at)}, i64 {columns}, i64 {assemble})")
+                       f"i64 {self.layout.position[blk.index]}, double* {B}, "
+                       f"i64 {columns}, i64 {assemble})")
 
     def program(self, name: str, items, outputs):
         """``@<prefix>_<name>(t, x, p, w, out)``: the assignments in chunks, each linear
@@ -685,6 +984,9 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     layout.pv = layout._region(len(jt.partials) + 1)
     layout.d = layout._region(jt.n_rows * jt.n_colours)
     mod = _Module(prefix, system, layout)
+    if any(not b.numba for b in layout.blocks.values()):
+        mod.decls |= {_MEMCPY, "declare double @llvm.fabs.f64(double)"}
+        mod.functions.append(_LU.replace("{P}", prefix).replace("{TINY}", double(1e-13)))
     mod.tables(system.tables)
     for name in PROGRAMS:
         mod.program(name, *programs[name])

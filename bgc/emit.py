@@ -213,7 +213,7 @@ def render(system: EquationSystem) -> str:
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, blk=blk,
+        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, n_eval=kern.n_eval, blk=blk,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         numba_blocks=any(b.numba for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,

@@ -78,7 +78,8 @@ class Kernels:
     """The IR module and what the numba side needs to know of it: the workspace size,
     the linear blocks (in the order of the solver's tables) and the tables' slots."""
     ir: str
-    n_work: int
+    n_work: int         # the Jacobian's workspace
+    n_eval: int         # the other programs' (its first n_eval slots)
     blocks: list[Block]
 
 
@@ -950,12 +951,12 @@ class _Module:
         self.functions.append(fn.text().replace("define internal", "define", 1)
                               .replace("double* noalias %out", "double* noalias %J", 1))
 
-    def entry(self, name: str, program: str):
+    def entry(self, name: str, program: str, n_work: int):
         """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
         with a workspace of its own (malloc'ed: the SARIB's is ~100 kB, too large for a
         stack)."""
         self.decls |= {"declare i8* @malloc(i64)", "declare void @free(i8*)"}
-        size = 8 * max(self.layout.size, 1)
+        size = 8 * max(n_work, 1)
         self.functions.append("\n".join([
             f"define void @{self.prefix}_{name}(double %t, double* %x, double* %p, "
             f"double* %out) nounwind {{",
@@ -981,6 +982,7 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     and for the Jacobian from its tape ``jt`` (program ``jac`` computes the tape's
     partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
     layout = Layout(system)
+    n_eval = layout.size
     layout.pv = layout._region(len(jt.partials) + 1)
     layout.d = layout._region(jt.n_rows * jt.n_colours)
     mod = _Module(prefix, system, layout)
@@ -992,6 +994,6 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
         mod.program(name, *programs[name])
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:
-        mod.entry(name, program)
-    return Kernels(mod.text(), layout.size,
+        mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
+    return Kernels(mod.text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])

@@ -184,9 +184,8 @@ def render(system: EquationSystem) -> str:
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = _cone(system.assignments, dx)
     jt = tape(rhs_asg, system.states)
-    jt.partials = [(k, d.xreplace(hoisted)) for k, d in jt.partials]
     solved = {b.index for b in jt.blocks}
-    jac_targets = [d for _, d in jt.partials] + [
+    jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
     jac_all, _ = _cone(system.assignments, jac_targets)
@@ -205,7 +204,7 @@ def render(system: EquationSystem) -> str:
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
     kern = kernels.lower(system, canonical, {
         "rhs": (rhs_asg, list(enumerate(dx))),
-        "jac": (jac_all, [(0, sp.S.One)] + list(jt.partials)),
+        "jac": (jac_all, jt.partials),
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
         "con": (con_asg, list(enumerate(con_exprs)))}, jt)

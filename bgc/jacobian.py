@@ -4,11 +4,11 @@ Every assigned variable that depends on the states gets a row of sensitivities; 
 columns are compressed by a colouring of the Jacobian's sparsity pattern (Curtis-Powell-
 Reid: columns that share no row share a colour), so a row holds one number per colour.
 For ``v = expr(w1, w2, ...)`` the generated code evaluates each partial ``d expr/d w_k``
-as a numeric coefficient (kept in a table) times a run-time factor computed once however
-many edges share it, and a short loop accumulates ``row(v) += partial * row(w_k)``. The
-emitted code grows with the number of edges in the graph, not with edges x columns, and
-nothing is ever substituted into one large expression. The result is exact (no
-differencing).
+at run time (by reverse-mode differentiation of ``expr``'s tree in the emitted code,
+``bgc.kernels``: no symbolic derivative is formed) into a slot of ``pv``, and a short loop
+accumulates ``row(v) += pv[slot] * row(w_k)``. The emitted code grows with the number of
+edges in the graph, not with edges x columns, and nothing is ever substituted into one
+large expression. The result is exact (no differencing).
 
 Through a numeric linear block ``A u = b`` the rows of ``u`` are ``A^-1 R`` with
 ``R = d(b - A u)/dx`` at fixed ``u``: the loop's own equations differentiated through
@@ -40,9 +40,9 @@ class JacobianTape:
     n_rows: int
     ptr: list[int]                           # entries of row r: ptr[r] .. ptr[r+1]
     src: list[int]                           # >= 0: a row; < 0: state colour -src-1
-    slot: list[int]                          # the entry's partial: slot (0 is 1.0) ...
-    scale: list[float]                       # ... times a numeric coefficient
-    partials: list[tuple[int, sp.Expr]]      # slots 1.. computed at run time
+    slot: list[int]                          # the entry's partial: its slot in pv
+    # per differentiated expression e: [(slot, w)], pv[slot] = d e / d w at run time
+    partials: list[tuple[sp.Expr, list[tuple[int, sp.Symbol]]]]
     blocks: list[Block]
     pattern: list[tuple[int, int, int]]      # (i, j, row of dx_i)
 
@@ -64,7 +64,8 @@ class _Recorder:
                                                  for j, st in enumerate(states)}
         self.state_index = {st.sym: j for j, st in enumerate(states)}
         self.rows: dict[sp.Symbol, int] = {}
-        self.entries: list[list[tuple[int, sp.Expr]]] = []   # (row, or -1-state, partial)
+        # per row: (e, [(row or -1-state, w)]), the row of d e, through e's symbols w
+        self.entries: list[tuple[sp.Expr | None, list[tuple[int, sp.Symbol]]]] = []
         self.row_cols: list[frozenset] = []
         self.blocks: list[Block] = []
 
@@ -73,17 +74,14 @@ class _Recorder:
         self.row_cols.append(cols)
         return len(self.entries) - 1
 
-    def record(self, e, rows: dict) -> tuple[list, frozenset] | None:
+    def record(self, e, rows: dict) -> tuple[tuple, frozenset] | None:
         """The edges of ``e`` to symbols with sensitivities (states or rows in ``rows``)."""
         edges, cols = [], frozenset()
         for s in sorted(e.free_symbols, key=lambda s: s.name):
-            if s not in rows and s not in self.state_index:
-                continue
-            d = sp.diff(e, s)
-            if d != 0:
-                edges.append((rows[s] if s in rows else -1 - self.state_index[s], d))
+            if s in rows or s in self.state_index:
+                edges.append((rows[s] if s in rows else -1 - self.state_index[s], s))
                 cols |= self.cols[s]
-        return (edges, cols) if edges else None
+        return ((e, edges), cols) if edges else None
 
     def assign(self, v, e, rows: dict):
         got = self.record(e, rows)
@@ -106,9 +104,9 @@ def tape(assignments, states) -> JacobianTape:
             cols = frozenset().union(*(g[1] for g in got if g))
             start = len(rec.entries)
             for g in got:
-                rec.new_row(g[0] if g else [], g[1] if g else frozenset())
+                rec.new_row(g[0] if g else (None, []), g[1] if g else frozenset())
             for u in item.unknowns:
-                rec.rows[u] = rec.new_row([], cols)
+                rec.rows[u] = rec.new_row((None, []), cols)
                 rec.cols[u] = cols
             rec.blocks.append(Block(item.index, start, len(item.unknowns)))
             continue
@@ -120,19 +118,17 @@ def tape(assignments, states) -> JacobianTape:
             r = rec.rows[st.dsym]
             pattern += [(i, j, r) for j in sorted(rec.row_cols[r])]
     colours, n_colours = _colour(len(states), pattern)
-    # flatten the tape: a partial is (numeric coefficient) x (shared run-time slot)
-    ptr, src, slot, scale = [0], [], [], []
-    slots: dict[sp.Expr, int] = {sp.S.One: 0}
-    for edges in rec.entries:
-        for r, d in edges:
+    # flatten the tape: each edge its own slot of run-time partials
+    ptr, src, slot, partials = [0], [], [], []
+    for e, edges in rec.entries:
+        for r, w in edges:
             src.append(r if r >= 0 else -1 - colours[-1 - r])
-            c, rest = d.as_coeff_Mul()
-            slot.append(slots.setdefault(rest, len(slots)))
-            scale.append(float(c))
+            slot.append(len(slot))
+        if edges:
+            partials.append((e, [(k, w) for k, (_, w) in zip(slot[-len(edges):], edges)]))
         ptr.append(len(src))
-    partials = [(k, d) for d, k in slots.items() if k > 0]
-    return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, slot, scale,
-                        partials, rec.blocks, pattern)
+    return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, slot, partials,
+                        rec.blocks, pattern)
 
 
 def _colour(n: int, pattern) -> tuple[list[int], int]:

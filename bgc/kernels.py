@@ -284,6 +284,119 @@ class _Function:
             return self.load("%w", value if fn is table else slope)
         raise BgcError(f"internal: no code for {fn.__name__} in {e}")
 
+    # -- derivatives: reverse mode through one expression's tree ----------------------
+    def grad(self, e, wrt) -> dict:
+        """{w: d e / d w} as IR values for the symbols ``wrt``: the adjoint of every node
+        of ``e`` that depends on them, parents before children (a node shared by two
+        parents is one node, visited once). Nothing symbolic is formed; each local
+        derivative reuses the node values computed for ``e``."""
+        wrt = set(wrt)
+        dep: dict = {}
+        order: list = []
+
+        def visit(node) -> bool:
+            hit = dep.get(node)
+            if hit is not None:
+                return hit
+            if node.is_Symbol:
+                d = node in wrt
+            elif node.is_Number or node.is_NumberSymbol:
+                d = False
+            else:
+                d = False
+                for a in node.args:
+                    if not isinstance(a, sp.Expr):   # a Piecewise's (expr, cond) pairs
+                        a = a.args[0]
+                    d = visit(a) or d
+                if d:
+                    order.append(node)
+            dep[node] = d
+            return d
+
+        visit(e)
+        adj = {e: double(1.0)}
+        for node in reversed(order):
+            a = adj.pop(node)
+            for child, local in self._local(node, dep):
+                if local is None:
+                    c = a
+                elif isinstance(local, tuple):        # ("select", i1): a where it holds
+                    c = self.select(local[1], a, double(0.0))
+                else:
+                    c = self.op(f"fmul double {a}, {local}")
+                adj[child] = self.op(f"fadd double {adj[child]}, {c}") if child in adj else c
+        return {w: adj.get(w, double(0.0)) for w in wrt}
+
+    def _local(self, node, dep):
+        """(child, d node / d child) for the children of ``node`` that depend on the
+        variables (None: 1; ("select", c): 1 where c holds, else 0)."""
+        fn = type(node)
+        if node.is_Add:
+            return [(a, None) for a in node.args if dep.get(a)]
+        if node.is_Mul:
+            args = node.args
+            vals = [self.val(a) for a in args]
+            out = []
+            for i, a in enumerate(args):
+                if dep.get(a):
+                    others = vals[:i] + vals[i + 1:]
+                    out.append((a, self._fold("fmul", others) if others else None))
+            return out
+        if node.is_Pow:
+            base, ex = node.args
+            out = []
+            if base is sp.E:
+                return [(ex, self.val(node))] if dep.get(ex) else []
+            if dep.get(base):
+                if ex == 1:
+                    out.append((base, None))
+                elif ex.is_Number:
+                    out.append((base, self.op(f"fmul double {self.val(ex)}, "
+                                              f"{self.val(base ** (ex - 1))}")))
+                else:
+                    q = self.op(f"fdiv double {self.val(node)}, {self.val(base)}")
+                    out.append((base, self.op(f"fmul double {self.val(ex)}, {q}")))
+            if dep.get(ex):
+                out.append((ex, self.op(f"fmul double {self.val(node)}, "
+                                        f"{self.call('llvm.log.f64', self.val(base))}")))
+            return out
+        if fn is sp.atan2:
+            y, x = node.args
+            vy, vx = self.val(y), self.val(x)
+            r = self.op(f"fadd double {self.op(f'fmul double {vx}, {vx}')}, "
+                        f"{self.op(f'fmul double {vy}, {vy}')}")
+            out = []
+            if dep.get(y):
+                out.append((y, self.op(f"fdiv double {vx}, {r}")))
+            if dep.get(x):
+                out.append((x, self.op(f"fneg double {self.op(f'fdiv double {vy}, {r}')}")))
+            return out
+        if fn is sp.Piecewise:
+            out, before = [], "false"
+            for piece in node.args:
+                c = self.cond(piece.cond)
+                if dep.get(piece.expr):
+                    free = self.op(f"xor i1 {before}, true")
+                    out.append((piece.expr, ("select", self.op(f"and i1 {c}, {free}"))))
+                before = self.op(f"or i1 {before}, {c}")
+            return out
+        if fn in (sp.Min, sp.Max):            # to the argument Python's min/max picks
+            pred = "olt" if fn is sp.Min else "ogt"
+            acc, pick = self.val(node.args[0]), "0"
+            for i, a in enumerate(node.args[1:], 1):
+                v = self.val(a)
+                c = self.op(f"fcmp {pred} double {v}, {acc}")
+                acc = self.select(c, v, acc)
+                pick = self.op(f"select i1 {c}, i64 {i}, i64 {pick}")
+            return [(a, ("select", self.op(f"icmp eq i64 {pick}, {i}")))
+                    for i, a in enumerate(node.args) if dep.get(a)]
+        if fn in (sp.sign, sp.Heaviside, sp.DiracDelta, table, table_slope):
+            return []                         # zero almost everywhere
+        if fn in _LOCAL and len(node.args) == 1:
+            x = node.args[0]
+            return [(x, _LOCAL[fn](self, x, node))] if dep.get(x) else []
+        raise BgcError(f"internal: no derivative for {fn.__name__} in {node}")
+
     def select(self, c: str, a: str, b: str) -> str:
         return self.op(f"select i1 {c}, double {a}, double {b}")
 
@@ -308,6 +421,30 @@ class _Function:
     def text(self) -> str:
         return "\n".join([f"define internal void @{self.name}({ARGS}) noinline nounwind {{",
                           "entry:", *self.body, "  ret void", "}"])
+
+
+def _one_over_sqrt(f, arg):
+    """1 / sqrt(arg)."""
+    return f.op(f"fdiv double {double(1.0)}, {f.call('llvm.sqrt.f64', f.val(arg))}")
+
+
+# d f(x) / dx for the functions of one argument, from x and the node f(x) itself
+_LOCAL = {
+    sp.sin: lambda f, x, n: f.val(sp.cos(x)),
+    sp.cos: lambda f, x, n: f.op(f"fneg double {f.val(sp.sin(x))}"),
+    sp.exp: lambda f, x, n: f.val(n),
+    sp.log: lambda f, x, n: f.op(f"fdiv double {double(1.0)}, {f.val(x)}"),
+    sp.tan: lambda f, x, n: f.op(f"fadd double {double(1.0)}, "
+                                 f"{f.op(f'fmul double {f.val(n)}, {f.val(n)}')}"),
+    sp.asin: lambda f, x, n: _one_over_sqrt(f, 1 - x ** 2),
+    sp.acos: lambda f, x, n: f.op(f"fneg double {_one_over_sqrt(f, 1 - x ** 2)}"),
+    sp.atan: lambda f, x, n: f.op(f"fdiv double {double(1.0)}, {f.val(1 + x ** 2)}"),
+    sp.sinh: lambda f, x, n: f.val(sp.cosh(x)),
+    sp.cosh: lambda f, x, n: f.val(sp.sinh(x)),
+    sp.tanh: lambda f, x, n: f.op(f"fsub double {double(1.0)}, "
+                                  f"{f.op(f'fmul double {f.val(n)}, {f.val(n)}')}"),
+    sp.Abs: lambda f, x, n: f.val(sp.sign(x)),
+}
 
 
 def _steps(items, outputs, layout: Layout):
@@ -346,16 +483,19 @@ def _steps(items, outputs, layout: Layout):
         if item.rank is not None:
             yield ("store", blk.rank, item.rank)
         yield ("solve", item.index)
-    for i, e in outputs:
-        yield ("out", i, e)
+    for out in outputs:
+        if isinstance(out[1], list):          # (e, [(slot, w)]): pv[slot] = d e / d w
+            yield ("grad",) + tuple(out)
+        else:
+            yield ("out",) + tuple(out)
 
 
 # The Jacobian tape as a loop (see bgc.jacobian): row r of the compressed sensitivities d
-# (n_rows x nc) is the sum over its entries m of scale[m] * pv[slot[m]] times row src[m],
+# (n_rows x nc) is the sum over its entries m of pv[slot[m]] times row src[m],
 # or, for src[m] < 0, added into column -src[m]-1. @{P} is the module's prefix.
 _TAPE = """\
 define internal void @{P}_tape(double* noalias %d, double* noalias %pv, i64 %start, \
-i64 %stop, i64 %nc, i64* %ptr, i64* %src, i64* %slot, double* %scale) nounwind {
+i64 %stop, i64 %nc, i64* %ptr, i64* %src, i64* %slot) nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -375,11 +515,8 @@ edge:
   %s = load i64, i64* %s.a, align 8
   %k.a = getelementptr inbounds i64, i64* %slot, i64 %m
   %k = load i64, i64* %k.a, align 8
-  %c.a = getelementptr inbounds double, double* %scale, i64 %m
-  %c = load double, double* %c.a, align 8
-  %pk.a = getelementptr inbounds double, double* %pv, i64 %k
-  %pk = load double, double* %pk.a, align 8
-  %wv = fmul double %c, %pk
+  %wv.a = getelementptr inbounds double, double* %pv, i64 %k
+  %wv = load double, double* %wv.a, align 8
   %seed = icmp slt i64 %s, 0
   br i1 %seed, label %state, label %chain
 state:
@@ -878,6 +1015,10 @@ class _Module:
                 fn.store("%w", step[1], fn.val(step[2]))
             elif kind == "out":
                 fn.store("%out", step[1], fn.val(step[2]))
+            elif kind == "grad":
+                d = fn.grad(step[1], [w for _, w in step[2]])
+                for slot, w in step[2]:
+                    fn.store("%out", slot, d[w])
             else:
                 self.zero(fn, "%w", step[1], step[2])
         flush()
@@ -923,7 +1064,6 @@ class _Module:
         ptr = self.array("tape_ptr", "i64", jt.ptr)
         src = self.array("tape_src", "i64", jt.src)
         slot = self.array("tape_slot", "i64", jt.slot)
-        scale = self.array("tape_scale", DBL, jt.scale)
         fn = _Function(f"{P}_jac_full", lay, {}, {}, self.decls)
         pv, d = fn.ptr("%w", lay.pv), fn.ptr("%w", lay.d)
         fn.body.append(f"  call void @{P}_jac(double %t, double* %x, double* %p, "
@@ -933,7 +1073,7 @@ class _Module:
             if seg[0] == "tape":
                 fn.body.append(f"  call void @{P}_tape(double* {d}, double* {pv}, "
                                f"i64 {seg[1]}, i64 {seg[2]}, i64 {nc}, {ptr}, {src}, "
-                               f"{slot}, {scale})")
+                               f"{slot})")
             else:                        # u's rows: A^-1 R, R in the rows before them
                 b = seg[1]
                 blk = lay.blocks[b.index]
@@ -983,7 +1123,7 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
     layout = Layout(system)
     n_eval = layout.size
-    layout.pv = layout._region(len(jt.partials) + 1)
+    layout.pv = layout._region(max(len(jt.slot), 1))
     layout.d = layout._region(jt.n_rows * jt.n_colours)
     mod = _Module(prefix, system, layout)
     if any(not b.numba for b in layout.blocks.values()):

@@ -208,13 +208,11 @@ def render(system: EquationSystem) -> str:
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
         "con": (con_asg, list(enumerate(con_exprs)))}, jt)
-    blk = {f: [getattr(b, f) for b in kern.blocks] for f in ("n", "a", "rank", "d", "k", "kb")}
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, n_eval=kern.n_eval, blk=blk,
+        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
-        numba_blocks=any(b.numba for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
         tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
                  "y": [_float(v) for v in tb.y]} for tb in system.tables],

@@ -65,12 +65,8 @@ class Block:
     d: int = 0
     k: int = 0
     kb: int = 0
-    lu: int = 0         # room for its LU factors (blocks solved in the IR)
-
-    @property
-    def numba(self) -> bool:
-        """Solved by the numba side (least squares through the SVD, or A = -K B)?"""
-        return self.rank >= 0 or self.d > 0
+    lu: int = 0         # room for its LU factors
+    ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
 
 
 @dataclass
@@ -87,7 +83,9 @@ class Layout:
     """Workspace slots: one per assigned symbol (a block's unknowns side by side), then a
     region per linear block, then each table's value and slope at the current t."""
 
-    def __init__(self, system):
+    def __init__(self, system, columns: int):
+        """``columns``: the most right-hand sides a block is solved for at once (the
+        Jacobian's colours)."""
         self.slot: dict[sp.Symbol, int] = {}
         self.blocks: dict[int, Block] = {}
         self.size = 0
@@ -109,8 +107,9 @@ class Layout:
                 if item.factors is not None:
                     blk.d = d = item.factors[0]
                     blk.k, blk.kb = self._region(n * d), self._region(d * n)
-                if not blk.numba:
-                    blk.lu = self._region(n * n)
+                blk.lu = self._region(n * n)
+                if item.rank is not None:
+                    blk.ls = self._region(lstsq_work(n, columns))
                 self.blocks[item.index] = blk
         self.tables = {tb.index: (self._region(1), self._region(1))
                        for tb in system.tables}
@@ -936,6 +935,198 @@ _MEMSET = "declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)"
 _MEMCPY = "declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)"
 
 
+class _Asm:
+    """Hand-written IR with counted loops (their counters in allocas, which LLVM's
+    mem2reg turns into registers): the least-squares solve and the A = -K B product."""
+
+    def __init__(self, header: str, counters: list[str]):
+        self.lines = [header, "entry:"] + [f"  %{c} = alloca i64" for c in counters]
+        self.k = 0
+
+    def __call__(self, text: str) -> str:
+        self.lines.append("  " + text)
+        return text.split(" = ", 1)[0] if " = " in text else ""
+
+    def tmp(self) -> str:
+        self.k += 1
+        return f"%t{self.k}"
+
+    def op(self, text: str) -> str:
+        r = self.tmp()
+        self(f"{r} = {text}")
+        return r
+
+    def label(self, name: str):
+        self.lines.append(f"{name}:")
+
+    def at(self, base: str, index: str, kind: str = "double") -> str:
+        return self.op(f"getelementptr inbounds {kind}, {kind}* {base}, i64 {index}")
+
+    def load(self, base: str, index: str) -> str:
+        return self.op(f"load double, double* {self.at(base, index)}, align 8")
+
+    def store(self, value: str, base: str, index: str):
+        self(f"store double {value}, double* {self.at(base, index)}, align 8")
+
+    def loop(self, counter: str, lo: str, hi: str, body):
+        """for counter in range(lo, hi): body(value of counter)."""
+        self.k += 1
+        k = self.k
+        self(f"store i64 {lo}, i64* %{counter}")
+        self(f"br label %L{k}.head")
+        self.label(f"L{k}.head")
+        i = self.op(f"load i64, i64* %{counter}")
+        self(f"%L{k}.c = icmp slt i64 {i}, {hi}")
+        self(f"br i1 %L{k}.c, label %L{k}.body, label %L{k}.end")
+        self.label(f"L{k}.body")
+        body(i)
+        nxt = self.op(f"add i64 {i}, 1")
+        self(f"store i64 {nxt}, i64* %{counter}")
+        self(f"br label %L{k}.head")
+        self.label(f"L{k}.end")
+
+    def when(self, cond: str, body):
+        """if cond: body()."""
+        self.k += 1
+        k = self.k
+        self(f"br i1 {cond}, label %W{k}.then, label %W{k}.end")
+        self.label(f"W{k}.then")
+        body()
+        self(f"br label %W{k}.end")
+        self.label(f"W{k}.end")
+
+    def accumulate(self, value: str):
+        """%acc += value."""
+        total = self.op(f"fadd double {self.op('load double, double* %acc')}, {value}")
+        self(f"store double {total}, double* %acc")
+
+    def text(self) -> str:
+        return "\n".join(self.lines + ["}"])
+
+
+def _lstsq_ir(P: str) -> str:
+    """``@<P>_lstsq(n, m, A, B, r, ws)``: redundant constraints (rank r < n) share the load
+    by least squares, as the numba code before it did: the pseudo-inverse through LAPACK's
+    dgesdd (scipy's, as numpy's), keeping r singular values. One below 1e-10 of the
+    largest, a non-finite A or a failed SVD is a singular configuration: X is NaN. B
+    (n x m, row-major) is overwritten with X; ``ws`` holds ``lstsq_work(n, m)`` doubles.
+    A's buffer read as column-major is A^T = U' S V'^T, so A = V' S U'^T: A's left
+    singular vectors are the rows of V'^T, its right ones the columns of U'."""
+    a = _Asm(f"define internal void @{P}_lstsq(i64 %n, i64 %m, double* noalias %A, "
+             f"double* noalias %B, i64 %r, double* noalias %ws) nounwind {{",
+             ["i", "j", "q"])
+    for v, ty in (("jobz", "i8"), ("dim", "i32"), ("lwork", "i32"), ("info", "i32"),
+                  ("acc", "double")):
+        a(f"%{v} = alloca {ty}")
+    nn = a.op("mul i64 %n, %n")
+    nm = a.op("mul i64 %n, %m")
+    fail = "%singular"
+    # any non-finite entry: x - x is NaN
+    def finite(i):
+        v = a.load("%A", i)
+        z = a.op(f"fsub double {v}, {v}")
+        bad = a.op(f"fcmp uno double {z}, {z}")
+        go_on = a.tmp()[1:]
+        a(f"br i1 {bad}, label {fail}, label %{go_on}")
+        a.label(go_on)
+    a.loop("i", "0", nn, finite)
+    ac, u = "%ws", a.at("%ws", nn)
+    vt = a.at(u, nn)
+    s = a.at(vt, nn)
+    wm = a.at(s, "%n")
+    work = a.at(wm, nm)
+    lw = a.op(f"add i64 {a.op(f'mul i64 {nn}, 7')}, {a.op('mul i64 %n, 12')}")
+    iwork = a.op(f"bitcast double* {a.at(work, lw)} to i32*")
+    a(f"call void @llvm.memcpy.p0i8.p0i8.i64(i8* {a.op(f'bitcast double* {ac} to i8*')}, "
+      f"i8* {a.op('bitcast double* %A to i8*')}, i64 {a.op(f'mul i64 {nn}, 8')}, i1 false)")
+    a("store i8 65, i8* %jobz")                                          # 'A'
+    a(f"store i32 {a.op('trunc i64 %n to i32')}, i32* %dim")
+    a(f"store i32 {a.op(f'trunc i64 {lw} to i32')}, i32* %lwork")
+    a(f"call void @{P}_dgesdd(i8* %jobz, i32* %dim, i32* %dim, double* {ac}, i32* %dim, "
+      f"double* {s}, double* {u}, i32* %dim, double* {vt}, i32* %dim, double* {work}, "
+      f"i32* %lwork, i32* {iwork}, i32* %info)")
+    info = a.op("load i32, i32* %info")
+    ok = a.op(f"icmp eq i32 {info}, 0")
+    rok = a.op("icmp sge i64 %r, 1")
+    go = a.op(f"and i1 {ok}, {rok}")
+    a(f"br i1 {go}, label %rank, label {fail}")
+    a.label("rank")
+    s0 = a.load(s, "0")
+    sr = a.load(s, a.op("add i64 %r, -1"))
+    small = a.op(f"fcmp ole double {sr}, {a.op(f'fmul double {double(1e-10)}, {s0}')}")
+    a(f"br i1 {small}, label {fail}, label %solve")
+    a.label("solve")
+
+    def w_row(q):                       # W[q, c] = sum_i V'^T[q, i] B[i, c] / s[q]
+        def w_col(c):
+            a("store double 0.0, double* %acc")
+
+            def term(i):
+                x = a.load(vt, a.op(f"add i64 {q}, {a.op(f'mul i64 {i}, %n')}"))
+                b = a.load("%B", a.op(f"add i64 {a.op(f'mul i64 {i}, %m')}, {c}"))
+                a.accumulate(a.op(f"fmul double {x}, {b}"))
+            a.loop("i", "0", "%n", term)
+            total = a.op("load double, double* %acc")
+            a.store(a.op(f"fdiv double {total}, {a.load(s, q)}"), wm,
+                    a.op(f"add i64 {a.op(f'mul i64 {q}, %m')}, {c}"))
+        a.loop("j", "0", "%m", w_col)
+    a.loop("q", "0", "%r", w_row)
+
+    def x_row(i):                       # X[i, c] = sum_q U'[i, q] W[q, c]
+        def x_col(c):
+            a("store double 0.0, double* %acc")
+
+            def term(q):
+                x = a.load(u, a.op(f"add i64 {i}, {a.op(f'mul i64 {q}, %n')}"))
+                w = a.load(wm, a.op(f"add i64 {a.op(f'mul i64 {q}, %m')}, {c}"))
+                a.accumulate(a.op(f"fmul double {x}, {w}"))
+            a.loop("q", "0", "%r", term)
+            a.store(a.op("load double, double* %acc"), "%B",
+                    a.op(f"add i64 {a.op(f'mul i64 {i}, %m')}, {c}"))
+        a.loop("j", "0", "%m", x_col)
+    a.loop("i", "0", "%n", x_row)
+    a("ret void")
+    a.label("singular")
+    a.loop("i", "0", nm, lambda i: a.store(double(float("nan")), "%B", i))
+    a("ret void")
+    return a.text()
+
+
+def lstsq_work(n: int, m: int) -> int:
+    """Doubles of workspace ``_lstsq_ir`` needs: A^T, U', V'^T, s, W, dgesdd's work for
+    jobz 'A' (LAPACK asks 3 n^2 + max(n, 4 n^2 + 4 n) at most; 8 n to spare) and its
+    8n int32 iwork."""
+    return 3 * n * n + n + n * m + (7 * n * n + 12 * n) + 4 * n
+
+
+def _assemble_ir(P: str) -> str:
+    """``@<P>_assemble(n, d, A, K, B)``: A = -K B (K: n x d, B: d x n), skipping the
+    zeros of K, as the numba code before it did."""
+    a = _Asm(f"define internal void @{P}_assemble(i64 %n, i64 %d, double* noalias %A, "
+             f"double* noalias %K, double* noalias %F) nounwind {{", ["i", "j", "q"])
+    nn = a.op("mul i64 %n, %n")
+    a.loop("i", "0", nn, lambda i: a.store("0.0", "%A", i))
+
+    def row(i):
+        def col(j):
+            c = a.load("%K", a.op(f"add i64 {a.op(f'mul i64 {i}, %d')}, {j}"))
+            nz = a.op(f"fcmp une double {c}, 0.0")
+
+            def update():
+                def q_(q):
+                    at = a.op(f"add i64 {a.op(f'mul i64 {i}, %n')}, {q}")
+                    old = a.load("%A", at)
+                    f = a.load("%F", a.op(f"add i64 {a.op(f'mul i64 {j}, %n')}, {q}"))
+                    a.store(a.op(f"fsub double {old}, {a.op(f'fmul double {c}, {f}')}"),
+                            "%A", at)
+                a.loop("q", "0", "%n", q_)
+            a.when(nz, update)
+        a.loop("j", "0", "%d", col)
+    a.loop("i", "0", "%n", row)
+    a("ret void")
+    return a.text()
+
+
 class _Module:
     """The IR module: chunk functions, one function per program, the Jacobian's tape
     and the C entry points of the native integrators."""
@@ -966,19 +1157,28 @@ class _Module:
                            f"{self._region(fn, to)}, i8* {self._region(fn, frm)}, "
                            f"i64 {8 * count}, i1 false)")
 
-    def solve(self, fn: _Function, blk: Block, at: int, columns: int, assemble: int):
-        """A_blk X = B for B (n x columns) at w[at], in place: by the LU below, or by the
-        numba side's solver (least squares; ``assemble``: first form A = -K B)."""
-        B = fn.ptr("%w", at)
-        if not blk.numba:
-            fn.body.append(f"  call void @{self.prefix}_lu(i64 {blk.n}, i64 {columns}, "
-                           f"double* {fn.ptr('%w', blk.a)}, double* {B}, "
-                           f"double* {fn.ptr('%w', blk.lu)})")
+    def solve(self, fn: _Function, blk: Block, at: int, columns: int, assemble: bool):
+        """A_blk X = B for B (n x columns) at w[at], in place (``assemble``: first form
+        A = -K B): by LU, or, for a block whose rank at run time is below its size
+        (redundant constraints), by least squares."""
+        P, n = self.prefix, blk.n
+        B, A = fn.ptr("%w", at), fn.ptr("%w", blk.a)
+        if assemble and blk.d:
+            fn.body.append(f"  call void @{P}_assemble(i64 {n}, i64 {blk.d}, double* {A}, "
+                           f"double* {fn.ptr('%w', blk.k)}, double* {fn.ptr('%w', blk.kb)})")
+        lu = (f"  call void @{P}_lu(i64 {n}, i64 {columns}, double* {A}, double* {B}, "
+              f"double* {fn.ptr('%w', blk.lu)})")
+        if blk.rank < 0:
+            fn.body.append(lu)
             return
-        self.decls.add(f"declare void @{self.prefix}_solve(double*, i64, double*, i64, i64)")
-        fn.body.append(f"  call void @{self.prefix}_solve(double* %w, "
-                       f"i64 {self.layout.position[blk.index]}, double* {B}, "
-                       f"i64 {columns}, i64 {assemble})")
+        r = fn.op(f"fptosi double {fn.load('%w', blk.rank)} to i64")
+        fewer = fn.op(f"icmp slt i64 {r}, {n}")
+        k = fn.n
+        fn.body += [f"  br i1 {fewer}, label %ls{k}, label %lu{k}", f"ls{k}:",
+                    f"  call void @{P}_lstsq(i64 {n}, i64 {columns}, double* {A}, "
+                    f"double* {B}, i64 {r}, double* {fn.ptr('%w', blk.ls)})",
+                    f"  br label %solved{k}", f"lu{k}:", lu, f"  br label %solved{k}",
+                    f"solved{k}:"]
 
     def program(self, name: str, items, outputs):
         """``@<prefix>_<name>(t, x, p, w, out)``: the assignments in chunks, each linear
@@ -1002,7 +1202,7 @@ class _Module:
             kind = step[0]
             if kind == "solve":
                 blk = self.layout.blocks[step[1]]
-                self.solve(fn, blk, blk.b, 1, int(blk.d > 0))
+                self.solve(fn, blk, blk.b, 1, True)
                 self.copy(fn, blk.u, blk.b, blk.n)
                 flush()                 # what follows reads the unknowns from w
                 continue
@@ -1078,7 +1278,7 @@ class _Module:
                 b = seg[1]
                 blk = lay.blocks[b.index]
                 self.copy(fn, lay.d + (b.start + b.n) * nc, lay.d + b.start * nc, b.n * nc)
-                self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, 0)
+                self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, False)
         self.zero(fn, "%J", 0, n * n)
         pattern = jt.pattern
         args = [self.array(k, "i64", v) for k, v in (
@@ -1121,14 +1321,21 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)]))
     and for the Jacobian from its tape ``jt`` (program ``jac`` computes the tape's
     partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
-    layout = Layout(system)
+    layout = Layout(system, max(jt.n_colours, 1))
     n_eval = layout.size
     layout.pv = layout._region(max(len(jt.slot), 1))
     layout.d = layout._region(jt.n_rows * jt.n_colours)
     mod = _Module(prefix, system, layout)
-    if any(not b.numba for b in layout.blocks.values()):
+    blocks = layout.blocks.values()
+    if blocks:
         mod.decls |= {_MEMCPY, "declare double @llvm.fabs.f64(double)"}
         mod.functions.append(_LU.replace("{P}", prefix).replace("{TINY}", double(1e-13)))
+    if any(b.d for b in blocks):
+        mod.functions.append(_assemble_ir(prefix))
+    if any(b.rank >= 0 for b in blocks):
+        mod.decls.add(f"declare void @{prefix}_dgesdd(i8*, i32*, i32*, double*, i32*, "
+                      "double*, double*, i32*, double*, i32*, double*, i32*, i32*, i32*)")
+        mod.functions.append(_lstsq_ir(prefix))
     mod.tables(system.tables)
     for name in PROGRAMS:
         mod.program(name, *programs[name])

@@ -43,7 +43,7 @@ def _progress_opt(fn):
                   help="no progress report on stderr (errors are still reported)")
     @functools.wraps(fn)
     def wrapper(*args, quiet, **kwargs):
-        with progress.use(progress.for_stderr(quiet)):
+        with progress.use(progress.for_stderr(quiet, kwargs.get("as_json", False))):
             return fn(*args, **kwargs)
     return wrapper
 
@@ -429,7 +429,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                      atol=atol or st.atol, solver=solver or st.solver,
                      points=points or st.points, params=p, step=step, max_steps=max_steps)
-        stage.done(f"{result.solver}, {result.stats.steps} steps to t = {result.t[-1]:g} s, "
+        stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
+                   f"t = {result.t[-1]:g} s, "
                    f"{progress.seconds(result.stats.compile_time)} of it JIT/cache load")
     files = {}
     if out:
@@ -517,8 +518,9 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
         lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
         f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
         anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
-        stage.done(f"{len(f)} frequencies, {len(anti)} anti-resonances, {len(res)} "
-                   f"resonances")
+        stage.done(f"{progress.count(len(f), 'frequency', 'frequencies')}, "
+                   f"{progress.count(len(anti), 'anti-resonance')}, "
+                   f"{progress.count(len(res), 'resonance')}")
     report = {"model": m.name, "method": method, "input": direction, "output": output,
               "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
               "antiresonances_hz": [round(f, 2) for f in anti],

@@ -37,10 +37,12 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
             if method == "zcp":
                 graph = zcp.assign(graph, open_loops)
             cg = causality.assign(graph)
-            st.done(f"{len(graph.elements)} elements, {len(graph.bonds)} bonds ({method})")
+            st.done(f"{progress.count(len(graph.elements), 'element')}, "
+                    f"{progress.count(len(graph.bonds), 'bond')} ({method})")
         with progress.stage("equations") as st:
             system = equations.derive(cg, **derive_options)
-            st.done(f"{len(system.assignments)} assignments, {len(system.states)} states")
+            st.done(f"{progress.count(len(system.assignments), 'assignment')}, "
+                    f"{progress.count(len(system.states), 'state')}")
     return Compiled(model, cg, system, timings)
 
 
@@ -48,10 +50,11 @@ def _load(path: str | Path) -> Model:
     """The load stage: the model file read and checked."""
     with progress.stage("load") as st:
         model = load.load(path)
-        counts = {"elements": model.elements, "bonds": model.bonds, "bodies": model.bodies,
-                  "joints": model.joints}
-        st.done(f"{model.name}: " + ", ".join(f"{len(v)} {k}" for k, v in counts.items()
-                                              if v))
+        parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
+                 ("joint", model.joints)]
+        st.done(f"{model.name}: " + ", ".join(
+            progress.count(len(v), k, "bodies" if k == "body" else None) for k, v in parts
+            if v))
     return model
 
 

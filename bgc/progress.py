@@ -11,22 +11,26 @@ A stage is timed with a context manager; ``done`` gives the counts shown when it
         jt = jacobian.derive(system)
         st.done(f"{len(jt.entries)} entries")
 
-That is all a new stage needs: it is shown, timed and recorded wherever it runs (a stage
-inside another, e.g. "jacobian" inside "emit", is shown indented under it). A stage with
-a known amount of work shows a bar: ``progress.stage("machine code", total=n)`` and
-``st.advance()`` after each item; ``st.update(text)`` changes the text while it runs. A
-stage that raises (an error, Ctrl-C) shows nothing more in plain mode and is not recorded;
-the exception goes on unchanged.
+That is all a new stage needs: it is shown, timed and recorded wherever it runs, in a
+pipeline function or in the CLI. A stage inside another (e.g. "jacobian" inside "emit") is
+indented one step; as a plain line it comes before its parent's, which ends later. A
+stage with a known amount of work shows a bar: ``progress.stage("machine code",
+total=n)``, then ``st.advance()`` after each item; ``st.update(text)`` changes the text
+while it runs. A stage that raises (an error, Ctrl-C) is not recorded and prints no plain
+line (the error line says what happened); the exception goes on unchanged. Counts read
+better through ``progress.count(n, "kernel")`` (1 kernel, 2 kernels).
 
 Who sees it: the reporter in use, chosen once by the CLI (``for_stderr``): on a terminal
-a live display (rich), else one plain line per finished stage on stderr,
-``bgc: equations: 1662 assignments, 152 states (3.8 s)``, with ``--quiet`` nothing. The
-default is ``Silent``: pipeline functions called from scripts and tests print nothing.
-A script may ask for the lines: ``with progress.use(progress.Plain()): ...``.
+a live display (rich); else one plain line per finished stage on stderr,
+``bgc: equations: 1662 assignments, 152 states (3.84 s)`` (none with ``--json``, whose
+report holds the stage times); with ``--quiet`` nothing. The default is ``Silent``:
+pipeline functions called from scripts and tests print nothing; a script may ask for the
+lines with ``with progress.use(progress.Plain()): ...``.
 
 Stage times, whatever the reporter: ``with progress.record() as times:`` collects
 ``{stage: seconds}`` of the stages finished inside it, in the order they finished (a
-nested stage's time is also part of its parent's; a repeated name adds up).
+nested stage's time is also part of its parent's; a repeated name adds up). That is how
+``Compiled.timings`` and ``bgc simulate --json``'s "stages" are filled.
 """
 
 from __future__ import annotations
@@ -37,6 +41,11 @@ from contextlib import contextmanager
 
 # the start of every plain progress line (error lines start with "error:" or "interrupted")
 PREFIX = "bgc: "
+
+
+def count(n: int, word: str, plural: str | None = None) -> str:
+    """``n`` things for people: 1 bond, 4 bonds, 2 bodies."""
+    return f"{n} {word if n == 1 else plural or word + 's'}"
 
 
 def seconds(t: float) -> str:
@@ -174,14 +183,17 @@ _running: list[Stage] = []
 _recorders: list[dict] = []
 
 
-def for_stderr(quiet: bool = False) -> Silent:
-    """The reporter for a command: nothing with ``quiet``, a live display when stderr is
-    a terminal, else plain lines."""
-    if quiet:
-        return Silent()
+def for_stderr(quiet: bool = False, as_json: bool = False) -> Silent:
+    """The reporter for a command: nothing with ``quiet``; a live display when stderr is a
+    terminal; else plain lines, but not with ``as_json`` (a program reading the JSON
+    often reads stderr with it: the JSON holds the stage times instead)."""
     stream = sys.stderr
     isatty = getattr(stream, "isatty", None)
-    return Live() if isatty is not None and isatty() else Plain(stream)
+    if quiet:
+        return Silent()
+    if isatty is not None and isatty():
+        return Live()
+    return Silent() if as_json else Plain(stream)
 
 
 @contextmanager

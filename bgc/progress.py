@@ -18,7 +18,8 @@ stage with a known amount of work shows a bar: ``progress.stage("machine code",
 total=n)``, then ``st.advance()`` after each item; ``st.update(text)`` changes the text
 while it runs. A stage that raises (an error, Ctrl-C) is not recorded and prints no plain
 line (the error line says what happened); the exception goes on unchanged. Counts read
-better through ``progress.count(n, "kernel")`` (1 kernel, 2 kernels).
+better through ``progress.count(n, "kernel")`` (1 kernel, 2 kernels). Enter and leave
+stages in the main thread; ``advance`` and ``update`` may come from worker threads.
 
 Who sees it: the reporter in use, chosen once by the CLI (``for_stderr``): on a terminal
 a live display (rich); else one plain line per finished stage on stderr,

@@ -91,8 +91,8 @@ class Silent:
     def update(self, st: Stage) -> None:
         pass
 
-    def end(self, st: Stage, failed: bool) -> None:
-        pass
+    def end(self, st: Stage, failed: str | None) -> None:
+        """``failed``: None, "failed" (an exception) or "interrupted" (Ctrl-C)."""
 
 
 class Plain(Silent):
@@ -102,7 +102,7 @@ class Plain(Silent):
     def __init__(self, stream=None):
         self.stream = stream
 
-    def end(self, st: Stage, failed: bool) -> None:
+    def end(self, st: Stage, failed: str | None) -> None:
         if failed:
             return
         detail = f": {st.detail}" if st.detail else ""
@@ -164,11 +164,11 @@ class Live(Silent):
             self.progress.update(st.handle, description=self._text(st),
                                  completed=st.completed)
 
-    def end(self, st: Stage, failed: bool) -> None:
+    def end(self, st: Stage, failed: str | None) -> None:
         if self.progress is None or st.handle is None:
             return
         if failed:
-            st.detail = "interrupted" if failed == "interrupt" else "failed"
+            st.detail = failed
         mark = ("✗", "red") if failed else ("✓", "green")
         self.progress.update(st.handle, description=self._text(st), mark=mark,
                              completed=st.total if st.total is not None and not failed
@@ -226,14 +226,14 @@ def stage(name: str, total: int | None = None):
     st = Stage(name, len(_running), total)
     _running.append(st)
     _reporter.start(st)
-    failed = False
+    failed = None
     try:
         yield st
     except KeyboardInterrupt:
-        failed = "interrupt"
+        failed = "interrupted"
         raise
     except BaseException:
-        failed = True
+        failed = "failed"
         raise
     finally:
         st.elapsed = time.perf_counter() - st.start

@@ -1,7 +1,9 @@
 """The ``bgc`` command line: check, compile, simulate.
 
 User mistakes (BgcError) are printed as one line and exit with status 2; with ``--json``
-the same error is printed as a JSON object.
+the same error is printed as a JSON object. The long stages report their progress on
+stderr (``bgc.progress``: a live display on a terminal, else one ``bgc: ...`` line per
+stage; nothing with ``--quiet``); stdout holds only the command's own output.
 """
 
 from __future__ import annotations
@@ -10,12 +12,13 @@ import functools
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import click
 import numpy as np
 
-from . import __version__, emit
+from . import __version__, emit, progress
 from .errors import BgcError, SimulationError
 from .fileio import check_writable
 from .joints import JOINT_KINDS
@@ -31,6 +34,18 @@ _loops_opt = click.option("--keep-loops", is_flag=True,
                           help="method zcp: keep kinematic loops (class-4 ZCPs) closed, an "
                                "index-2 DAE that --solver native integrates, instead of "
                                "opening them with break variables")
+
+
+def _progress_opt(fn):
+    """``--quiet``, and the command run with its progress reporter (``progress.for_stderr``);
+    placed under ``_user_errors``, so that a live display is closed before an error line."""
+    @click.option("-q", "--quiet", is_flag=True,
+                  help="no progress report on stderr (errors are still reported)")
+    @functools.wraps(fn)
+    def wrapper(*args, quiet, **kwargs):
+        with progress.use(progress.for_stderr(quiet, kwargs.get("as_json", False))):
+            return fn(*args, **kwargs)
+    return wrapper
 
 
 # exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it)
@@ -142,6 +157,7 @@ def main():
 @_loops_opt
 @_json_opt
 @_user_errors
+@_progress_opt
 def check(model, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
@@ -235,9 +251,12 @@ def check(model, method, keep_loops, as_json):
 @_loops_opt
 @_json_opt
 @_user_errors
+@_progress_opt
 def compile_cmd(model, out_dir, method, keep_loops, as_json):
     """Generate the numba simulation module for MODEL."""
+    t0 = time.perf_counter()
     c, path = compile_model(model, out_dir, method, open_loops=not keep_loops)
+    total = time.perf_counter() - t0
     text = path.read_text()
     info = {"module": str(path), "states": len(c.system.states),
             "assignments": len(c.system.assignments), "bytes": len(text.encode()),
@@ -245,7 +264,6 @@ def compile_cmd(model, out_dir, method, keep_loops, as_json):
     if as_json:
         click.echo(json.dumps(info, indent=2))
     else:
-        total = sum(c.timings.values())
         click.echo(f"wrote {path} ({info['states']} states, {info['assignments']} "
                    f"assignments, {info['bytes']} bytes) in {total:.3f} s")
 
@@ -369,6 +387,7 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @_loops_opt
 @_json_opt
 @_user_errors
+@_progress_opt
 def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, out, plot,
              states, out_dir,
              parasitic_mode, separation, exc_kind, exc_dir, amplitude, frequency, zoom,
@@ -385,7 +404,9 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if plot:
         from .results import plot_format
         plot_format(plot, "--plot")
-    module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
+    with progress.record() as stages:       # what this run paid before integrating
+        module, m, compiled = ensure_module(model, out_dir, method,
+                                            open_loops=not keep_loops)
     st = m.settings
     _check_overrides(model, params)
     p, choice = _parse_params(module, params), None
@@ -404,9 +425,13 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         p = _parse_params(module, params, base=p)     # explicit -p values still win
     _check_plan(module, p, t_end or st.t_end, step,
                 "--frequency" if frequency is not None else "--param" if params else "--t-end")
-    result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
-                 atol=atol or st.atol, solver=solver or st.solver, points=points or st.points,
-                 params=p, step=step, max_steps=max_steps)
+    with progress.stage("integrate") as stage:
+        result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
+                     atol=atol or st.atol, solver=solver or st.solver,
+                     points=points or st.points, params=p, step=step, max_steps=max_steps)
+        stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
+                   f"t = {result.t[-1]:g} s, "
+                   f"{progress.seconds(result.stats.compile_time)} of it JIT/cache load")
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out, states))
@@ -438,7 +463,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
                                "projection": proj.to_dict() if proj else None,
                                "parasitic": choice.to_dict() if choice else None,
                                "excitation": exc, "envelope_minima_hz": minima,
-                               "compiled": compiled is not None, "files": files}, indent=2))
+                               "compiled": compiled is not None, "stages": stages,
+                               "files": files}, indent=2))
         return
     if proj is not None:
         click.echo(proj.describe())
@@ -475,6 +501,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
 @_method_opt
 @_json_opt
 @_user_errors
+@_progress_opt
 def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as_json):
     """Frequency response of an output to an excitation direction, linearized about the
     static equilibrium; its anti-resonances and resonances in the band."""
@@ -487,9 +514,13 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
         raise BgcError(f"unknown output '{output}'", key="--output",
                        hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
     _check_overrides(model, params)
-    lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
-    f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
-    anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
+    with progress.stage("frequency response") as stage:
+        lin = bfrf.linearize(module, m, direction, _parse_params(module, params))
+        f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
+        anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
+        stage.done(f"{progress.count(len(f), 'frequency', 'frequencies')}, "
+                   f"{progress.count(len(anti), 'anti-resonance')}, "
+                   f"{progress.count(len(res), 'resonance')}")
     report = {"model": m.name, "method": method, "input": direction, "output": output,
               "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
               "antiresonances_hz": [round(f, 2) for f in anti],
@@ -519,6 +550,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
               callback=_param_items, help="set a parameter the scene exposes (repeatable)")
 @_json_opt
 @_user_errors
+@_progress_opt
 def run_cmd(scene, out_dir, gen_dir, params, as_json):
     """Run a scene: build its reduced model (once), simulate, write CSV, PNG and a JSON
     summary."""

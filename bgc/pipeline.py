@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import causality, emit, equations, expand, load, zcp
+from . import causality, emit, equations, expand, load, progress, zcp
 from .causality import CausalGraph
 from .equations import EquationSystem
 from .fileio import check_writable
@@ -26,35 +25,49 @@ class Compiled:
 
 def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool = True,
           **derive_options) -> Compiled:
-    """Run load (unless given a Model) -> expand -> (zcp) -> causality -> equations, timing
-    each stage. ``open_loops``: method zcp opens kinematic loops with break variables
-    (else refuses them). ``derive_options`` go to ``equations.derive`` (e.g.
-    ``max_symbolic_loop``)."""
-    timings = {}
-    t0 = time.perf_counter()
-    if not isinstance(model, Model):
-        model = load.load(model)
-    timings["load"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    graph = expand.expand(model, method)
-    if method == "zcp":
-        graph = zcp.assign(graph, open_loops)
-    cg = causality.assign(graph)
-    timings["causality"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    system = equations.derive(cg, **derive_options)
-    timings["equations"] = time.perf_counter() - t0
+    """Run load (unless given a Model) -> expand -> (zcp) -> causality -> equations, each a
+    progress stage (timed in ``Compiled.timings``). ``open_loops``: method zcp opens
+    kinematic loops with break variables (else refuses them). ``derive_options`` go to
+    ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
+    with progress.record() as timings:
+        if not isinstance(model, Model):
+            model = _load(model)
+        with progress.stage("causality") as st:
+            graph = expand.expand(model, method)
+            if method == "zcp":
+                graph = zcp.assign(graph, open_loops)
+            cg = causality.assign(graph)
+            st.done(f"{progress.count(len(graph.elements), 'element')}, "
+                    f"{progress.count(len(graph.bonds), 'bond')} ({method})")
+        with progress.stage("equations") as st:
+            system = equations.derive(cg, **derive_options)
+            st.done(f"{progress.count(len(system.assignments), 'assignment')}, "
+                    f"{progress.count(len(system.states), 'state')}")
     return Compiled(model, cg, system, timings)
+
+
+def _load(path: str | Path) -> Model:
+    """The load stage: the model file read and checked."""
+    with progress.stage("load") as st:
+        model = load.load(path)
+        parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
+                 ("joint", model.joints)]
+        st.done(f"{model.name}: " + ", ".join(
+            progress.count(len(v), k, "bodies" if k == "body" else None) for k, v in parts
+            if v))
+    return model
 
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
                   method: str = "parasitic", **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
     check_writable(out_dir, "output directory", directory=True)   # before the work
-    c = build(model, method, **derive_options)
-    t0 = time.perf_counter()
-    path = emit.write(c.system, out_dir)
-    c.timings["emit"] = time.perf_counter() - t0
+    with progress.record() as timings:
+        c = build(model, method, **derive_options)
+        with progress.stage("emit") as st:
+            path = emit.write(c.system, out_dir)
+            st.done(f"{path.name}, {path.stat().st_size / 1e3:.0f} kB")
+    c.timings = timings
     return c, path
 
 
@@ -62,10 +75,14 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                   method: str = "parasitic", open_loops: bool = True):
     """The generated module for a model, recompiled only if missing or stale (method zcp
     with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``)."""
-    model = load.load(model_path)
-    kind = equations.variant(method, open_loops)
-    path = emit.module_path(model.name, out_dir, kind)
-    compiled = None
-    if emit.is_stale(path, model.digest, kind):
-        compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
-    return emit.import_module(path), model, compiled
+    with progress.record() as timings:
+        model = _load(model_path)
+        kind = equations.variant(method, open_loops)
+        path = emit.module_path(model.name, out_dir, kind)
+        compiled = None
+        if emit.is_stale(path, model.digest, kind):
+            compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
+        module = emit.import_module(path)
+    if compiled is not None:
+        compiled.timings = timings        # its load too
+    return module, model, compiled

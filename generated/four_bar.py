@@ -16,7 +16,7 @@ from numba import carray, cfunc, njit, types
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "75bbe7793ff86974ebe4badd2a213fff"
+MODEL_HASH = "1a43ccbe6e9f6457c28561bdb806888a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -25,8 +25,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_four_bar_75bbe7793ff86974ebe4badd2a213fff", sys.modules[__name__])
-__name__ = "_bgc_four_bar_75bbe7793ff86974ebe4badd2a213fff"
+    sys.modules.setdefault("_bgc_four_bar_1a43ccbe6e9f6457c28561bdb806888a", sys.modules[__name__])
+__name__ = "_bgc_four_bar_1a43ccbe6e9f6457c28561bdb806888a"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "coupler.m.px", "coupler.m.py", "coupler.m.pz", "coupler.J.px", "coupler.J.py", "coupler.J.pz", "rocker.m.px", "rocker.m.py", "rocker.m.pz", "rocker.J.px", "rocker.J.py", "rocker.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "coupler.x", "coupler.ax", "coupler.y", "coupler.ay", "coupler.z", "coupler.az", "rocker.x", "rocker.ax", "rocker.y", "rocker.ay", "rocker.z", "rocker.az", )
 PARAM_NAMES = ("crank_pivot__stiffness", "crank_pivot__damping", "crank_pivot__rot_stiffness", "crank_pivot__rot_damping", "crank_pivot__tx_load", "crank_pivot__ty_load", "crank_pivot__tz_load", "crank_pivot__ry_load", "crank_pivot__rz_load", "ball_A__stiffness", "ball_A__damping", "ball_A__rot_stiffness", "ball_A__rot_damping", "ball_A__tx_load", "ball_A__ty_load", "ball_A__tz_load", "ball_B__stiffness", "ball_B__damping", "ball_B__rot_stiffness", "ball_B__rot_damping", "ball_B__tx_load", "ball_B__ty_load", "ball_B__tz_load", "rocker_pivot__stiffness", "rocker_pivot__damping", "rocker_pivot__rot_stiffness", "rocker_pivot__rot_damping", "rocker_pivot__tx_load", "rocker_pivot__ty_load", "rocker_pivot__tz_load", "rocker_pivot__ry_load", "rocker_pivot__rz_load", )

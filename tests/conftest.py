@@ -82,3 +82,10 @@ def fd_jacobian(mod, t, x, p):
         xm[j] -= h
         fd[:, j] = (mod.rhs(t, xp, p) - mod.rhs(t, xm, p)) / (2 * h)
     return fd
+
+
+def error_lines(stderr: str) -> list[str]:
+    """stderr's lines without bgc's progress lines (``bgc: STAGE: ... (TIME)``, one per
+    finished stage when stderr is not a terminal): what a failing run says."""
+    from bgc.progress import PREFIX
+    return [ln for ln in stderr.splitlines() if not ln.startswith(PREFIX)]

@@ -28,6 +28,7 @@ from click.testing import CliRunner
 from bgc.cli import main
 from bgc.model import KINDS
 from bgc.simulate import SOLVERS
+from conftest import error_lines
 
 ERROR_LINE = re.compile(
     r"^error: (?P<file>.+?):(?P<line>\d+):(?P<col>\d+): (?P<key>[^\s:]+): (?P<msg>.+) "
@@ -87,7 +88,7 @@ def run_bad(tmp_path: Path, monkeypatch, cmd: str, text: str, *, at: str, key: s
     assert result.exception is None or isinstance(result.exception, SystemExit), (
         f"bgc raised {result.exception!r}" + detail)
     assert result.exit_code == 2, f"exit code {result.exit_code}" + detail
-    lines = result.stderr.splitlines()
+    lines = error_lines(result.stderr)
     assert len(lines) == 1, f"expected one stderr line, got {len(lines)}" + detail
     err = lines[0]
     assert err.startswith("error: "), detail
@@ -494,7 +495,7 @@ def test_simulate_unknown_solver(tmp_path, monkeypatch):
     detail = f"\nstdout: {result.stdout!r}\nstderr: {result.stderr!r}"
     assert "Traceback" not in result.output + result.stderr, detail
     assert result.exit_code == 2, detail
-    lines = result.stderr.splitlines()
+    lines = error_lines(result.stderr)
     assert len(lines) == 1 and lines[0].startswith("error: "), detail
     assert "nope" in lines[0] and "hint: " in lines[0], detail
     assert all(s in lines[0] for s in SOLVERS), detail
@@ -512,7 +513,7 @@ def test_executable_exits_2_without_traceback(tmp_path):
     detail = f"\nstdout: {proc.stdout!r}\nstderr: {proc.stderr!r}"
     assert proc.returncode == 2, detail
     assert "Traceback" not in proc.stderr + proc.stdout, detail
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}:"), detail
     assert not out_dir.exists() or not list(out_dir.iterdir()), detail
 

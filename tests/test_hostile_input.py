@@ -26,6 +26,7 @@ from test_output_files import bgc, snapshot
 
 from bgc import load, signals
 from bgc.model import MAX_POINTS
+from conftest import error_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -72,7 +73,7 @@ def refused(tmp_path: Path, *args, key: str | None = None, line: int | None = No
     detail = f"\nstdout: {proc.stdout[-2000:]!r}\nstderr: {proc.stderr[-2000:]!r}"
     assert "Traceback" not in proc.stderr + proc.stdout, detail
     assert proc.returncode == 2, f"exit {proc.returncode}" + detail
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert 1 <= len(lines) <= 2, detail
     m = (OPTION_LINE if option else ERROR_LINE).match(lines[0])
     assert m, "not bgc's error form" + detail

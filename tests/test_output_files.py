@@ -21,6 +21,7 @@ import pytest
 
 from bgc.errors import BgcError
 from bgc.fileio import atomic_write, check_writable
+from conftest import error_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 RLC = ROOT / "models" / "rlc.yaml"
@@ -47,7 +48,7 @@ def refused(tmp_path: Path, *args, names: str):
     detail = f"\nstdout: {proc.stdout!r}\nstderr: {proc.stderr!r}"
     assert proc.returncode == 2, detail
     assert "Traceback" not in proc.stderr + proc.stdout, detail
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert 1 <= len(lines) <= 2 and lines[0].startswith("error: "), detail
     assert names in lines[0] and "(hint: " in lines[0], detail
     assert snapshot(tmp_path) == before, "the directory changed" + detail

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import error_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 MSD = ROOT / "models" / "msd_forced.yaml"
@@ -86,7 +87,7 @@ def test_step_budget_stops_the_run_and_keeps_its_results(gen, solver):
     out = gen / f"budget_{solver}.csv"
     proc = run("simulate", MSD, "-o", "gen", "--solver", solver, "--max-steps", 25,
                "--out", out, cwd=gen)
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr, proc.stderr
     assert "the step budget (25 steps) is spent at t = " in lines[0], lines[0]
@@ -101,7 +102,7 @@ def test_step_budget_stops_the_run_and_keeps_its_results(gen, solver):
 @pytest.mark.parametrize("value", ["0", "-5", "1.5", "many"])
 def test_step_budget_must_be_a_whole_positive_number(gen, value):
     proc = run("simulate", MSD, "-o", "gen", "--max-steps", value, cwd=gen)
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0].startswith("error: --max-steps: "), lines[0]
 
@@ -146,7 +147,7 @@ def test_ctrl_c_stops_within_a_second_and_writes_the_results_so_far(gen, solver)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr, stderr
     assert took < 1.0, f"{took:.2f} s from Ctrl-C to exit"
-    assert stderr.startswith("interrupted: Ctrl-C at t = "), stderr
+    assert error_lines(stderr)[0].startswith("interrupted: Ctrl-C at t = "), stderr
     assert "partial results up to t = " in stderr, stderr
     data = rows(out)
     assert len(data) >= 2 and 0 < data[-1][0] < t_end
@@ -162,7 +163,7 @@ def test_redundant_constraints_at_millimetre_scale_end_at_once_naming_them(gen, 
     out = gen / f"micro_{solver}.csv"
     proc = run("simulate", MICRO, "--method", "lagrange", "-o", "gen", "--solver", solver,
                "--t-end", 0.1, "--out", out, cwd=gen, timeout=60)
-    lines = proc.stderr.splitlines()
+    lines = error_lines(proc.stderr)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and len(lines) == 1, proc.stderr
     assert "not finite at the initial state (t = 0)" in lines[0], lines[0]

@@ -24,6 +24,7 @@ from bgc.cli import main
 from bgc.emit import module_name_problem, py_str
 from bgc.errors import BgcError
 from bgc.pipeline import compile_model
+from conftest import error_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -174,7 +175,7 @@ def run_cli(tmp_path, args):
     detail = f"\nstdout: {result.stdout!r}\nstderr: {result.stderr!r}"
     assert result.exit_code == 2, detail
     assert "Traceback" not in result.output + result.stderr, detail
-    lines = result.stderr.splitlines()
+    lines = error_lines(result.stderr)
     assert len(lines) == 1 and lines[0].startswith("error: "), detail
     return lines[0]
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import jinja2
 import sympy as sp
 
-from . import __version__, kernels, symbols
+from . import __version__, kernels, progress, symbols
 from .equations import EquationSystem, LinearBlock
 from .errors import BgcError
 from .fileio import atomic_write
@@ -183,7 +183,11 @@ def render(system: EquationSystem) -> str:
     m = system.model
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = _cone(system.assignments, dx)
-    jt = tape(rhs_asg, system.states)
+    with progress.stage("jacobian") as st:
+        jt = tape(rhs_asg, system.states)
+        st.done(f"{progress.count(len(jt.pattern), 'entry', 'entries')}, "
+                f"{progress.count(jt.n_colours, 'colour')}, "
+                f"{progress.count(len(jt.slot), 'partial')}")
     solved = {b.index for b in jt.blocks}
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
@@ -211,7 +215,8 @@ def render(system: EquationSystem) -> str:
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=canonical, ir=kern.ir, n_work=kern.n_work, n_eval=kern.n_eval,
+        canonical=canonical, prefix=canonical, ir=kern.ir,
+        n_functions=kern.ir.count("\ndefine "), n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
         tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],

@@ -60,15 +60,30 @@ def _load(path: str | Path) -> Model:
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
                   method: str = "parasitic", **derive_options) -> tuple[Compiled, Path]:
-    """Build and write ``out_dir/<name>.py``; nothing is written if any stage fails."""
+    """Build and write ``out_dir/<name>.py``, then compile its machine code, so that a
+    later ``import`` or ``bgc simulate`` compiles nothing; nothing is written if a stage
+    before the module's fails."""
     check_writable(out_dir, "output directory", directory=True)   # before the work
     with progress.record() as timings:
         c = build(model, method, **derive_options)
         with progress.stage("emit") as st:
             path = emit.write(c.system, out_dir)
             st.done(f"{path.name}, {path.stat().st_size / 1e3:.0f} kB")
+        machine_code(path)
     c.timings = timings
     return c, path
+
+
+def machine_code(path: Path):
+    """The machine-code stage: import the generated module, which compiles its LLVM
+    kernels for this machine (``bgc.kernels``; or loads them, compiled before), and
+    compile its numba wrappers (or load them from numba's cache)."""
+    with progress.stage("machine code") as st:
+        module = emit.import_module(path)
+        module.compile_all()
+        st.done(f"{progress.count(module.KERNEL_FUNCTIONS, 'kernel')}, "
+                f"{len(module._KERNEL_IR) / 1e6:.1f} MB of LLVM IR")
+    return module
 
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",

@@ -187,7 +187,7 @@ def render(system: EquationSystem) -> str:
         jt = tape(rhs_asg, system.states)
         st.done(f"{progress.count(len(jt.pattern), 'entry', 'entries')}, "
                 f"{progress.count(jt.n_colours, 'colour')}, "
-                f"{progress.count(len(jt.slot), 'partial')}")
+                f"{progress.count(len(jt.src), 'partial')}")
     solved = {b.index for b in jt.blocks}
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved

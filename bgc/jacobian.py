@@ -40,8 +40,8 @@ class JacobianTape:
     n_rows: int
     ptr: list[int]                           # entries of row r: ptr[r] .. ptr[r+1]
     src: list[int]                           # >= 0: a row; < 0: state colour -src-1
-    slot: list[int]                          # the entry's partial: its slot in pv
-    # per differentiated expression e: [(slot, w)], pv[slot] = d e / d w at run time
+    # per differentiated expression e: [(m, w)], pv[m] = d e / d w at run time is the
+    # partial of entry m
     partials: list[tuple[sp.Expr, list[tuple[int, sp.Symbol]]]]
     blocks: list[Block]
     pattern: list[tuple[int, int, int]]      # (i, j, row of dx_i)
@@ -118,16 +118,14 @@ def tape(assignments, states) -> JacobianTape:
             r = rec.rows[st.dsym]
             pattern += [(i, j, r) for j in sorted(rec.row_cols[r])]
     colours, n_colours = _colour(len(states), pattern)
-    # flatten the tape: each edge its own slot of run-time partials
-    ptr, src, slot, partials = [0], [], [], []
+    # flatten the tape: each edge its own run-time partial
+    ptr, src, partials = [0], [], []
     for e, edges in rec.entries:
-        for r, w in edges:
-            src.append(r if r >= 0 else -1 - colours[-1 - r])
-            slot.append(len(slot))
         if edges:
-            partials.append((e, [(k, w) for k, (_, w) in zip(slot[-len(edges):], edges)]))
+            partials.append((e, [(len(src) + k, w) for k, (_, w) in enumerate(edges)]))
+        src += [r if r >= 0 else -1 - colours[-1 - r] for r, _ in edges]
         ptr.append(len(src))
-    return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, slot, partials,
+    return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, partials,
                         rec.blocks, pattern)
 
 

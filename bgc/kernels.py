@@ -1,19 +1,27 @@
-"""Stage **kernels**: the straight-line code of an EquationSystem as LLVM IR.
+"""Stage **kernels**: an EquationSystem's run-time work as LLVM IR.
 
 numba's compile time for one straight-line function grows faster than its length (the
-SARIB's Jacobian: minutes); LLVM alone, given the same operations as IR, compiles them in
-seconds. So the generated module keeps numba for what is small and has loops (block solves,
-the Jacobian tape, the C entry points) and hands the assignments to LLVM as IR functions of
-at most ``CHUNK`` assignments each, which keeps LLVM's cost linear in the model's size.
+SARIB's Jacobian: minutes); LLVM, given the same operations as IR, compiles them in about a
+second. So everything a generated module computes is IR, compiled through llvmlite (the
+LLVM binding numba itself uses) when the module is first imported on a machine; numba only
+wraps it (``rhs``, ``jac``, ... stay numba functions a script can call or inline).
 
-Every function the module offers (``rhs``, ``jac``'s run-time partials, ``outputs``,
-``guards``, ``constraints``) is a **program**: its cone of assignments cut into
-**segments** at the linear blocks. A segment computes its assignments, then the entries of
-the next block's matrix and right-hand side; the numba side solves the block and writes
-the unknowns back; the next segment goes on. Values cross segments and chunks through one
-workspace array ``w`` (a slot per assigned symbol, a region per block); within a chunk
-they stay in registers. The IR is plain text, target-independent (no triple, no CPU),
-with numbers written exactly (hexadecimal doubles), so it is the same on every machine.
+- **Programs**: ``rhs``, ``jac`` (its run-time partials), ``out``, ``guard``, ``con``:
+  each its cone of assignments in causal order, in functions of at most ``CHUNK`` steps
+  (LLVM's cost stays linear in the model's size). Values cross functions through one
+  workspace ``w``: a slot per assigned symbol, a region per linear block; within a
+  function they stay in registers.
+- **Linear blocks** (algebraic loops, constraint blocks) are solved where the causal
+  order reaches them: LU with partial pivoting, or, where the constraints' rank at run
+  time is below the block's size, least squares through LAPACK's SVD (scipy's dgesdd).
+- **The Jacobian**: each assignment's partials by reverse-mode differentiation of its
+  expression tree (``_Function.grad``: no symbolic derivative is ever formed), then the
+  compressed forward-mode tape of ``bgc.jacobian`` as a loop over constant tables.
+- **C entry points** ``void f(double t, double *x, double *p, double *out)`` for bgc's
+  native integrators.
+
+The IR is plain text, target-independent (no triple, no CPU), with every number written
+exactly (hexadecimal doubles): the same model gives the same bytes on every machine.
 """
 
 from __future__ import annotations
@@ -490,11 +498,11 @@ def _steps(items, outputs, layout: Layout):
 
 
 # The Jacobian tape as a loop (see bgc.jacobian): row r of the compressed sensitivities d
-# (n_rows x nc) is the sum over its entries m of pv[slot[m]] times row src[m],
+# (n_rows x nc) is the sum over its entries m of pv[m] times row src[m],
 # or, for src[m] < 0, added into column -src[m]-1. @{P} is the module's prefix.
 _TAPE = """\
 define internal void @{P}_tape(double* noalias %d, double* noalias %pv, i64 %start, \
-i64 %stop, i64 %nc, i64* %ptr, i64* %src, i64* %slot) nounwind {
+i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -512,9 +520,7 @@ edge:
   %m = phi i64 [ %m0, %row ], [ %m.next, %edge.end ]
   %s.a = getelementptr inbounds i64, i64* %src, i64 %m
   %s = load i64, i64* %s.a, align 8
-  %k.a = getelementptr inbounds i64, i64* %slot, i64 %m
-  %k = load i64, i64* %k.a, align 8
-  %wv.a = getelementptr inbounds double, double* %pv, i64 %k
+  %wv.a = getelementptr inbounds double, double* %pv, i64 %m
   %wv = load double, double* %wv.a, align 8
   %seed = icmp slt i64 %s, 0
   br i1 %seed, label %state, label %chain
@@ -1263,7 +1269,6 @@ class _Module:
         nc = jt.n_colours
         ptr = self.array("tape_ptr", "i64", jt.ptr)
         src = self.array("tape_src", "i64", jt.src)
-        slot = self.array("tape_slot", "i64", jt.slot)
         fn = _Function(f"{P}_jac_full", lay, {}, {}, self.decls)
         pv, d = fn.ptr("%w", lay.pv), fn.ptr("%w", lay.d)
         fn.body.append(f"  call void @{P}_jac(double %t, double* %x, double* %p, "
@@ -1272,8 +1277,7 @@ class _Module:
         for seg in jt.segments:
             if seg[0] == "tape":
                 fn.body.append(f"  call void @{P}_tape(double* {d}, double* {pv}, "
-                               f"i64 {seg[1]}, i64 {seg[2]}, i64 {nc}, {ptr}, {src}, "
-                               f"{slot})")
+                               f"i64 {seg[1]}, i64 {seg[2]}, i64 {nc}, {ptr}, {src})")
             else:                        # u's rows: A^-1 R, R in the rows before them
                 b = seg[1]
                 blk = lay.blocks[b.index]
@@ -1323,7 +1327,7 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
     layout = Layout(system, max(jt.n_colours, 1))
     n_eval = layout.size
-    layout.pv = layout._region(max(len(jt.slot), 1))
+    layout.pv = layout._region(max(len(jt.src), 1))
     layout.d = layout._region(jt.n_rows * jt.n_colours)
     mod = _Module(prefix, system, layout)
     blocks = layout.blocks.values()

@@ -206,17 +206,21 @@ def render(system: EquationSystem) -> str:
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
-    kern = kernels.lower(system, canonical, {
+    kern = kernels.lower(system, kernels.PLACEHOLDER, {
         "rhs": (rhs_asg, list(enumerate(dx))),
         "jac": (jac_all, jt.partials),
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
         "con": (con_asg, list(enumerate(con_exprs)))}, jt)
+    # the kernels' names: the module's and its IR's digest (one model compiled with other
+    # options is other code; two such modules in one process must not share a name)
+    prefix = f"{canonical}_{hashlib.sha256(kern.ir.encode()).hexdigest()[:12]}"
+    ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=canonical, ir=kern.ir,
-        n_functions=kern.ir.count("\ndefine "), n_work=kern.n_work, n_eval=kern.n_eval,
+        canonical=canonical, prefix=prefix, ir=ir, n_functions=ir.count("\ndefine "),
+        n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
         tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],

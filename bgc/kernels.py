@@ -36,6 +36,8 @@ from .equations import LinearBlock
 from .errors import BgcError
 from .signals import table, table_slope
 
+# the functions' prefix while the IR is built (emit replaces it by the module's own)
+PLACEHOLDER = "bgc_kernel_prefix"
 CHUNK = 300          # assignments (or stores) per IR function
 # LLVM's IR passes at -O1 and instruction selection at -O0 (fast, local register
 # allocation): on the SARIB's lagrange module 1 s instead of 11 s at -O2/-O2, and the

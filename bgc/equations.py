@@ -671,7 +671,8 @@ def _tear(comp: list, deps: dict, first=()) -> list:
     tears = [v for v in comp if v in first]
     rest = [v for v in comp if v not in first]
     while True:
-        sub = {v: [d for d in deps[v] if d in rest] for v in rest}
+        live = set(rest)
+        sub = {v: [d for d in deps[v] if d in live] for v in rest}
         cyclic = [c for c in strongly_connected(rest, sub) if is_cyclic(c, sub)]
         if not cyclic:
             return tears
@@ -762,8 +763,10 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
     multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
     dependent = [v for v in comp if v in {x for x, _, _ in b.zcp_dependent}]
     tears = _tear(comp, deps, multipliers + dependent)
-    rest = [v for v in comp if v not in tears]
-    sub_deps = {v: [d for d in deps[v] if d in rest] for v in rest}
+    torn = set(tears)
+    rest = [v for v in comp if v not in torn]
+    live = set(rest)
+    sub_deps = {v: [d for d in deps[v] if d in live] for v in rest}
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
     subs: dict = {}
     for v in order:

@@ -25,7 +25,7 @@ from . import cardan, exact, lagrange, symbols, zcp
 from .causality import CausalGraph
 from .errors import EquationError
 from .expand import AXES, body_junction, position, rotation_matrix
-from .forward_mode import directional, propagate
+from .forward_mode import directional, propagate, trivial
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
 
@@ -890,9 +890,7 @@ def _drop_aliases(assignments):
             continue
         v, e = item
         e = e.xreplace(aliases)
-        trivial = e.is_Symbol or e.is_Number or (e.could_extract_minus_sign()
-                                                  and (-e).is_Symbol)
-        if trivial and not v.name.startswith("DX_"):
+        if trivial(e) and not v.name.startswith("DX_"):
             aliases[v] = e
         else:
             kept.append((v, e))

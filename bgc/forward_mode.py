@@ -17,8 +17,12 @@ import sympy as sp
 
 
 def trivial(d) -> bool:
-    """A number or a (negated) symbol: printed inline, never hoisted."""
-    return d.is_Number or d.is_Symbol or (d.could_extract_minus_sign() and (-d).is_Symbol)
+    """A number or a (negated) symbol: printed inline, never hoisted. (``-s`` is the Mul
+    ``(-1, s)``; asking sympy ``could_extract_minus_sign`` instead negates the whole
+    expression, which costs most on the large sums that are never trivial.)"""
+    return (d.is_Number or d.is_Symbol
+            or (d.is_Mul and len(d.args) == 2 and d.args[0] is sp.S.NegativeOne
+                and d.args[1].is_Symbol))
 
 
 def derivative(e, s, free: dict | None = None):

@@ -579,10 +579,17 @@ class _Builder:
             out[symbols.ref(name, f"M{a}_R0")] = M[k]
         return out
 
-    def ref_map(self) -> dict[sp.Symbol, sp.Expr]:
+    def ref_map(self, wanted: set[str] | None = None) -> dict[sp.Symbol, sp.Expr]:
+        """Every reference ``target.attr`` -> its expression; with ``wanted``, only those
+        of the targets named (building every body's and joint's references costs more
+        than all the rest of the equations of a large model)."""
+        def want(target):
+            return wanted is None or target in wanted
         out = {}
         bonds = {bd.name: i for i, bd in enumerate(self.g.bonds)}
         for name, el in self.g.elements.items():
+            if not want(name):
+                continue
             if el.kind in ("0", "1"):
                 first = self.g.ports[name][0]
                 tag = "e" if el.kind == "0" else "f"
@@ -592,14 +599,20 @@ class _Builder:
                 out.update(self._refs(name, "e", E))
                 out.update(self._refs(name, "f", s * F))
         for st in self.states:
-            out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
+            if want(st.element):
+                out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
         for name, v in self.dependent.items():
-            out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
+            if want(name):
+                out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
         for n, body in self.g.bodies.items():
-            out.update(self.body_refs(n, body))
+            if want(n) or any(want(f"{n}__{pt}") for pt in body.points):
+                out.update(self.body_refs(n, body))
         for name, dirs in self.g.joints.items():
-            out.update(self.joint_refs(name, dirs))
+            if want(name):
+                out.update(self.joint_refs(name, dirs))
         for bname, i in bonds.items():
+            if not want(bname):
+                continue
             out.update(self._refs(bname, "e", self.E(i)))
             out.update(self._refs(bname, "f", self.F(i)))
         return out
@@ -612,10 +625,18 @@ class _Builder:
         return {symbols.ref(target, tag): value}
 
     def resolve_refs(self):
-        self.refs = self.ref_map()
+        """Replace the references in the equations; ``refs`` keeps those of the equations
+        and the outputs (the only readers)."""
+        reading = {}
         for v, e in self.eqs.items():
-            if any(symbols.is_ref(s) for s in e.free_symbols):
-                self.eqs[v] = e.xreplace(self.refs)
+            refs = {s for s in e.free_symbols if symbols.is_ref(s)}
+            if refs:
+                reading[v] = refs
+        used = set().union(*reading.values(), *(
+            {s for s in o.expr.free_symbols if symbols.is_ref(s)} for o in self.m.outputs))
+        self.refs = self.ref_map({symbols.split_ref(s)[0] for s in used})
+        for v in reading:
+            self.eqs[v] = self.eqs[v].xreplace(self.refs)
 
     def explicit(self, var: sp.Symbol, memo: dict, path: tuple) -> sp.Expr:
         """``var`` as a function of states, parameters and t only (for d/dt)."""

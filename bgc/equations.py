@@ -725,7 +725,17 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
                        tuple(b.eqs[v] for v in comp))
 
 
-def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int,
+def _substituted(b: _Builder, order: list) -> dict:
+    """The loop variables ``order`` (causal order) as expressions of the tearing variables
+    and what lies outside the loop (only where a substituted residual is wanted: they
+    swell along long loops)."""
+    subs: dict = {}
+    for v in order:
+        subs[v] = b.eqs[v].xreplace(subs)
+    return subs
+
+
+def _reduced_block(b: _Builder, tears: list, order: list, index: int,
                    refuse, rank=None, numeric_rhs=False) -> LinearBlock:
     """A linear loop solved numerically in its tearing variables only. ``A = I - d
     tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
@@ -746,8 +756,10 @@ def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int
     if any(e.has(*loop_vars) for e in [e for _, e in pre] + [a for _, _, a in entries]):
         raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
     zero = {t: 0 for t in tears}
-    rhs = (None if rank is not None or numeric_rhs else
-           tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears))
+    rhs = None
+    if rank is None and not numeric_rhs:
+        subs = _substituted(b, order)
+        rhs = tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears)
     return LinearBlock(index, tuple(tears), tuple(entries), rhs,
                        tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
 
@@ -782,16 +794,14 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
     multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
-    dependent = [v for v in comp if v in {x for x, _, _ in b.zcp_dependent}]
+    zcp_dependent = {x for x, _, _ in b.zcp_dependent}
+    dependent = [v for v in comp if v in zcp_dependent]
     tears = _tear(comp, deps, multipliers + dependent)
     torn = set(tears)
     rest = [v for v in comp if v not in torn]
     live = set(rest)
     sub_deps = {v: [d for d in deps[v] if d in live] for v in rest}
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
-    subs: dict = {}
-    for v in order:
-        subs[v] = eqs[v].xreplace(subs)
     elements = sorted({b.origin[v][0] for v in comp if b.origin[v][0]})
     bonds = sorted({b.origin[v][1] for v in comp if b.origin[v][1]})
     kind = "derivative" if any(v.name.startswith("DX_") for v in comp) else "algebraic"
@@ -816,23 +826,24 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
         loop.kind = "constraint"
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
                         f"({len(multipliers)} Lagrange multipliers)"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse,
+        block = _reduced_block(b, tears, order, block_index, refuse,
                                rank=symbols.param(lagrange.RANK))
         return [block] + [(v, eqs[v]) for v in order], loop
     if dependent:
         loop.kind = "imposed-flow"
         loop.tearing = [f"numeric LU of the {len(dependent)} dependent momenta (class-1 "
                         "ZCP: velocities imposed by the flow sources)"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse, numeric_rhs=True)
+        block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
     if any(v.name.startswith("W_") for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse)
+        block = _reduced_block(b, tears, order, block_index, refuse)
         return [block] + [(v, eqs[v]) for v in order], loop
     if len(tears) > max_symbolic:
         loop.tearing = ["numeric LU of all " + str(len(comp)) + " loop variables"]
         return [_numeric_block(b, comp, block_index, refuse)], loop
+    subs = _substituted(b, order)
     residuals = [sp.expand(t - eqs[t].xreplace(subs)) for t in tears]
     try:
         A, rhs = sp.linear_eq_to_matrix(residuals, tears)

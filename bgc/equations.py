@@ -175,6 +175,7 @@ class _Builder:
         self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
         self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
         self.algebraic: list = []       # states of a DAE whose row of M is zero
+        self._columns: dict = {}        # (bond, effort | flow) -> its column of symbols
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):
@@ -194,7 +195,11 @@ class _Builder:
         bond = self.g.bonds[b]
         if bond.dim == 1:
             return make(bond.name)
-        return sp.Matrix([make(bond.name, k) for k in range(bond.dim)])
+        key = (b, make)
+        col = self._columns.get(key)
+        if col is None:     # built once: a Matrix costs ~10x its copy
+            col = self._columns[key] = sp.Matrix([make(bond.name, k) for k in range(bond.dim)])
+        return col.copy()
 
     def E(self, b: int):
         """Effort of bond b: a symbol, or a column of symbols on a multibond."""

@@ -57,12 +57,15 @@ def directional(e, sens: dict) -> dict[int, sp.Expr]:
     """{seed: d e / d seed} through the symbols of ``e`` that have sensitivities."""
     acc: dict[int, sp.Expr] = {}
     free: dict = {}
+    one = sp.S.One
     for s in sorted((s for s in e.free_symbols if s in sens), key=lambda s: s.name):
         partial = derivative(e, s, free)
         if partial == 0:
             continue
         for j, ds in sens[s].items():
-            acc[j] = acc.get(j, sp.S.Zero) + partial * ds
+            # as acc.get(j, 0) + partial * ds, without sympy's work for 0 + x, 1 * x
+            term = ds if partial is one else partial if ds is one else partial * ds
+            acc[j] = acc[j] + term if j in acc else term
     return {j: d for j, d in sorted(acc.items()) if d != 0}
 
 

@@ -153,6 +153,22 @@ class EquationSystem:
         return sorted({bp for s in self.model.signals.values() for bp in s.breakpoints})
 
 
+def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
+    """``A * B``, the same entries as sympy forms them (each the sum of the products of
+    the non-zero entries, in order), without sympy's conversions to and from its
+    DomainMatrix, which cost more than the products on the small matrices here."""
+    m, k, o = A.rows, A.cols, B.cols
+    if B.rows != k:
+        raise ValueError(f"matmul: {A.shape} x {B.shape}")
+    a, b = A.flat(), B.flat()
+    out = []
+    for i in range(m):
+        row = a[i * k:(i + 1) * k]
+        for j in range(o):
+            out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
+    return sp.Matrix(m, o, out)
+
+
 def variant(method: str, open_loops: bool = True) -> str:
     """``method``, or ``zcp_closed`` for method zcp with its loops kept closed."""
     return "zcp_closed" if method == "zcp" and not open_loops else method
@@ -311,7 +327,7 @@ class _Builder:
         dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
         law = el.fields.get(el.law)
         M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-        value = M * x if el.law == "k" else M.inv() * x
+        value = matmul(M, x) if el.law == "k" else matmul(M.inv(), x)
         if el.kind == "C":
             self.define(E, value, name, b)
             self.define(dx, s * F, name, b)
@@ -391,12 +407,12 @@ class _Builder:
         if isinstance(n, sp.MatrixBase):   # f_c = M f_a, e_a = M^T e_c
             n = self.hoist(name, n)
             if not self.cg.receives_effort(a, name):
-                self.define(self.F(c), n * sp.Matrix([self.F(a)]), name, c)
-                self.define(self.E(a), n.T * sp.Matrix([self.E(c)]), name, a)
+                self.define(self.F(c), matmul(n, sp.Matrix([self.F(a)])), name, c)
+                self.define(self.E(a), matmul(n.T, sp.Matrix([self.E(c)])), name, a)
             else:                          # a rotation, or a constant invertible matrix
                 inv = n.T if el.orthogonal else n.inv()
-                self.define(self.F(a), inv * self.F(c), name, a)
-                self.define(self.E(c), inv.T * self.E(a), name, c)
+                self.define(self.F(a), matmul(inv, self.F(c)), name, a)
+                self.define(self.E(c), matmul(inv.T, self.E(a)), name, c)
             return
         if self.cg.receives_effort(a, name):
             self.define(self.E(c), self.E(a) / n, name, c)
@@ -510,7 +526,7 @@ class _Builder:
                                 f"'{n}'", cardan.gimbal_margin(ang[1])))
             F0 = exact.matrix(body.frame)
             C = cardan.rotation(*ang)
-            self.define(rotation_matrix(n), C if F0 == sp.eye(3) else F0 * C, n)
+            self.define(rotation_matrix(n), C if F0 == sp.eye(3) else matmul(F0, C), n)
             for k in range(3):
                 for x, rate, x0, label in ((pos[k], v[k], body.com[k], AXES[k]),
                                            (ang[k], rates[k], 0.0, f"a{AXES[k]}")):

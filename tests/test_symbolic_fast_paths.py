@@ -1,9 +1,13 @@
-"""forward_mode's own differentiation and triviality test must give exactly what sympy's
-``diff`` and sign extraction give (the generated code is compared byte for byte)."""
+"""The front end's shortcuts past sympy (forward_mode's differentiation and triviality
+test, equations.matmul) must give exactly the expressions sympy gives: the generated code
+is compared byte for byte."""
+
+import random
 
 import sympy as sp
 
 from bgc import pipeline
+from bgc.equations import matmul
 from bgc.forward_mode import derivative, directional, trivial
 
 x, y, z, w = sp.symbols("x y z w", real=True)
@@ -62,3 +66,16 @@ def test_references_resolve_to_the_same_expressions_as_a_full_map(tmp_path):
         assert o.expr.xreplace(b.refs) == o.expr.xreplace(full)
     system = pipeline.build(model, "parasitic").system
     assert [n for n, _ in system.outputs] == [o.name for o in model.outputs]
+
+
+def test_matmul_is_sympys_product_exactly():
+    pool = [0, 1, -1, sp.Rational(1, 2), 2, x, y, -z, x * y, x + y, sp.cos(x),
+            sp.Float(0.5), sp.sqrt(2) / 2, sp.Float(0.1) * x]
+    rng = random.Random(1)
+    for _ in range(500):
+        m, k, o = rng.randint(1, 3), rng.randint(1, 3), rng.randint(1, 3)
+        A = sp.Matrix(m, k, [rng.choice(pool) for _ in range(m * k)])
+        B = sp.Matrix(k, o, [rng.choice(pool) for _ in range(k * o)])
+        got, want = matmul(A, B), A * B
+        assert got.shape == want.shape
+        assert [sp.srepr(e) for e in got] == [sp.srepr(e) for e in want], (A, B)

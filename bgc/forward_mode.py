@@ -41,24 +41,34 @@ def derivative(e, s, free: dict | None = None):
     if s not in fs:
         return sp.S.Zero
     if e.is_Add:
-        return sp.Add(*[derivative(a, s, free) for a in e.args])
+        return _sum([derivative(a, s, free) for a in e.args])
     if e.is_Mul:
         args = e.args
         terms = []
         for i, a in enumerate(args):
             d = derivative(a, s, free)
             if d is not sp.S.Zero:
-                terms.append(sp.Mul(*args[:i], d, *args[i + 1:]))
-        return sp.Add(*terms)
+                factors = [f for f in (*args[:i], d, *args[i + 1:]) if f is not sp.S.One]
+                terms.append(factors[0] if len(factors) == 1 else
+                             sp.Mul(*factors, _sympify=False))
+        return _sum(terms)
     return sp.diff(e, s)
+
+
+def _sum(terms):
+    """``sp.Add(*terms)``, short-cut where sympy's is (no term or one other than 0)."""
+    terms = [t for t in terms if t is not sp.S.Zero]
+    if len(terms) < 2:
+        return terms[0] if terms else sp.S.Zero
+    return sp.Add(*terms, _sympify=False)
 
 
 def directional(e, sens: dict) -> dict[int, sp.Expr]:
     """{seed: d e / d seed} through the symbols of ``e`` that have sensitivities."""
     acc: dict[int, sp.Expr] = {}
-    free: dict = {}
+    free = {e: e.free_symbols}
     one = sp.S.One
-    for s in sorted((s for s in e.free_symbols if s in sens), key=lambda s: s.name):
+    for s in sorted((s for s in free[e] if s in sens), key=lambda s: s.name):
         partial = derivative(e, s, free)
         if partial == 0:
             continue

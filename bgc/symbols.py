@@ -16,7 +16,7 @@ t = sp.Symbol("t", real=True)
 LOCAL = {name: sp.Symbol(f"LOCAL_{name}", real=True) for name in ("e", "f", "q", "p")}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.lru_cache(maxsize=1 << 16)
 def _sym(name: str) -> sp.Symbol:
     """The real symbol ``name`` (memoized: the same object sympy would return from its
     cache, without re-checking the assumptions on every one of the many calls)."""

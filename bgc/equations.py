@@ -16,6 +16,8 @@ expression. Two things need more than sorting:
 
 from __future__ import annotations
 
+import gc
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -25,7 +27,7 @@ from . import cardan, exact, lagrange, symbols, zcp
 from .causality import CausalGraph
 from .errors import EquationError
 from .expand import AXES, body_junction, position, rotation_matrix
-from .forward_mode import directional, propagate
+from .forward_mode import directional, propagate, trivial
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
 
@@ -151,6 +153,22 @@ class EquationSystem:
         return sorted({bp for s in self.model.signals.values() for bp in s.breakpoints})
 
 
+def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
+    """``A * B``, the same entries as sympy forms them (each the sum of the products of
+    the non-zero entries, in order), without sympy's conversions to and from its
+    DomainMatrix, which cost more than the products on the small matrices here."""
+    m, k, o = A.rows, A.cols, B.cols
+    if B.rows != k:
+        raise ValueError(f"matmul: {A.shape} x {B.shape}")
+    a, b = A.flat(), B.flat()
+    out = []
+    for i in range(m):
+        row = a[i * k:(i + 1) * k]
+        for j in range(o):
+            out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
+    return sp.Matrix(m, o, out)
+
+
 def variant(method: str, open_loops: bool = True) -> str:
     """``method``, or ``zcp_closed`` for method zcp with its loops kept closed."""
     return "zcp_closed" if method == "zcp" and not open_loops else method
@@ -175,6 +193,7 @@ class _Builder:
         self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
         self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
         self.algebraic: list = []       # states of a DAE whose row of M is zero
+        self._columns: dict = {}        # (bond, effort | flow) -> its column of symbols
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):
@@ -194,7 +213,11 @@ class _Builder:
         bond = self.g.bonds[b]
         if bond.dim == 1:
             return make(bond.name)
-        return sp.Matrix([make(bond.name, k) for k in range(bond.dim)])
+        key = (b, make)
+        col = self._columns.get(key)
+        if col is None:     # built once: a Matrix costs ~10x its copy
+            col = self._columns[key] = sp.Matrix([make(bond.name, k) for k in range(bond.dim)])
+        return col.copy()
 
     def E(self, b: int):
         """Effort of bond b: a symbol, or a column of symbols on a multibond."""
@@ -304,7 +327,7 @@ class _Builder:
         dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
         law = el.fields.get(el.law)
         M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-        value = M * x if el.law == "k" else M.inv() * x
+        value = matmul(M, x) if el.law == "k" else matmul(M.inv(), x)
         if el.kind == "C":
             self.define(E, value, name, b)
             self.define(dx, s * F, name, b)
@@ -384,12 +407,12 @@ class _Builder:
         if isinstance(n, sp.MatrixBase):   # f_c = M f_a, e_a = M^T e_c
             n = self.hoist(name, n)
             if not self.cg.receives_effort(a, name):
-                self.define(self.F(c), n * sp.Matrix([self.F(a)]), name, c)
-                self.define(self.E(a), n.T * sp.Matrix([self.E(c)]), name, a)
+                self.define(self.F(c), matmul(n, sp.Matrix([self.F(a)])), name, c)
+                self.define(self.E(a), matmul(n.T, sp.Matrix([self.E(c)])), name, a)
             else:                          # a rotation, or a constant invertible matrix
                 inv = n.T if el.orthogonal else n.inv()
-                self.define(self.F(a), inv * self.F(c), name, a)
-                self.define(self.E(c), inv.T * self.E(a), name, c)
+                self.define(self.F(a), matmul(inv, self.F(c)), name, a)
+                self.define(self.E(c), matmul(inv.T, self.E(a)), name, c)
             return
         if self.cg.receives_effort(a, name):
             self.define(self.E(c), self.E(a) / n, name, c)
@@ -503,7 +526,7 @@ class _Builder:
                                 f"'{n}'", cardan.gimbal_margin(ang[1])))
             F0 = exact.matrix(body.frame)
             C = cardan.rotation(*ang)
-            self.define(rotation_matrix(n), C if F0 == sp.eye(3) else F0 * C, n)
+            self.define(rotation_matrix(n), C if F0 == sp.eye(3) else matmul(F0, C), n)
             for k in range(3):
                 for x, rate, x0, label in ((pos[k], v[k], body.com[k], AXES[k]),
                                            (ang[k], rates[k], 0.0, f"a{AXES[k]}")):
@@ -579,10 +602,17 @@ class _Builder:
             out[symbols.ref(name, f"M{a}_R0")] = M[k]
         return out
 
-    def ref_map(self) -> dict[sp.Symbol, sp.Expr]:
+    def ref_map(self, wanted: set[str] | None = None) -> dict[sp.Symbol, sp.Expr]:
+        """Every reference ``target.attr`` -> its expression; with ``wanted``, only those
+        of the targets named (building every body's and joint's references costs more
+        than all the rest of the equations of a large model)."""
+        def want(target):
+            return wanted is None or target in wanted
         out = {}
         bonds = {bd.name: i for i, bd in enumerate(self.g.bonds)}
         for name, el in self.g.elements.items():
+            if not want(name):
+                continue
             if el.kind in ("0", "1"):
                 first = self.g.ports[name][0]
                 tag = "e" if el.kind == "0" else "f"
@@ -592,14 +622,20 @@ class _Builder:
                 out.update(self._refs(name, "e", E))
                 out.update(self._refs(name, "f", s * F))
         for st in self.states:
-            out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
+            if want(st.element):
+                out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
         for name, v in self.dependent.items():
-            out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
+            if want(name):
+                out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v
         for n, body in self.g.bodies.items():
-            out.update(self.body_refs(n, body))
+            if want(n) or any(want(f"{n}__{pt}") for pt in body.points):
+                out.update(self.body_refs(n, body))
         for name, dirs in self.g.joints.items():
-            out.update(self.joint_refs(name, dirs))
+            if want(name):
+                out.update(self.joint_refs(name, dirs))
         for bname, i in bonds.items():
+            if not want(bname):
+                continue
             out.update(self._refs(bname, "e", self.E(i)))
             out.update(self._refs(bname, "f", self.F(i)))
         return out
@@ -612,10 +648,18 @@ class _Builder:
         return {symbols.ref(target, tag): value}
 
     def resolve_refs(self):
-        self.refs = self.ref_map()
+        """Replace the references in the equations; ``refs`` keeps those of the equations
+        and the outputs (the only readers)."""
+        reading = {}
         for v, e in self.eqs.items():
-            if any(symbols.is_ref(s) for s in e.free_symbols):
-                self.eqs[v] = e.xreplace(self.refs)
+            refs = {s for s in e.free_symbols if symbols.is_ref(s)}
+            if refs:
+                reading[v] = refs
+        used = set().union(*reading.values(), *(
+            {s for s in o.expr.free_symbols if symbols.is_ref(s)} for o in self.m.outputs))
+        self.refs = self.ref_map({symbols.split_ref(s)[0] for s in used})
+        for v in reading:
+            self.eqs[v] = self.eqs[v].xreplace(self.refs)
 
     def explicit(self, var: sp.Symbol, memo: dict, path: tuple) -> sp.Expr:
         """``var`` as a function of states, parameters and t only (for d/dt)."""
@@ -671,7 +715,8 @@ def _tear(comp: list, deps: dict, first=()) -> list:
     tears = [v for v in comp if v in first]
     rest = [v for v in comp if v not in first]
     while True:
-        sub = {v: [d for d in deps[v] if d in rest] for v in rest}
+        live = set(rest)
+        sub = {v: [d for d in deps[v] if d in live] for v in rest}
         cyclic = [c for c in strongly_connected(rest, sub) if is_cyclic(c, sub)]
         if not cyclic:
             return tears
@@ -703,7 +748,17 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
                        tuple(b.eqs[v] for v in comp))
 
 
-def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int,
+def _substituted(b: _Builder, order: list) -> dict:
+    """The loop variables ``order`` (causal order) as expressions of the tearing variables
+    and what lies outside the loop (only where a substituted residual is wanted: they
+    swell along long loops)."""
+    subs: dict = {}
+    for v in order:
+        subs[v] = b.eqs[v].xreplace(subs)
+    return subs
+
+
+def _reduced_block(b: _Builder, tears: list, order: list, index: int,
                    refuse, rank=None, numeric_rhs=False) -> LinearBlock:
     """A linear loop solved numerically in its tearing variables only. ``A = I - d
     tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
@@ -724,8 +779,10 @@ def _reduced_block(b: _Builder, tears: list, order: list, subs: dict, index: int
     if any(e.has(*loop_vars) for e in [e for _, e in pre] + [a for _, _, a in entries]):
         raise refuse("nonlinear algebraic loop", "break the loop with a small parasitic C or I")
     zero = {t: 0 for t in tears}
-    rhs = (None if rank is not None or numeric_rhs else
-           tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears))
+    rhs = None
+    if rank is None and not numeric_rhs:
+        subs = _substituted(b, order)
+        rhs = tuple(b.eqs[t].xreplace(subs).xreplace(zero) for t in tears)
     return LinearBlock(index, tuple(tears), tuple(entries), rhs,
                        tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
 
@@ -760,14 +817,14 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
     multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
-    dependent = [v for v in comp if v in {x for x, _, _ in b.zcp_dependent}]
+    zcp_dependent = {x for x, _, _ in b.zcp_dependent}
+    dependent = [v for v in comp if v in zcp_dependent]
     tears = _tear(comp, deps, multipliers + dependent)
-    rest = [v for v in comp if v not in tears]
-    sub_deps = {v: [d for d in deps[v] if d in rest] for v in rest}
+    torn = set(tears)
+    rest = [v for v in comp if v not in torn]
+    live = set(rest)
+    sub_deps = {v: [d for d in deps[v] if d in live] for v in rest}
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
-    subs: dict = {}
-    for v in order:
-        subs[v] = eqs[v].xreplace(subs)
     elements = sorted({b.origin[v][0] for v in comp if b.origin[v][0]})
     bonds = sorted({b.origin[v][1] for v in comp if b.origin[v][1]})
     kind = "derivative" if any(v.name.startswith("DX_") for v in comp) else "algebraic"
@@ -792,23 +849,24 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
         loop.kind = "constraint"
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
                         f"({len(multipliers)} Lagrange multipliers)"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse,
+        block = _reduced_block(b, tears, order, block_index, refuse,
                                rank=symbols.param(lagrange.RANK))
         return [block] + [(v, eqs[v]) for v in order], loop
     if dependent:
         loop.kind = "imposed-flow"
         loop.tearing = [f"numeric LU of the {len(dependent)} dependent momenta (class-1 "
                         "ZCP: velocities imposed by the flow sources)"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse, numeric_rhs=True)
+        block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
     if any(v.name.startswith("W_") for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
-        block = _reduced_block(b, tears, order, subs, block_index, refuse)
+        block = _reduced_block(b, tears, order, block_index, refuse)
         return [block] + [(v, eqs[v]) for v in order], loop
     if len(tears) > max_symbolic:
         loop.tearing = ["numeric LU of all " + str(len(comp)) + " loop variables"]
         return [_numeric_block(b, comp, block_index, refuse)], loop
+    subs = _substituted(b, order)
     residuals = [sp.expand(t - eqs[t].xreplace(subs)) for t in tears]
     try:
         A, rhs = sp.linear_eq_to_matrix(residuals, tears)
@@ -831,6 +889,26 @@ def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> Equat
     than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
     The method (what L became) was chosen by ``expand``; ``lagrange`` adds the
     multipliers' acceleration-level equations."""
+    with gc_paused():
+        return _derive(cg, max_symbolic_loop)
+
+
+@contextmanager
+def gc_paused():
+    """Python's cyclic garbage collector off for a while: building expressions allocates
+    millions of acyclic sympy objects, and each full collection walks all that are alive,
+    so the collections cost more than linearly with the model's size (about a fifth of
+    the equations of a 40-link chain)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
     b = _Builder(cg)
     method = cg.graph.method
     b.build()
@@ -887,9 +965,7 @@ def _drop_aliases(assignments):
             continue
         v, e = item
         e = e.xreplace(aliases)
-        trivial = e.is_Symbol or e.is_Number or (e.could_extract_minus_sign()
-                                                  and (-e).is_Symbol)
-        if trivial and not v.name.startswith("DX_"):
+        if trivial(e) and not v.name.startswith("DX_"):
             aliases[v] = e
         else:
             kept.append((v, e))

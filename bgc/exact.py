@@ -20,6 +20,7 @@ noise a numerical computation of another machine would leave) maps to the same v
 
 from __future__ import annotations
 
+import functools
 import math
 from fractions import Fraction
 
@@ -45,7 +46,12 @@ def rational(x) -> sp.Rational:
         x = float(x)
     if isinstance(x, int) and not isinstance(x, bool):
         return sp.Integer(x)
-    x = float(x)
+    return _shortest(float(x))
+
+
+@functools.lru_cache(maxsize=4096)
+def _shortest(x: float) -> sp.Rational:
+    """``rational`` of a float (memoized: a model's few values are read many times)."""
     if not math.isfinite(x):
         raise ValueError(f"not a finite number: {x}")
     if x == 0.0:

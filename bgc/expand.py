@@ -23,6 +23,8 @@ dimension (rule C1), nothing is left unbonded.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import sympy as sp
 
@@ -54,8 +56,13 @@ def joint_offset(body: Body, at) -> sp.Matrix:
     """Body-frame offset from G of the body-fixed point that is at ``at`` (R0) initially:
     computed exactly and put in canonical form (``exact``), so no rounding noise of the
     machine reaches the equations."""
-    return exact.canonical(exact.matrix(body.frame).T
-                           * (exact.vector(at) - exact.vector(body.com)))
+    return _offset(tuple(map(tuple, body.frame)), tuple(body.com), tuple(at)).copy()
+
+
+@functools.lru_cache(maxsize=1024)
+def _offset(frame, com, at) -> sp.Matrix:
+    """``joint_offset``, memoized (asked for each joint direction, each side)."""
+    return exact.canonical(exact.matrix(frame).T * (exact.vector(at) - exact.vector(com)))
 
 
 def joint_param(joint: str, role: str) -> str:

@@ -6,6 +6,8 @@ print expressions as they are. Display names (``spring.q``, ``L1.f``) are kept b
 
 from __future__ import annotations
 
+import functools
+
 import sympy as sp
 
 t = sp.Symbol("t", real=True)
@@ -14,7 +16,10 @@ t = sp.Symbol("t", real=True)
 LOCAL = {name: sp.Symbol(f"LOCAL_{name}", real=True) for name in ("e", "f", "q", "p")}
 
 
+@functools.lru_cache(maxsize=1 << 16)
 def _sym(name: str) -> sp.Symbol:
+    """The real symbol ``name`` (memoized: the same object sympy would return from its
+    cache, without re-checking the assumptions on every one of the many calls)."""
     return sp.Symbol(name, real=True)
 
 

@@ -42,7 +42,8 @@ def test_compile_writes_module(tmp_path):
     assert r.exit_code == 0, r.output
     info = json.loads(r.output)
     assert info["states"] == 2 and (tmp_path / "rlc.py").exists()
-    assert set(info["timings"]) == {"load", "causality", "equations", "emit"}
+    assert set(info["timings"]) == {"load", "causality", "equations", "jacobian", "emit",
+                                    "machine code"}
 
 
 def test_simulate_writes_csv_png_and_statistics(tmp_path):

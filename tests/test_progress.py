@@ -22,7 +22,7 @@ from conftest import MODELS, ROOT
 
 RLC = MODELS / "rlc.yaml"
 LINE = re.compile(r"^bgc: ( *)([a-z][a-z ]*?)(?:: (.+))? \((\d+(?:\.\d+)?) s\)$")
-COMPILE_STAGES = ["load", "causality", "equations", "emit"]
+COMPILE_STAGES = ["load", "causality", "equations", "jacobian", "emit", "machine code"]
 
 
 def bgc(*args):

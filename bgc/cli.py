@@ -385,6 +385,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if plot:
         from .results import plot_format
         plot_format(plot, "--plot")
+    from .simulate import precompile_loop
+    precompile_loop(solver)            # the native loop compiles beside the model's build
     module, m, compiled = ensure_module(model, out_dir, method, open_loops=not keep_loops)
     st = m.settings
     _check_overrides(model, params)

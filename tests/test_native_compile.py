@@ -24,7 +24,7 @@ def test_compile_loop_is_the_specialization_a_run_uses(compiled, loop, kw):
     before = set(dispatcher.signatures)
     assert before
     r = simulate(compiled("msd_forced"), t_end=0.05, points=11, **kw)
-    assert r.ok and len(r.t) == 11 and np.isfinite(r.x).all()
+    assert r.success and len(r.t) == 11 and np.isfinite(r.x).all()
     assert set(dispatcher.signatures) == before
     assert native.cached(dispatcher)
 

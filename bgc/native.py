@@ -26,6 +26,11 @@ REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE, INTERRUP
     range(8)
 
 
+# a function called only from compiled code: no Python or C wrapper to lower and optimize
+# (a few % of a loop's cold compile); not callable from Python
+inner = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
+
 @intrinsic
 def call_entry(typingctx, addr, t, x, p, out):
     """Call the C function at ``addr`` as f(t, x.data, p.data, out.data) (contiguous

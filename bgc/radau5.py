@@ -25,7 +25,7 @@ from numba.np.linalg import F_INT_nptype, _LAPACK
 from . import sparse_lu
 from .native import (GUARD, INTERRUPTED, N_STATS, NOT_FINITE, PAUSED, REACHED, SINGULAR,
                      ST_JAC, ST_LU, ST_REJECTED, ST_RHS, ST_STEPS, STEP_TOO_SMALL,
-                     call_entry, evaluate, guard_min, stopped)
+                     call_entry, evaluate, guard_min, inner, stopped)
 
 _S6 = 6.0 ** 0.5
 _C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
@@ -44,7 +44,6 @@ _P = np.array([[13.0 / 3.0 + 7.0 * _S6 / 3.0, -23.0 / 3.0 - 22.0 * _S6 / 3.0,
                [13.0 / 3.0 - 7.0 * _S6 / 3.0, -23.0 / 3.0 + 22.0 * _S6 / 3.0,
                 10.0 / 3.0 - 5.0 * _S6],
                [1.0 / 3.0, -8.0 / 3.0, 10.0 / 3.0]])
-_inner = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 NEWTON_MAXITER = 6
 NO_LU, DENSE_LU, SPARSE_LU = 0, 1, 2
 MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
@@ -71,7 +70,7 @@ def _getrf_complex(a, piv):
     return _GETRF_COMPLEX(122, n, n, a.ctypes, n, piv.ctypes)
 
 
-@_inner
+@inner
 def _lu_solve(lu, piv, b):
     """Solve with getrf's factors of A (``lu`` holds them transposed, LAPACK's column-major
     order): row swaps, then the unit lower and the upper triangle."""
@@ -95,7 +94,7 @@ def _lu_solve(lu, piv, b):
     return x
 
 
-@_inner
+@inner
 def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
     """Factor mu_real/h M - J and mu_complex/h M - J (M empty: the identity): along the
     sparse ``plan`` if there is one and both pass its growth check (returns SPARSE_LU),
@@ -127,7 +126,7 @@ def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
     return NO_LU
 
 
-@_inner
+@inner
 def _solve(lu, piv, b, plan, kind):
     """Solve with the factors ``_newton_matrices`` made (of either kind)."""
     if kind == SPARSE_LU:
@@ -140,9 +139,9 @@ def _solve(lu, piv, b, plan, kind):
 # check alone formats an error message: about 3 s on first use) and matrix product as
 # functions of their own; the loops compile in 2/3 of the time and allocate almost
 # nothing per step. Helpers called only from compiled code have no Python or C wrapper
-# (``_inner``): less to lower and optimize.
+# (``native.inner``): less to lower and optimize.
 
-@_inner
+@inner
 def _times_mass(M, v, out):
     """out = M v (M empty: v itself)."""
     n = v.shape[0]
@@ -157,7 +156,7 @@ def _times_mass(M, v, out):
         out[i] = s
 
 
-@_inner
+@inner
 def _scale(y, y_new, rtol, atol, index2, h, s):
     """Error scale per state, into ``s``: atol + rtol max(|y|, |y_new|); divided by h for
     algebraic states of index 2, whose local error is one order lower (Hairer & Wanner
@@ -169,7 +168,7 @@ def _scale(y, y_new, rtol, atol, index2, h, s):
             s[i] /= h
 
 
-@_inner
+@inner
 def _rms_ratio(v, scale):
     """The root mean square of v / scale."""
     s = 0.0
@@ -179,7 +178,7 @@ def _rms_ratio(v, scale):
     return np.sqrt(s / v.shape[0])
 
 
-@_inner
+@inner
 def _finite(v) -> bool:
     for i in range(v.shape[0]):
         if not np.isfinite(v[i]):
@@ -187,7 +186,7 @@ def _finite(v) -> bool:
     return True
 
 
-@_inner
+@inner
 def _dense_into(t_old, h, y_old, Q, t, out):
     """The collocation polynomial of the step [t_old, t_old + h] at t, into ``out``."""
     x = (t - t_old) / h
@@ -203,7 +202,7 @@ def dense(t_old, h, y_old, Q, t):
     return out
 
 
-@_inner
+@inner
 def _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats):
     """Hairer, Norsett & Wanner I, II.4 (error estimator of order 3), as scipy."""
     n = y.shape[0]
@@ -226,7 +225,7 @@ def _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats):
     return min(100.0 * h0, h1)
 
 
-@_inner
+@inner
 def _record(out, k_out, t_eval, t_end, t_old, h_last, y_old, Q):
     """Rows of ``out`` from the polynomial at the t_eval[k_out:] up to t_end; the new
     k_out."""
@@ -236,7 +235,7 @@ def _record(out, k_out, t_eval, t_end, t_old, h_last, y_old, Q):
     return k_out
 
 
-@_inner
+@inner
 def _newton(rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
             lu_complex, piv_real, piv_complex, plan, lu_kind, scale, newton_tol, stats,
             diag):
@@ -306,7 +305,7 @@ def _newton(rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
     return False, NEWTON_MAXITER, rate, True
 
 
-@_inner
+@inner
 def _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p, guard_tol, kg, work):
     """Where on the polynomial of the last step a guard margin reaches its tolerance
     (bisection): (time, guard index)."""

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from .native import (GUARD, INTERRUPTED, N_STATS, NOT_FINITE, PAUSED, REACHED, ST_RHS,
-                     ST_STEPS, UNSTABLE, call_entry, evaluate, guard_min, stopped)
+                     ST_STEPS, UNSTABLE, call_entry, evaluate, guard_min, inner, stopped)
 
 
 @njit(cache=True)
@@ -58,7 +58,7 @@ def stable_step(eigenvalues) -> tuple[float, complex | None]:
     return float(h), (complex(lam[k]) if k >= 0 else None)
 
 
-@njit(cache=True)
+@inner
 def _unstable(jac, t, y, p, step) -> bool:
     """Whether ``step`` is beyond the stability limit of the Jacobian at (t, y)."""
     n = y.shape[0]
@@ -67,7 +67,7 @@ def _unstable(jac, t, y, p, step) -> bool:
     return step > _stable_step(np.linalg.eigvals(J.astype(np.complex128)))[0]
 
 
-@njit(cache=True)
+@inner
 def _axpy(y, a, x, out):
     """out = y + a x."""
     for i in range(y.shape[0]):

@@ -14,8 +14,8 @@ from bgc import native, radau5, rk4
 from bgc.simulate import simulate
 
 
-@pytest.mark.parametrize("loop, kw", [(radau5, dict(solver="native")),
-                                      (rk4, dict(solver="rk4", step=1e-4))])
+@pytest.mark.parametrize("loop, kw", [(radau5, {"solver": "native"}),
+                                      (rk4, {"solver": "rk4", "step": 1e-4})])
 def test_compile_loop_is_the_specialization_a_run_uses(compiled, loop, kw):
     """After ``compile_loop`` a run (with its Ctrl-C flag, events and output times) adds
     no specialization of the loop: the cache the child fills is the one the run loads."""

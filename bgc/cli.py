@@ -404,9 +404,13 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if plot:
         from .results import plot_format
         plot_format(plot, "--plot")
+    from .simulate import precompile_loop
+
+    def loop_beside(m):                 # the native loop compiles beside the model's build
+        precompile_loop(solver or m.settings.solver)
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(model, out_dir, method,
-                                            open_loops=not keep_loops)
+                                            open_loops=not keep_loops, on_load=loop_beside)
     st = m.settings
     _check_overrides(model, params)
     p, choice = _parse_params(module, params), None

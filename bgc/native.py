@@ -26,6 +26,11 @@ REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE, INTERRUP
     range(8)
 
 
+# a function called only from compiled code: no Python or C wrapper to lower and optimize
+# (a few % of a loop's cold compile); not callable from Python
+inner = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
+
 @intrinsic
 def call_entry(typingctx, addr, t, x, p, out):
     """Call the C function at ``addr`` as f(t, x.data, p.data, out.data) (contiguous
@@ -82,3 +87,63 @@ def load_flag(typingctx, flag):
 def stopped(flag) -> bool:
     """Whether the loop was asked to stop (an empty ``flag``: never)."""
     return flag.shape[0] > 0 and load_flag(flag) != 0
+
+
+def cached(dispatcher) -> bool:
+    """Whether numba's cache holds ``dispatcher`` compiled from its current source (through
+    numba's cache index; False when it cannot tell)."""
+    try:
+        return bool(dispatcher._cache._cache_file._load_index())
+    except Exception:                       # noqa: BLE001 - a private API: no answer
+        return False
+
+
+class Precompile:
+    """A step loop compiled into numba's cache by a separate process, started while this
+    one still works on the model (sympy, emit, the model's machine code): on two cores the
+    loop's cold compile runs beside the front end instead of after it. ``wait`` before
+    the loop's first call, then it loads from the cache; if the child failed, the loop
+    compiles here as it would have. The child has its own session (Ctrl-C reaches this
+    process only), no output, and is killed when this process exits before it is done."""
+
+    def __init__(self, module: str):
+        import atexit
+        import subprocess
+        import sys
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", f"from bgc import {module}; {module}.compile_loop()"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, start_new_session=True)
+        atexit.register(self.stop)
+
+    def wait(self) -> bool:
+        """Wait for the child; whether it compiled the loop."""
+        try:
+            return self.proc.wait() == 0
+        except BaseException:               # Ctrl-C while waiting: no orphan
+            self.stop()
+            raise
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+_started: dict[str, Precompile] = {}
+
+
+def precompile(module: str):
+    """Start compiling the step loop of ``module`` (``radau5``, ``rk4``: its
+    ``compile_loop``) in a separate process, unless numba's cache has it already."""
+    import importlib
+    mod = importlib.import_module(f"bgc.{module}")
+    if module not in _started and not cached(getattr(mod, module)):
+        _started[module] = Precompile(module)
+
+
+def await_precompiled(module: str):
+    """Before the loop's first call: wait for the compile ``precompile`` started."""
+    job = _started.pop(module, None)
+    if job is not None:
+        job.wait()

@@ -87,11 +87,15 @@ def machine_code(path: Path):
 
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
-                  method: str = "parasitic", open_loops: bool = True):
+                  method: str = "parasitic", open_loops: bool = True, on_load=None):
     """The generated module for a model, recompiled only if missing or stale (method zcp
-    with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``)."""
+    with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``). ``on_load`` is
+    called with the Model as soon as it is read (e.g. to start other work beside the
+    build)."""
     with progress.record() as timings:
         model = _load(model_path)
+        if on_load is not None:
+            on_load(model)
         kind = equations.variant(method, open_loops)
         path = emit.module_path(model.name, out_dir, kind)
         compiled = None

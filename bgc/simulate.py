@@ -156,6 +156,14 @@ def _dense(sol, ts, n: int) -> np.ndarray:
 MAX_STEPS = 10 ** 6
 
 
+def precompile_loop(solver: str | None):
+    """Start compiling the step loop of a native solver in a separate process
+    (``native.precompile``), for the caller to go on with the model meanwhile."""
+    method = SOLVERS.get(solver)
+    if isinstance(method, NativeSolver):
+        native.precompile(method.loop)
+
+
 def budget_message(problem, t, x) -> str:
     """Why a run stopped at its step budget, with the states moving fastest there."""
     return (f"the step budget ({problem.max_steps} steps) is spent at t = {t:.6g}"
@@ -267,6 +275,7 @@ class NativeSolver(Solver):
 
     def warm_up(self, problem, x0):
         """Compile (or load from numba's cache) the loop and the module's entry points."""
+        native.await_precompiled(self.loop)
         self._run(problem, 0.0, 0.0, np.array(x0, dtype=np.float64), np.empty(0), 1e-6,
                   1e-6, np.inf, Stats())
 

@@ -346,9 +346,11 @@ class Run:
         self.table(rows, ["N", "method", "states", "assignments", "ops_rhs", "ops_jac",
                           "cold_s", "warm_s", "cold_jit_s", *stage_cols, "status"],
                    {"status": lambda v: str(v)[:60]})
-        ratios = compile_cost.growth_ratios(rows)
-        self.summary.append("Growth of the cold time from N = 10 to N = 40 (4x the links; "
-                            "linear: 4x): " + ", ".join(
+        a, b = ("5", "10") if self.quick else ("10", "40")
+        ratios = compile_cost.growth_ratios(rows, a, b)
+        self.summary.append(f"Growth of the cold time from N = {a} to N = {b} "
+                            f"({int(b) // int(a)}x the links; linear: at most "
+                            f"{int(b) // int(a)}x): " + ", ".join(
                                 f"{m} {v:.3g}x" if np.isfinite(v) else f"{m} not measured"
                                 for m, v in ratios.items()) + ".\n")
         tg = compile_cost.targets(rows)
@@ -359,7 +361,9 @@ class Run:
                 ts = [t for t in tg if t["key"] == key]
                 self.targets.append(
                     f"{ts[0]['target']} (target <= {ts[0]['limit']:g}): " + ", ".join(
-                        f"{t['method']} {t['measured']:.3g} {t['verdict']}" for t in ts))
+                        f"{t['method']} {t['measured']:.3g} {t['verdict']}"
+                        if np.isfinite(t["measured"]) else f"{t['method']} {t['verdict']}"
+                        for t in ts))
         self.data["compile"] = rows
 
     def symmetry(self):

@@ -254,8 +254,13 @@ def _num(v) -> float:
         return math.nan
 
 
-def _verdict(value: float, limit: float) -> str:
-    return "not measured" if math.isnan(value) else ("pass" if value <= limit else "FAIL")
+def _verdict(value: float, limit: float, *runs) -> str:
+    """pass/FAIL against ``limit``; a run that timed out or failed fails the target (its
+    status said), one not run is 'not measured'."""
+    if math.isnan(value):
+        bad = [str(r["status"]) for r in runs if r and r.get("status", "ok") != "ok"]
+        return f"FAIL ({bad[0]})" if bad else "not measured"
+    return "pass" if value <= limit else "FAIL"
 
 
 def growth_ratios(rows, a: str = "10", b: str = "40") -> dict[str, float]:
@@ -275,16 +280,17 @@ def targets(rows) -> list[dict]:
     by = {(str(r["N"]), r["method"]): r for r in rows}
     ratio = growth_ratios(rows)
     for m in methods:
-        sar, c40 = by.get(("sarib", m), {}), by.get(("40", m), {})
-        for name, what, value, limit in (
+        sar, c10, c40 = (by.get((n, m), {}) for n in ("sarib", "10", "40"))
+        for name, what, value, runs in (
                 ("sarib_cold_s", "SARIB cold time to first result [s]",
-                 _num(sar.get("cold_s")), TARGETS["sarib_cold_s"]),
+                 _num(sar.get("cold_s")), (sar,)),
                 ("chain40_cold_s", "chain N=40 cold time to first result [s]",
-                 _num(c40.get("cold_s")), TARGETS["chain40_cold_s"]),
+                 _num(c40.get("cold_s")), (c40,)),
                 ("growth_10_40", "cold time N=40 / N=10", ratio.get(m, math.nan),
-                 TARGETS["growth_10_40"]),
+                 (c10, c40)),
                 ("warm_s", "SARIB warm start to first result [s]",
-                 _num(sar.get("warm_s")), TARGETS["warm_s"])):
+                 _num(sar.get("warm_s")), (sar,))):
+            limit = TARGETS[name]
             out.append({"target": what, "method": m, "measured": value, "limit": limit,
-                        "verdict": _verdict(value, limit), "key": name})
+                        "verdict": _verdict(value, limit, *runs), "key": name})
     return out

@@ -22,7 +22,7 @@ def _rows(path):
 
 def test_a_row_times_a_cold_then_a_warm_first_result_of_a_chain(tmp_path):
     """Chain of 2 links, parasitic: the cold run compiles into an empty cache, the warm
-    one finds module and cache and recompiles nothing; the size comes from bgc compile."""
+    one finds module and cache and recompiles nothing; the module is the cold run's."""
     model = write_chain(2, tmp_path / "models")
     rows = compile_cost.sweep([("2", model)], ("parasitic",), tmp_path / "work",
                               log=lambda m: None)
@@ -99,9 +99,16 @@ def test_summary_tables_growth_and_targets_from_rows(tmp_path):
     assert ("| SARIB cold time to first result [s] | zcp | nan | 10 | FAIL (timeout after "
             "900 s) |") in text
     assert "| sarib | zcp | 480 |" in text and "| timeout after 900 s |" in text
-    # a target whose runs are missing is not measured, not failed
+    # a target whose runs are missing is not measured, not failed, and not tabled
     assert {t["verdict"] for t in compile_cost.targets(rows[:2])} == {"pass",
                                                                       "not measured"}
+    quick = Run(tmp_path / "quick", quick=True, repeats=1, budget=1.0, log=lambda m: None,
+                build=tmp_path / "build")
+    quick.compile_report([_synthetic("5", "parasitic", 2.0), _synthetic("10", "parasitic",
+                                                                        5.0)])
+    text = "\n".join(quick.summary)
+    assert "N = 5 to N = 10" in text and "parasitic 2.5x" in text
+    assert "need the full run" in text and "| verdict |" not in text and not quick.targets
     # the run's targets (full mode): one line per target over the methods
     assert any(t.startswith("cold time N=40 / N=10 (target <= 4.5): parasitic 3 pass, "
                             "zcp 6 FAIL") for t in run.targets), run.targets

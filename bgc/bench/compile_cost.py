@@ -5,8 +5,9 @@
   process: all of load, sympy, emit, machine-code compile and the integrator loop; the
   report's per-stage seconds beside it (``--json``: ``stages`` or ``timings``);
 - warm start: the same command again, the cache and module now present;
-- model size: states and assignments (``bgc compile --json``), module size and operation
-  count (arithmetic and calls in ``rhs``, ``jac``, ``outputs``, on its syntax tree);
+- model size: states and assignments (the report's, else derived in process), the
+  generated module's size and operation count (arithmetic and calls in ``rhs``, ``jac``,
+  ``outputs``, on its syntax tree);
 - over chains of N spatial links (``chain.py``) and the SARIB, per method: the growth from
   N = 10 to N = 40 is the test of a compile cost that follows the model's size;
 - the operation count against N: linear growth is the sign of no expression swell.
@@ -28,6 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..pipeline import build
 from .chain import write_chain
 
 # the stages bgc reports (read as given: a stage a report lacks is NaN, one it adds is kept)
@@ -183,7 +185,7 @@ def _measure(model: Path, method: str, run_dir: Path, label, timeout) -> dict:
     cold = _bgc(args, env, timeout)
     warm = (_bgc(args, env, timeout) if cold["status"] == "ok" else
             {"wall_s": math.nan, "status": "not run", "report": None})
-    row.update(_size(model, method, run_dir, cold["report"], timeout))
+    row.update(_size(model, method, gen, cold["report"]))
     row["cold_s"], row["warm_s"] = cold["wall_s"], warm["wall_s"]
     # what the runs' own reports say: the integrator's JIT/cache load, and whether the warm
     # run found the module current (a warm run that recompiles is no warm run)
@@ -200,23 +202,19 @@ def _measure(model: Path, method: str, run_dir: Path, label, timeout) -> dict:
     return row
 
 
-def _size(model: Path, method: str, run_dir: Path, report: dict | None,
-          timeout: float) -> dict:
-    """States and assignments (from the report if it gives them, else ``bgc compile
-    --json`` into a directory of its own), and the module's size and operation count."""
-    out = {"states": math.nan, "assignments": math.nan}
+def _size(model: Path, method: str, gen: Path, report: dict | None) -> dict:
+    """States and assignments (from the report if it gives them, else derived here, in
+    process: ``bgc compile --json``'s numbers without its emit and machine code), and
+    the size and operation count of the module the cold run generated."""
     if report and "states" in report and "assignments" in report:
-        out.update(states=report["states"], assignments=report["assignments"])
-        module = report.get("module")
+        out = {"states": report["states"], "assignments": report["assignments"]}
     else:
-        r = _bgc(["compile", str(model), "--method", method, "--json", "-o",
-                  str(run_dir / "size")], dict(os.environ), timeout)
-        rep = r["report"] or {}
-        out.update(states=rep.get("states", math.nan),
-                   assignments=rep.get("assignments", math.nan))
-        module = rep.get("module")
-    if module and Path(module).exists():
-        out.update(module_size(Path(module)))
+        c = build(model, method)
+        out = {"states": len(c.system.states), "assignments": len(c.system.assignments)}
+    modules = sorted(p for p in gen.glob("*.py") if p.name != "__init__.py") \
+        if gen.is_dir() else []
+    if modules:
+        out.update(module_size(modules[0]))
     return out
 
 

@@ -43,8 +43,8 @@ def test_a_row_times_a_cold_then_a_warm_first_result_of_a_chain(tmp_path):
 
 def test_a_run_past_its_timeout_is_killed_and_recorded(tmp_path):
     model = write_chain(3, tmp_path)
-    row = compile_cost.measure(model, "lagrange", tmp_path, label="3", timeout=0.5)
-    assert row["status"] == "timeout after 0.5 s"
+    row = compile_cost.measure(model, "lagrange", tmp_path, timeout=0.5)
+    assert row["status"] == "timeout after 0.5 s" and row["model"] == "chain_3"
     assert math.isnan(row["cold_s"]) and math.isnan(row["warm_s"])
 
 

@@ -64,11 +64,12 @@ def module_size(path: Path) -> dict:
             **{f"ops_{k}": v for k, v in operations(path).items()}}
 
 
-# What runs in the fresh interpreter (``scenes.py``): only what a user's script imports (``bgc.emit``,
-# ``bgc.simulate``), not this benchmark package. ``cold`` times each function's first call
-# (its compile) and the native loop's; ``warm`` (the cache filled) imports the module and
-# takes the first step. Both report the time from the interpreter's launch (BGC_LAUNCH,
-# the parent's clock just before it starts the process) to the end of the first step.
+# What runs in the fresh interpreter (for ``scenes.py``): only what a user's script
+# imports (``bgc.emit``, ``bgc.simulate``), not this benchmark package. ``cold`` times each
+# function's first call (its compile) and the native loop's; ``warm`` (the cache filled)
+# imports the module and takes the first step. Both report the time from the
+# interpreter's launch (BGC_LAUNCH, the parent's clock just before it starts the process)
+# to the end of the first step.
 WORKER = """
 import json, os, sys, time
 from pathlib import Path
@@ -165,23 +166,22 @@ def column(stage: str) -> str:
     return stage.strip().replace(" ", "_").replace("-", "_") + "_s"
 
 
-def measure(model: str | Path, method: str, work: Path, label: str | None = None,
-            timeout: float = TIMEOUT) -> dict:
+def measure(model: str | Path, method: str, work: Path, timeout: float = TIMEOUT) -> dict:
     """One row: the cold and warm time to first result of ``model`` under ``method``,
     per stage, and its size. Cold: a fresh output directory and empty caches (every
     variable in ``CACHE_ENV``); warm: the same command again with both now filled."""
     model = Path(model)
     with tempfile.TemporaryDirectory(prefix=f"{model.stem}_{method}_", dir=work) as tmp:
-        return _measure(model, method, Path(tmp), label, timeout)
+        return _measure(model, method, Path(tmp), timeout)
 
 
-def _measure(model: Path, method: str, run_dir: Path, label, timeout) -> dict:
+def _measure(model: Path, method: str, run_dir: Path, timeout: float) -> dict:
     cache, gen = run_dir / "cache", run_dir / "generated"
     cache.mkdir()
     env = dict(os.environ, **{k: str(cache) for k in CACHE_ENV})
     args = ["simulate", str(model), "--method", method, "--t-end", repr(T_END), "--json",
             "-o", str(gen), "--out", str(run_dir / "first.csv")]
-    row = {"model": label or model.stem, "method": method}
+    row = {"model": model.stem, "method": method}
     cold = _bgc(args, env, timeout)
     warm = (_bgc(args, env, timeout) if cold["status"] == "ok" else
             {"wall_s": math.nan, "status": "not run", "report": None})

@@ -346,11 +346,14 @@ class Run:
         self.table(rows, ["N", "method", "states", "assignments", "ops_rhs", "ops_jac",
                           "cold_s", "warm_s", "cold_jit_s", *stage_cols, "status"],
                    {"status": lambda v: str(v)[:60]})
-        a, b = ("5", "10") if self.quick else ("10", "40")
+        # the pair, N = 10 to 40; else (quick) the smallest and largest chain run
+        ns = sorted({int(r["N"]) for r in rows if str(r["N"]) != "sarib"})
+        a, b = ("10", "40") if {10, 40} <= set(ns) or len(ns) < 2 else (str(ns[0]),
+                                                                        str(ns[-1]))
         ratios = compile_cost.growth_ratios(rows, a, b)
         self.summary.append(f"Growth of the cold time from N = {a} to N = {b} "
-                            f"({int(b) // int(a)}x the links; linear: at most "
-                            f"{int(b) // int(a)}x): " + ", ".join(
+                            f"({int(b) / int(a):g}x the links; linear: at most "
+                            f"{int(b) / int(a):g}x): " + ", ".join(
                                 f"{m} {v:.3g}x" if np.isfinite(v) else f"{m} not measured"
                                 for m, v in ratios.items()) + ".\n")
         tg = [t for t in compile_cost.targets(rows) if t["verdict"] != "not measured"]

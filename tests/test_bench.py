@@ -1,7 +1,7 @@
 """bgc bench (issue 6) at small scale: every part writes its CSV, chart and summary, and
 what it measures holds (errors fall with the tolerance, the parasitic error floor falls
-with the stiffness, compile cost is measured in fresh processes, the emitted operations
-grow no faster than the SARIB's legs). The full benchmark is ``make bench``."""
+with the stiffness). Compile cost: tests/test_bench_compile_cost.py. The full benchmark
+is ``make bench``."""
 
 from __future__ import annotations
 
@@ -13,9 +13,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from bgc.bench import compile_cost
 from bgc.cli import main
-from conftest import MODELS, ROOT
 
 
 def _rows(path):
@@ -62,23 +60,6 @@ def test_peers_precision_and_stiffness_at_small_scale(gen_dir, tmp_path):
     ks = sorted(floor)
     assert floor[ks[-1]] < 0.2 * floor[ks[0]], floor
     assert (tmp_path / "stiffness.png").exists() and rep["summary"].endswith("summary.md")
-
-
-def test_compile_cost_in_fresh_processes_and_growth_with_the_legs(tmp_path):
-    """Cold numba compile in an empty cache, then a warm start that only loads it; the
-    operation count of the SARIB with one and two legs: a second leg adds no more than
-    the first leg and the rest cost together (no expression swell)."""
-    row = compile_cost.measure(MODELS / "pendulum.yaml", "parasitic", tmp_path)
-    assert row["numba_cold_model_s"] > 0.2 and row["cold_rhs_s"] > 0
-    assert 0 < row["warm_to_first_step_s"] < row["warm_process_s"] < row["cold_process_s"]
-    assert row["ops_rhs"] > 10 and row["ops_jac"] > 10 and row["module_bytes"] > 1000
-    growth = compile_cost.growth(MODELS / "sarib.yaml", ("parasitic",), tmp_path, (1, 2))
-    one, two = growth
-    assert two["states"] - one["states"] == 25     # beater, bar: 12 each; hinge spring
-    for f in ("ops_rhs", "ops_jac"):
-        assert two[f] < 2.0 * one[f], (f, one[f], two[f])
-    ops = compile_cost.operations(ROOT / "generated" / "pendulum.py")
-    assert set(ops) == {"rhs", "jac", "outputs"} and min(ops.values()) > 0
 
 
 @pytest.mark.slow       # 4-5 minutes: RK4, drift, redundancy and zcp maps, small scale

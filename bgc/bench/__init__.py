@@ -8,15 +8,16 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
 - ``precision``: work-precision diagrams, method x integrator (``precision.py``);
 - ``stiffness``: the parasitic stiffness sweep, numerical against modelling error;
 - ``stability``: where each method fails and what bgc says (``stability.py``);
-- ``compile``: sympy, emit, numba cold and warm, module size, growth with the SARIB's
-  legs (``compile_cost.py``);
+- ``compile``: cold and warm time to first result (``bgc simulate`` in a fresh
+  interpreter, empty caches), per stage, against model size: chains of N = 5 ... 80
+  links and the SARIB, per method (``compile_cost.py``);
 - ``symmetry``: the one-leg SARIB against the full rig under pumping, its error next to
   its speed (``symmetry.py``);
 - ``scenes``: each shipped scene's reduced module against the full model: states,
   compile and run time, output difference (``scenes.py``).
 
-``quick=True`` runs every part at small scale (a slider-crank, a pendulum, the SARIB's
-first two legs) for the tests.
+``quick=True`` runs every part at small scale (a slider-crank, a pendulum, chains of 5
+and 10 links) for the tests.
 """
 
 from __future__ import annotations
@@ -97,6 +98,7 @@ class Run:
         self.data: dict = {}
         self.targets: list[str] = []
         self.revision = revision()       # what was imported: read at the start
+        self.compile_timeout = compile_cost.TIMEOUT
 
     def table(self, rows, cols, fmt=None) -> None:
         fmt = fmt or {}
@@ -309,42 +311,67 @@ class Run:
         self.data["stability"] = {"rk4": rk, "drift": grid, "redundancy": red, "zcp": zc}
 
     def compile(self):
-        self.summary.append("## Compile cost\n")
-        model = MODELS / ("pendulum.yaml" if self.quick else "sarib.yaml")
-        methods = ("parasitic",) if self.quick else METHODS
-        rows = []
-        for m in methods:
-            self.log(f"compile: {model.stem} under {m} (cold numba in a fresh process)")
-            rows.append(compile_cost.measure(model, m, self.bench.build))
-        write_rows(self.out / "compile.csv", rows)
-        self.summary.append("Derivation and emitting in process; numba's cold compile in a "
-                            "fresh interpreter with an empty cache; warm start: a fresh "
-                            "interpreter with that cache, from its launch to the end of "
-                            "the first step (importing only `bgc.emit` and `bgc.simulate`, "
-                            "as a user's script would).\n")
-        self.table(rows, ["model", "method", "states", "sympy_s", "emit_s", "module_bytes",
-                          "ops_rhs", "ops_jac", "numba_cold_model_s", "native_loop_cold_s",
-                          "warm_to_first_step_s"])
-        legs = (1, 2) if self.quick else (1, 2, 3, 4)
-        gmethods = ("parasitic",) if self.quick else METHODS
-        self.log("compile: operation count against the SARIB's legs")
-        growth = compile_cost.growth(MODELS / "sarib.yaml", gmethods, self.bench.build, legs)
-        write_rows(self.out / "compile_growth.csv", growth)
-        charts.growth(growth, self.out / "compile_growth.png",
-                      "emitted operations against the SARIB's legs")
-        self.summary.append("Operation count against the SARIB's legs "
-                            "(`compile_growth.png`):\n")
-        self.table(growth, ["legs", "method", "states", "sympy_s", "ops_rhs", "ops_jac"])
+        """Cold and warm time to first result against model size: chains of N links
+        (quick: N = 5, 10) and, unless quick, the SARIB, under each method."""
+        cases = compile_cost.models(self.quick, self.bench.build, MODELS / "sarib.yaml")
+        rows = compile_cost.sweep(cases, METHODS, self.bench.build / "compile_cost",
+                                  self.log, self.compile_timeout)
+        self.compile_report(rows)
+
+    def compile_report(self, rows) -> None:
+        """compile_cost.csv, its chart and its summary (tables and targets) from rows."""
+        write_rows(self.out / "compile_cost.csv", rows)
+        charts.compile_cost(rows, self.out / "compile_cost.png",
+                            "cold time to first result against model size")
+        num = compile_cost._num
+        self.summary.append("## Compile cost: time to first result against model size\n")
+        self.summary.append(
+            f"`bgc simulate MODEL --method M --t-end {compile_cost.T_END:g} --json` timed "
+            "around a fresh interpreter (`compile_cost.csv`, `compile_cost.png`): **cold** "
+            "with an empty cache (`NUMBA_CACHE_DIR`) and a fresh output directory, so it "
+            "holds load, sympy, emit, machine-code compile and the integrator loop; "
+            "**warm**: the same command again, module and cache present. Models: chains "
+            "of N spatial links (`bgc.bench.chain`) and the SARIB; states and assignments "
+            "of the derived equations, operations counted in the generated `rhs` and "
+            f"`jac`. A run longer than {self.compile_timeout:g} s is stopped and recorded "
+            "as such. Stage columns are the cold run's report's own seconds (NaN: the "
+            "report does not give that stage).\n")
+        stage_cols = [c for c in dict.fromkeys(k for r in rows for k in r)
+                      if c.endswith("_s") and c not in ("cold_s", "warm_s", "cold_jit_s",
+                                                        "warm_jit_s")
+                      and any(np.isfinite(num(r.get(c))) for r in rows)]
+        if not stage_cols:
+            self.summary.append("The reports gave no per-stage timings; `cold_jit_s` is "
+                                "the run's own JIT/cache-load time (solver statistics).\n")
+        self.table(rows, ["N", "method", "states", "assignments", "ops_rhs", "ops_jac",
+                          "cold_s", "warm_s", "cold_jit_s", *stage_cols, "status"],
+                   {"status": lambda v: str(v)[:60]})
+        # the issue's pair, N = 10 to 40; else (quick) the smallest and largest chain run
+        ns = sorted({int(r["N"]) for r in rows if str(r["N"]) != "sarib"})
+        a, b = ("10", "40") if {10, 40} <= set(ns) or len(ns) < 2 else (str(ns[0]),
+                                                                        str(ns[-1]))
+        ratios = compile_cost.growth_ratios(rows, a, b)
+        self.summary.append(f"Growth of the cold time from N = {a} to N = {b} "
+                            f"({int(b) / int(a):g}x the links; linear: at most "
+                            f"{int(b) / int(a):g}x): " + ", ".join(
+                                f"{m} {v:.3g}x" if np.isfinite(v) else f"{m} not measured"
+                                for m, v in ratios.items()) + ".\n")
+        tg = [t for t in compile_cost.targets(rows) if t["verdict"] != "not measured"]
+        if tg:
+            self.summary.append("Targets (issue 24):\n")
+            self.table(tg, ["target", "method", "measured", "limit", "verdict"])
+        else:
+            self.summary.append("The targets (issue 24: the SARIB, chains of 10 and 40 "
+                                "links) need the full run.\n")
         if not self.quick:
-            for r in rows:
+            for key in dict.fromkeys(t["key"] for t in tg):
+                ts = [t for t in tg if t["key"] == key]
                 self.targets.append(
-                    f"SARIB {r['method']}: cold numba compile of the model "
-                    f"{r['numba_cold_model_s']:.3g} s (target < 60 s: "
-                    f"{'met' if r['numba_cold_model_s'] < 60 else 'NOT met'}; the native "
-                    f"loop, once per machine, {r['native_loop_cold_s']:.3g} s more); warm "
-                    f"start to first step {r['warm_to_first_step_s']:.3g} s (target < 2 s: "
-                    f"{'met' if r['warm_to_first_step_s'] < 2 else 'NOT met'})")
-        self.data["compile"] = {"methods": rows, "growth": growth}
+                    f"{ts[0]['target']} (target <= {ts[0]['limit']:g}): " + ", ".join(
+                        f"{t['method']} {t['measured']:.3g} {t['verdict']}"
+                        if np.isfinite(t["measured"]) else f"{t['method']} {t['verdict']}"
+                        for t in ts))
+        self.data["compile"] = rows
 
     def symmetry(self):
         """The one-leg SARIB (issue 7): what the symmetry shortcut costs in accuracy, next

@@ -161,3 +161,89 @@ def zcp_map(rows, path: Path, title: str) -> Path:
         ax.legend(fontsize=7)
     axes[1, 0].invert_xaxis()
     return _save(fig, path, title)
+
+
+def compile_cost(rows, path: Path, title: str) -> Path:
+    """Cold time to first result against the model's states, log-log, per method (chains
+    joined, the SARIB a star, warm starts hollow), with a line of linear growth from each
+    method's smallest chain; below, per method, the cold time of each model split into
+    the stages its report gives (without any: the integrator's JIT time from its solver
+    statistics), the rest unattributed (interpreter start, imports)."""
+    def num(v):
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return float("nan")
+
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    fig, axes = _panels(1 + len(methods), 3.4, sharex=False)
+    ax = axes[0, 0]
+    for i, m in enumerate(methods):
+        rs = [r for r in rows if r["method"] == m]
+        chains = sorted((r for r in rs if str(r["N"]) != "sarib"), key=lambda r: num(r["N"]))
+        pts = [(num(r["states"]), num(r["cold_s"])) for r in chains]
+        pts = [(x, y) for x, y in pts if np.isfinite(x) and np.isfinite(y)]
+        if pts:
+            x, y = np.array(pts).T
+            ax.loglog(x, y, marker=_MARKERS.get(m, "o"), color=f"C{i}", label=f"{m}: chain")
+            xs = np.array([x[0], max(num(r["states"]) for r in rs)])
+            ax.loglog(xs, y[0] * xs / x[0], ":", color=f"C{i}", lw=0.9)
+        warm = [(num(r["states"]), num(r["warm_s"])) for r in rs]
+        warm = [(x, y) for x, y in warm if np.isfinite(x) and np.isfinite(y)]
+        if warm:
+            x, y = np.array(warm).T
+            ax.loglog(x, y, _MARKERS.get(m, "o"), mfc="none", color=f"C{i}", ms=5,
+                      label=f"{m}: warm")
+        for r in rs:
+            if str(r["N"]) == "sarib" and np.isfinite(num(r["cold_s"])):
+                ax.loglog([num(r["states"])], [num(r["cold_s"])], "*", ms=12,
+                          color=f"C{i}", label=f"{m}: SARIB")
+    for r in rows:
+        if str(r["N"]) != "sarib" and np.isfinite(num(r["states"])) and r["method"] == \
+                methods[0]:
+            ax.annotate(f"N={r['N']}", (num(r["states"]), 0.02), fontsize=6,
+                        xycoords=("data", "axes fraction"), ha="center")
+    ax.axhline(15.0, color="k", ls="--", lw=0.7)
+    ax.axhline(10.0, color="0.5", ls="--", lw=0.7)
+    ax.set_xlabel("states")
+    ax.set_ylabel("time to first result [s]")
+    ax.set_title("dotted: linear growth from the smallest chain; dashed: targets 15 s "
+                 "(chain 40), 10 s (SARIB)", fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=3)
+    stage_cols = [k for k in dict.fromkeys(k for r in rows for k in r)
+                  if k.endswith("_s") and k not in ("cold_s", "warm_s", "cold_jit_s",
+                                                    "warm_jit_s")]
+    for j, m in enumerate(methods):
+        ax = axes[1 + j, 0]
+        rs = [r for r in rows if r["method"] == m]
+        x = np.arange(len(rs))
+        bottom = np.zeros(len(rs))
+        for k, col in enumerate(stage_cols):
+            h = np.array([num(r.get(col)) for r in rs])
+            h = np.where(np.isfinite(h), h, 0.0)
+            if h.any():
+                ax.bar(x, h, bottom=bottom, color=f"C{k}", label=col[:-2].replace("_", " "))
+                bottom += h
+        # a report without stages: its solver statistics' JIT/cache-load time, at least
+        jit = np.array([num(r.get("cold_jit_s")) if not bottom[i] else 0.0
+                        for i, r in enumerate(rs)])
+        jit = np.where(np.isfinite(jit), jit, 0.0)
+        if jit.any():
+            ax.bar(x, jit, bottom=bottom, color="0.45",
+                   label="JIT/cache load (solver statistics; no stages reported)")
+            bottom += jit
+        cold = np.array([num(r["cold_s"]) for r in rs])
+        rest = np.where(np.isfinite(cold), np.maximum(cold - bottom, 0.0), 0.0)
+        ax.bar(x, rest, bottom=bottom, color="0.8", hatch="//", edgecolor="0.6",
+               label="unattributed")
+        for xi, r in zip(x, rs):
+            if r.get("status", "ok") != "ok":
+                ax.annotate(str(r["status"])[:20], (xi, 0), fontsize=6, rotation=90,
+                            ha="center", va="bottom")
+        ax.set_xticks(x, [f"N={r['N']}" if str(r["N"]) != "sarib" else "SARIB"
+                          for r in rs])
+        ax.set_ylabel(f"{m}: cold [s]")
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend(fontsize=6, ncol=4)
+    return _save(fig, path, title)

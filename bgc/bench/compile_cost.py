@@ -1,32 +1,47 @@
-"""Compile cost: where the time goes between a model file and the first step.
+"""Compile cost: from a model file to the first result, against the model's size.
 
-- derivation (load, expand + causality, equations in sympy) and emitting, in process;
-- numba's cold compile of each generated function, in a fresh interpreter with an empty
-  cache (``NUMBA_CACHE_DIR``), and bgc's native step loop, which is compiled once per
-  machine, not per model, reported apart;
-- warm start: a fresh interpreter with that cache, from its launch to the end of the
-  first step (what a user waits for on the second run);
-- the generated module's size and operation count (arithmetic and calls in ``rhs``,
-  ``jac``, ``outputs``, counted on its syntax tree), and how that count grows with the
-  SARIB's legs (1 to 4): linear growth is the sign of no expression swell.
+- cold time to first result: ``bgc simulate MODEL --t-end 0.01`` in a fresh interpreter,
+  with an empty cache (``NUMBA_CACHE_DIR``) and a fresh output directory, timed around the
+  process: all of load, sympy, emit, machine-code compile and the integrator loop; the
+  report's per-stage seconds beside it (``--json``: ``stages`` or ``timings``);
+- warm start: the same command again, the cache and module now present;
+- model size: states and assignments (the report's, else derived in process), the
+  generated module's size and operation count (arithmetic and calls in ``rhs``, ``jac``,
+  ``outputs``, on its syntax tree);
+- over chains of N spatial links (``chain.py``) and the SARIB, per method: the growth from
+  N = 10 to N = 40 is the test of a compile cost that follows the model's size;
+- the operation count against N: linear growth is the sign of no expression swell.
 
-The subprocess parts run ``WORKER``, which imports only what a user's script would.
+``WORKER`` (a fresh interpreter timing the first call of each generated function) is
+the per-function numba compile that ``scenes.py`` reports.
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import math
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import yaml
+from ..pipeline import build
+from .chain import write_chain
 
-from ..pipeline import compile_model
+# the stages bgc reports (read as given: a stage a report lacks is NaN, one it adds is kept)
+STAGES = ("load", "causality", "equations", "jacobian", "emit", "machine code", "integrate")
+# environment variables pointed at the fresh, empty cache of a cold run
+CACHE_ENV = ("NUMBA_CACHE_DIR",)
+T_END = 0.01
+TIMEOUT = 900.0
+CHAIN_N = (5, 10, 20, 40, 80)
+# the issue's targets (issue 24, item 1 and 2)
+TARGETS = {"sarib_cold_s": 10.0, "chain40_cold_s": 15.0, "growth_10_40": 4.5,
+           "warm_s": 1.0}
 
 FUNCTIONS = ("rhs", "jac", "outputs", "guards", "constraints")
 
@@ -42,23 +57,19 @@ def operations(path: Path) -> dict[str, int]:
     return out
 
 
-def derive(model: str | Path, method: str) -> dict:
-    """Derivation and emit times, size and operation counts of a fresh compile."""
-    with tempfile.TemporaryDirectory() as tmp:
-        c, path = compile_model(model, tmp, method)
-        text = path.read_text()
-        ops = operations(path)
-    return {"states": len(c.system.states), "load_s": c.timings["load"],
-            "causality_s": c.timings["causality"], "sympy_s": c.timings["equations"],
-            "emit_s": c.timings["emit"], "module_bytes": len(text.encode()),
-            "module_lines": text.count("\n"), **{f"ops_{k}": v for k, v in ops.items()}}
+def module_size(path: Path) -> dict:
+    """A generated module's bytes and the operation count of its functions."""
+    text = Path(path).read_text()
+    return {"module_bytes": len(text.encode()),
+            **{f"ops_{k}": v for k, v in operations(path).items()}}
 
 
-# What runs in the fresh interpreter: only what a user's script imports (``bgc.emit``,
-# ``bgc.simulate``), not this benchmark package. ``cold`` times each function's first call
-# (its compile) and the native loop's; ``warm`` (the cache filled) imports the module and
-# takes the first step. Both report the time from the interpreter's launch (BGC_LAUNCH,
-# the parent's clock just before it starts the process) to the end of the first step.
+# What runs in the fresh interpreter (for ``scenes.py``): only what a user's script
+# imports (``bgc.emit``, ``bgc.simulate``), not this benchmark package. ``cold`` times each
+# function's first call (its compile) and the native loop's; ``warm`` (the cache filled)
+# imports the module and takes the first step. Both report the time from the
+# interpreter's launch (BGC_LAUNCH, the parent's clock just before it starts the process)
+# to the end of the first step.
 WORKER = """
 import json, os, sys, time
 from pathlib import Path
@@ -101,49 +112,183 @@ def _subprocess(mode: str, path: Path, cache: Path) -> dict:
     return out
 
 
-def measure(model: str | Path, method: str, build: Path) -> dict:
-    """Derivation, cold numba compile and warm start of one model under one method."""
-    row = {"model": Path(model).stem, "method": method, **derive(model, method)}
-    build.mkdir(parents=True, exist_ok=True)
-    c, path = compile_model(model, build / f"cost_{method}", method)
-    with tempfile.TemporaryDirectory() as cache:
-        cold = _subprocess("cold", path, Path(cache))
-        warm = _subprocess("warm", path, Path(cache))
-    row.update({f"cold_{k}": v for k, v in cold.items()})
-    row["numba_cold_model_s"] = sum(cold.get(f"{f}_s", 0.0) for f in FUNCTIONS) + \
-        cold["entry_points_s"]
-    # the first step in the cold process compiled the step loop too (once per machine)
-    row["native_loop_cold_s"] = cold["loop_and_setup_s"]
-    row["warm_to_first_step_s"] = warm["launch_to_first_step_s"]
-    row["warm_process_s"] = warm["process_s"]        # with the interpreter's exit
-    row["warm_import_s"] = warm["import_s"]
+# --- cold and warm time to first result ---------------------------------------------
+
+
+def _bgc(args: list[str], env: dict, timeout: float) -> dict:
+    """``bgc ARGS`` in a fresh interpreter (``python -m bgc.cli``), timed around the
+    process: ``wall_s``, ``status`` ('ok', 'failed: <last stderr line>' or 'timeout
+    after T s') and the JSON report it printed (``report``, None unless ok). A process
+    past ``timeout`` is killed with its process group, so one slow case cannot hang the
+    bench."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "bgc.cli", *args], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        return {"wall_s": math.nan, "status": f"timeout after {timeout:g} s", "report": None}
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        last = (err.strip().splitlines() or [f"exit status {proc.returncode}"])[-1]
+        return {"wall_s": wall, "status": f"failed: {last[:200]}", "report": None}
+    try:
+        report = json.loads(out[out.index("{"):])
+    except ValueError:
+        return {"wall_s": wall, "status": "failed: no JSON report on stdout", "report": None}
+    return {"wall_s": wall, "status": "ok", "report": report}
+
+
+def stages(report: dict | None) -> dict[str, float]:
+    """The per-stage seconds of a ``--json`` report (``stages`` or ``timings``, at the top
+    or in ``stats``), as given; empty if it has none."""
+    if not report:
+        return {}
+    for where in (report, report.get("stats") or {}):
+        for key in ("stages", "timings"):
+            got = where.get(key)
+            if isinstance(got, dict):
+                out = {}
+                for k, v in got.items():
+                    if isinstance(v, dict):     # {stage: {"seconds": ...}} is read too
+                        v = v.get("seconds", v.get("elapsed"))
+                    if isinstance(v, (int, float)):
+                        out[str(k)] = float(v)
+                return out
+    return {}
+
+
+def column(stage: str) -> str:
+    """The CSV column of a stage ('machine code' -> 'machine_code_s')."""
+    return stage.strip().replace(" ", "_").replace("-", "_") + "_s"
+
+
+def measure(model: str | Path, method: str, work: Path, timeout: float = TIMEOUT) -> dict:
+    """One row: the cold and warm time to first result of ``model`` under ``method``,
+    per stage, and its size. Cold: a fresh output directory and empty caches (every
+    variable in ``CACHE_ENV``); warm: the same command again with both now filled."""
+    model = Path(model)
+    with tempfile.TemporaryDirectory(prefix=f"{model.stem}_{method}_", dir=work) as tmp:
+        return _measure(model, method, Path(tmp), timeout)
+
+
+def _measure(model: Path, method: str, run_dir: Path, timeout: float) -> dict:
+    cache, gen = run_dir / "cache", run_dir / "generated"
+    cache.mkdir()
+    env = dict(os.environ, **{k: str(cache) for k in CACHE_ENV})
+    args = ["simulate", str(model), "--method", method, "--t-end", repr(T_END), "--json",
+            "-o", str(gen), "--out", str(run_dir / "first.csv")]
+    row = {"model": model.stem, "method": method}
+    cold = _bgc(args, env, timeout)
+    warm = (_bgc(args, env, timeout) if cold["status"] == "ok" else
+            {"wall_s": math.nan, "status": "not run", "report": None})
+    row.update(_size(model, method, gen, cold["report"]))
+    row["cold_s"], row["warm_s"] = cold["wall_s"], warm["wall_s"]
+    # what the runs' own reports say: the integrator's JIT/cache load, and whether the warm
+    # run found the module current (a warm run that recompiles is no warm run)
+    for name, r in (("cold", cold), ("warm", warm)):
+        st = (r["report"] or {}).get("stats") or {}
+        row[f"{name}_jit_s"] = float(st.get("compile_time", math.nan))
+    row["warm_recompiled"] = (warm["report"] or {}).get("compiled")
+    got = stages(cold["report"])
+    for stage in dict.fromkeys([*STAGES, *got]):
+        row[column(stage)] = got.get(stage, math.nan)
+    row["stages_reported"] = len(got)
+    row["status"] = cold["status"] if cold["status"] != "ok" else (
+        "ok" if warm["status"] == "ok" else f"warm {warm['status']}")
     return row
 
 
-def sarib_legs(source: Path, legs: int, out: Path) -> Path:
-    """The SARIB with only its first ``legs`` legs (beater, bar, hinge and the bar's two
-    spherical joints each): same bodies and joints otherwise."""
-    data = yaml.safe_load(Path(source).read_text())
-    gone = range(legs + 1, 5)
-    for i in gone:
-        for key in (f"beater_{i}", f"bar_{i}"):
-            data["bodies"].pop(key)
-        for key in (f"hinge_{i}", f"bar_bottom_{i}", f"bar_top_{i}"):
-            data["joints"].pop(key)
-    data["outputs"] = {k: v for k, v in data["outputs"].items()
-                       if not any(f"hinge_{i}." in str(v) for i in gone)}
-    data["name"] = f"sarib_{legs}leg"
-    path = out / f"sarib_{legs}leg.yaml"
-    out.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
+def _size(model: Path, method: str, gen: Path, report: dict | None) -> dict:
+    """States and assignments (from the report if it gives them, else derived here, in
+    process: ``bgc compile --json``'s numbers without its emit and machine code), and
+    the size and operation count of the module the cold run generated."""
+    if report and "states" in report and "assignments" in report:
+        out = {"states": report["states"], "assignments": report["assignments"]}
+    else:
+        c = build(model, method)
+        out = {"states": len(c.system.states), "assignments": len(c.system.assignments)}
+    modules = sorted(p for p in gen.glob("*.py") if p.name != "__init__.py") \
+        if gen.is_dir() else []
+    if modules:
+        out.update(module_size(modules[0]))
+    return out
 
 
-def growth(source: Path, methods, build: Path, legs=(1, 2, 3, 4)) -> list[dict]:
-    """Operation counts and derivation time of the SARIB with 1..4 legs, per method."""
+def models(quick: bool, build: Path, sarib: Path | None = None) -> list[tuple[str, Path]]:
+    """(label, model file): the chains (quick: N = 5, 10) and, unless quick, the SARIB."""
+    ns = CHAIN_N[:2] if quick else CHAIN_N
+    out = [(str(n), write_chain(n, build / "chains")) for n in ns]
+    if not quick and sarib is not None:
+        out.append(("sarib", Path(sarib)))
+    return out
+
+
+def sweep(cases, methods, work: Path, log=print, timeout: float = TIMEOUT) -> list[dict]:
+    """``measure`` over models x methods; each row's ``N`` is the chain's N or 'sarib'."""
+    work.mkdir(parents=True, exist_ok=True)
     rows = []
-    for n in legs:
-        path = sarib_legs(source, n, build / "legs")
+    for label, path in cases:
         for method in methods:
-            rows.append({"legs": n, "method": method, **derive(path, method)})
+            log(f"compile: {path.stem} under {method}: cold, then warm (fresh interpreters)")
+            row = measure(path, method, work, timeout=timeout)
+            rows.append({"N": label, **row})
+            log(f"  cold {row['cold_s']:.3g} s, warm {row['warm_s']:.3g} s, "
+                f"{row['states']} states ({row['status']})")
     return rows
+
+
+# --- what the rows say ----------------------------------------------------------------
+
+
+def _num(v) -> float:
+    """A CSV cell (or a row's value) as a float, NaN for none."""
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _verdict(value: float, limit: float, *runs) -> str:
+    """pass/FAIL against ``limit``; a run that timed out or failed fails the target (its
+    status said), one not run is 'not measured'."""
+    if math.isnan(value):
+        bad = [str(r["status"]) for r in runs if r and r.get("status", "ok") != "ok"]
+        return f"FAIL ({bad[0]})" if bad else "not measured"
+    return "pass" if value <= limit else "FAIL"
+
+
+def growth_ratios(rows, a: str = "10", b: str = "40") -> dict[str, float]:
+    """Cold time of chain N=b over chain N=a, per method (NaN where either is missing)."""
+    out = {}
+    for method in dict.fromkeys(r["method"] for r in rows):
+        t = {str(r["N"]): _num(r["cold_s"]) for r in rows if r["method"] == method}
+        out[method] = t.get(b, math.nan) / t.get(a, math.nan) if a in t and b in t \
+            else math.nan
+    return out
+
+
+def targets(rows) -> list[dict]:
+    """The issue's targets, one row per target x method: measured value and verdict."""
+    out = []
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    by = {(str(r["N"]), r["method"]): r for r in rows}
+    ratio = growth_ratios(rows)
+    for m in methods:
+        sar, c10, c40 = (by.get((n, m), {}) for n in ("sarib", "10", "40"))
+        for name, what, value, runs in (
+                ("sarib_cold_s", "SARIB cold time to first result [s]",
+                 _num(sar.get("cold_s")), (sar,)),
+                ("chain40_cold_s", "chain N=40 cold time to first result [s]",
+                 _num(c40.get("cold_s")), (c40,)),
+                ("growth_10_40", "cold time N=40 / N=10", ratio.get(m, math.nan),
+                 (c10, c40)),
+                ("warm_s", "SARIB warm start to first result [s]",
+                 _num(sar.get("warm_s")), (sar,))):
+            limit = TARGETS[name]
+            out.append({"target": what, "method": m, "measured": value, "limit": limit,
+                        "verdict": _verdict(value, limit, *runs), "key": name})
+    return out

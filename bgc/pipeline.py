@@ -81,8 +81,9 @@ def machine_code(path: Path):
     with progress.stage("machine code") as st:
         module = emit.import_module(path)
         module.compile_all()
-        st.done(f"{progress.count(module.KERNEL_FUNCTIONS, 'kernel')}, "
-                f"{len(module._KERNEL_IR) / 1e6:.1f} MB of LLVM IR")
+        size = len(module._KERNEL_IR)
+        st.done(f"{progress.count(module.KERNEL_FUNCTIONS, 'kernel')}, " + (
+            f"{size / 1e6:.1f} MB" if size >= 1e6 else f"{size / 1e3:.0f} kB") + " of LLVM IR")
     return module
 
 

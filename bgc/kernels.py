@@ -26,6 +26,7 @@ exactly (hexadecimal doubles): the same model gives the same bytes on every mach
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 
@@ -1350,3 +1351,14 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
         mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
     return Kernels(mod.text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
+
+
+def program_functions(source: str, program: str) -> list[str]:
+    """The bodies of the IR functions of one program ("rhs", "jac", "out", ...) in a
+    generated module's source: what a benchmark counts and a test inspects."""
+    prefix = re.search(r'^_KERNEL_PREFIX = "(\w+)"', source, re.M)
+    if prefix is None:
+        return []
+    name = re.compile(rf"{prefix.group(1)}_{program}_\d+")
+    return [m.group(2) for m in re.finditer(r"^define [^@\n]*@(\w+)\(.*?\n(.*?)^}", source,
+                                            re.S | re.M) if name.fullmatch(m.group(1))]

@@ -4,7 +4,6 @@ fresh output, standalone import, parameters as an array."""
 from __future__ import annotations
 
 import os
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 
 from bgc import emit, load
+from bgc.kernels import program_functions
 from bgc.pipeline import compile_model
 from bgc.simulate import simulate
 from conftest import MODELS, ROOT, model_params
@@ -139,19 +139,11 @@ def test_parameters_change_without_recompiling(compiled):
     assert mod.MODEL_HASH == h
 
 
-def _program_ir(text: str, program: str) -> list[str]:
-    """The bodies of a generated module's IR functions of one program (rhs, jac, ...)."""
-    prefix = re.search(r'^_KERNEL_PREFIX = "(\w+)"', text, re.M).group(1)
-    return [m.group(2) for m in re.finditer(r"^define [^@\n]*@(\w+)\(.*?\n(.*?)^}", text,
-                                            re.S | re.M)
-            if re.fullmatch(rf"{prefix}_{program}_\d+", m.group(1))]
-
-
 def test_emitted_code_keeps_causal_assignments(compiled):
     """The rhs is a sorted list of assignments, not one substituted expression: each
     assignment of its cone is stored to the workspace once, in short instructions."""
     mod = compiled("rr_loop")
-    bodies = _program_ir(Path(mod.__file__).read_text(), "rhs")
+    bodies = program_functions(Path(mod.__file__).read_text(), "rhs")
     stores = sum(b.count("store double") for b in bodies)
     assert stores >= 5 + len(mod.STATE_NAMES)       # the assignments, then dx
     assert all(len(ln) < 200 for b in bodies for ln in b.splitlines())
@@ -170,7 +162,7 @@ def test_fourteen_body_model_stays_lean(tmp_path):
     n = len(s.states)
     assert n == 10 * 12 + 4 * 6 + 8   # massive bodies (pose, momenta), massless (pose), springs
     text = path.read_text()
-    rhs = [ln for b in _program_ir(text, "rhs") for ln in b.splitlines()]
+    rhs = [ln for b in program_functions(text, "rhs") for ln in b.splitlines()]
     # about 90 instructions a state (each read of a slot or state is two); a substituted
     # expression would be many times that
     assert len(rhs) < 150 * n, len(rhs)

@@ -94,7 +94,7 @@ def test_step_budget_stops_the_run_and_keeps_its_results(gen, solver):
     assert "fastest states there: " in lines[0], lines[0]
     t_stop = float(lines[0].split("is spent at t = ")[1].split(";")[0])
     assert 0 < t_stop < 2.0
-    assert f"partial results up to t = " in proc.stderr
+    assert "partial results up to t = " in proc.stderr
     data = rows(out)
     assert len(data) >= 2 and data[-1][0] <= t_stop + 1e-12
 

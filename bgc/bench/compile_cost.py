@@ -18,7 +18,6 @@ the per-function numba compile that ``scenes.py`` reports.
 
 from __future__ import annotations
 
-import ast
 import json
 import math
 import os
@@ -29,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..kernels import program_functions
 from ..pipeline import build
 from .chain import write_chain
 
@@ -47,14 +47,11 @@ FUNCTIONS = ("rhs", "jac", "outputs", "guards", "constraints")
 
 
 def operations(path: Path) -> dict[str, int]:
-    """Arithmetic operations and calls in each generated function (its syntax tree)."""
-    tree = ast.parse(Path(path).read_text())
-    out = {}
-    for node in tree.body:
-        if isinstance(node, ast.FunctionDef) and node.name in ("rhs", "jac", "outputs"):
-            out[node.name] = sum(isinstance(n, (ast.BinOp, ast.UnaryOp, ast.Call))
-                                 for n in ast.walk(node))
-    return out
+    """Instructions of the LLVM IR of ``rhs``, ``jac`` (its partials) and ``outputs`` in a
+    generated module (``bgc.kernels``): arithmetic, calls, loads and stores."""
+    text = Path(path).read_text()
+    return {name: sum(body.count("\n  ") for body in program_functions(text, program))
+            for name, program in (("rhs", "rhs"), ("jac", "jac"), ("outputs", "out"))}
 
 
 def module_size(path: Path) -> dict:

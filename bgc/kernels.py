@@ -124,8 +124,6 @@ class Layout:
                 self.blocks[item.index] = blk
         self.tables = {tb.index: (self._region(1), self._region(1))
                        for tb in system.tables}
-        # a block's place in the module's block tables (by index)
-        self.position = {k: i for i, k in enumerate(sorted(self.blocks))}
 
     def _take(self, v):
         if v not in self.slot:

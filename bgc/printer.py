@@ -1,16 +1,14 @@
-"""Prints sympy expressions as numba-friendly Python that uses only numpy (``np``) and
-the standard library's ``math``.
-
-Scalar elementary functions print as ``math.*``: every expression here is a scalar, and
-numba types and lowers a ``math`` call several times faster than the numpy ufunc (the
-SARIB's Jacobian compiled in 46 s instead of 69 s with nothing else changed)."""
+"""Prints sympy expressions as Python that uses only numpy (``np``) and the standard
+library's ``math``: the few plain-Python parts of a generated module (its initial state
+and largest step as functions of the parameters). The equations themselves are LLVM IR
+(``bgc.kernels``)."""
 
 from __future__ import annotations
 
 import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 
-from .signals import table, table_slope
+from .signals import table
 
 
 _MATH = {f"numpy.{np_name}": f"math.{name}" for np_name, name in (
@@ -96,9 +94,6 @@ class NumbaPrinter(NumPyPrinter):
         if isinstance(expr, table):
             k = int(expr.args[0])
             return f"np.interp({self._print(expr.args[1])}, TABLE_T{k}, TABLE_Y{k})"
-        if isinstance(expr, table_slope):
-            k = int(expr.args[0])
-            return f"_table_slope({self._print(expr.args[1])}, TABLE_T{k}, TABLE_Y{k})"
         return super()._print_Function(expr)
 
     def _print_Symbol(self, expr):

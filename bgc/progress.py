@@ -86,13 +86,14 @@ class Silent:
     """Shows nothing: the default, for library use, and ``--quiet``."""
 
     def start(self, st: Stage) -> None:
-        pass
+        """A stage began: nothing to show (a reporter that shows it overrides this)."""
 
     def update(self, st: Stage) -> None:
-        pass
+        """A running stage's text or count changed: nothing to show."""
 
     def end(self, st: Stage, failed: str | None) -> None:
-        """``failed``: None, "failed" (an exception) or "interrupted" (Ctrl-C)."""
+        """A stage ended; ``failed``: None, "failed" (an exception) or "interrupted"
+        (Ctrl-C): nothing to show."""
 
 
 class Plain(Silent):

@@ -45,7 +45,7 @@ CHUNK = 300          # assignments (or stores) per IR function
 # rhs and Jacobian run as fast as numba's -O3 build of the same code did
 IR_OPT, CODEGEN_OPT = 1, 0
 
-DBL, PTR = "double", "double*"
+DBL = "double"
 ARGS = "double %t, double* noalias %x, double* noalias %p, double* noalias %w, " \
        "double* noalias %out"
 # sympy function -> LLVM intrinsic or C library function of one double
@@ -1146,16 +1146,16 @@ class _Module:
         self.functions: list[str] = []
         self.globals: list[str] = []
 
-    def _region(self, fn: _Function, offset: int) -> str:
-        """An i8* to w[offset] (for memset and memcpy)."""
-        return fn.op(f"bitcast double* {fn.ptr('%w', offset)} to i8*")
+    @staticmethod
+    def _region(fn: _Function, offset: int, base: str = "%w") -> str:
+        """An i8* to base[offset] (for memset and memcpy)."""
+        return fn.op(f"bitcast double* {fn.ptr(base, offset)} to i8*")
 
     def zero(self, fn: _Function, base: str, offset: int, count: int):
         if count:
             self.decls.add(_MEMSET)
-            p = fn.op(f"bitcast double* {fn.ptr(base, offset)} to i8*")
-            fn.body.append(f"  call void @llvm.memset.p0i8.i64(i8* {p}, i8 0, "
-                           f"i64 {8 * count}, i1 false)")
+            fn.body.append(f"  call void @llvm.memset.p0i8.i64(i8* "
+                           f"{self._region(fn, offset, base)}, i8 0, i64 {8 * count}, i1 false)")
 
     def copy(self, fn: _Function, to: int, frm: int, count: int):
         if count:

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "a6ec41e4bb12f294756f222f100656ca"
+MODEL_HASH = "b368533162e25b987a2ce3a9263d41af"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 
@@ -34,8 +34,8 @@ METHOD = "parasitic"
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca", sys.modules[__name__])
-__name__ = "_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca"
+    sys.modules.setdefault("_bgc_msd_free_b368533162e25b987a2ce3a9263d41af", sys.modules[__name__])
+__name__ = "_bgc_msd_free_b368533162e25b987a2ce3a9263d41af"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )
@@ -89,7 +89,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2"
+_KERNEL_PREFIX = "_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -98,19 +98,19 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -147,13 +147,13 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -202,13 +202,13 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -233,35 +233,35 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -320,7 +320,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -351,7 +351,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -409,45 +409,45 @@ ends:
 }
 
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 6
   %v2 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 13
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_tape_src, i64 0, i64 0))
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_a6ec41e4bb12f294756f222f100656ca_e6ca082095f2_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }

@@ -181,7 +181,9 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
     """The consistent state nearest ``x`` (minimum-norm corrections) and a Projection.
 
     Positions first (g = 0 over the pose states, Gauss-Newton), then velocities (dg/dt is
-    linear in the momenta: one least-squares step, repeated once for round-off)."""
+    linear in the momenta: one least-squares step, repeated once for round-off) over the
+    rows that zcp does not impose (an imposed row's dg/dt is round-off whatever the
+    momenta: a step on it would divide round-off by round-off)."""
     x = np.array(x, dtype=np.float64)
     x_user = x.copy()
     names = list(module.CONSTRAINT_NAMES)
@@ -214,9 +216,11 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
                                         "a quarter turn stalls the Newton steps): check the "
                                         "joint points and the bodies' com/frame or x0")
     K, other = velocity_jacobian(module, x, p)
-    for _ in range(2):
-        r = _split(module, x, p)[1]
-        x[other] += np.linalg.lstsq(K, -r, rcond=RANK_TOL)[0]
+    measured = ~np.asarray(module.IMPOSED, dtype=bool)
+    if measured.any():            # imposed rows hold by construction: K is round-off there
+        for _ in range(2):
+            r = _split(module, x, p)[1]
+            x[other] += np.linalg.lstsq(K[measured], -r[measured], rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
     Kb, free, n_imposed = _measured_rows(module, K)
     Ke = equilibrate(Kb)

@@ -214,15 +214,19 @@ def render(system: EquationSystem) -> str:
         "con": (con_asg, list(enumerate(con_exprs)))}, jt)
     # the kernels' names: the module's and its IR's digest (one model compiled with other
     # options is other code; two such modules in one process must not share a name)
-    prefix = f"{canonical}_{hashlib.sha256(kern.ir.encode()).hexdigest()[:12]}"
+    digest = hashlib.sha256(f"{kern.ir}\n{kern.ir_straight}".encode()).hexdigest()[:12]
+    prefix = f"{canonical}_{digest}"
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
+    ir_straight = kern.ir_straight.replace(kernels.PLACEHOLDER, prefix)
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=prefix, ir=ir, n_functions=ir.count("\ndefine "),
+        canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight,
+        n_functions=(ir + ir_straight).count("\ndefine "),
         n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
+        straight_passes=kernels.STRAIGHT_PASSES,
         tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
                  "y": [_float(v) for v in tb.y]} for tb in system.tables],
         jac_i=[i for i, _, _ in jt.pattern], jac_j=[j for _, j, _ in jt.pattern],

@@ -8,9 +8,10 @@ wraps it (``rhs``, ``jac``, ... stay numba functions a script can call or inline
 
 - **Programs**: ``rhs``, ``jac`` (its run-time partials), ``out``, ``guard``, ``con``:
   each its cone of assignments in causal order, in functions of at most ``CHUNK`` steps
-  (LLVM's cost stays linear in the model's size). Values cross functions through one
-  workspace ``w``: a slot per assigned symbol, a region per linear block; within a
-  function they stay in registers.
+  and about ``CHUNK_OPS`` instructions (LLVM's cost stays linear in the model's size).
+  Values cross functions through one workspace ``w``: a slot per assigned symbol, a
+  region per linear block; within a function they stay in registers. These chunks are
+  a module of their own (``Kernels.ir_straight``), given only local passes.
 - **Linear blocks** (algebraic loops, constraint blocks) are solved where the causal
   order reaches them: LU with partial pivoting, or, where the constraints' rank at run
   time is below the block's size, least squares through LAPACK's SVD (scipy's dgesdd).
@@ -40,10 +41,18 @@ from .signals import table, table_slope
 # the functions' prefix while the IR is built (emit replaces it by the module's own)
 PLACEHOLDER = "bgc_kernel_prefix"
 CHUNK = 300          # assignments (or stores) per IR function
+# and at most about this many instructions: LLVM's passes cost more than linearly in a
+# function's size, and a zcp chain's eliminated expressions make a few assignments long
+CHUNK_OPS = 2000
 # LLVM's IR passes at -O1 and instruction selection at -O0 (fast, local register
 # allocation): on the SARIB's lagrange module 1 s instead of 11 s at -O2/-O2, and the
 # rhs and Jacobian run as fast as numba's -O3 build of the same code did
 IR_OPT, CODEGEN_OPT = 1, 0
+# The straight-line chunks (most of the IR) take only local passes: -O1's loop passes
+# find nothing in them and cost half the IR passes' time (loop vectorization alone 14 %
+# on a 40-link zcp chain), while the rhs runs within a few per cent of -O1's. The loops
+# (tape, solves) keep -O1 with its module passes: without them the Jacobian is 3x slower.
+STRAIGHT_PASSES = ("instruction_combine", "simplify_cfg", "dead_code_elimination")
 
 DBL = "double"
 ARGS = "double %t, double* noalias %x, double* noalias %p, double* noalias %w, " \
@@ -82,9 +91,13 @@ class Block:
 
 @dataclass
 class Kernels:
-    """The IR module and what the numba side needs to know of it: the workspace size,
-    the linear blocks (in the order of the solver's tables) and the tables' slots."""
+    """The IR and what the numba side needs to know of it: the workspace size, the
+    linear blocks (in the order of the solver's tables) and the tables' slots. The IR is
+    two modules, compiled with different passes and linked: ``ir`` (the loops: the
+    Jacobian's tape, the linear solves, the programs' drivers and entry points; -O1) and
+    ``ir_straight`` (the programs' straight-line chunks; a few local passes)."""
     ir: str
+    ir_straight: str
     n_work: int         # the Jacobian's workspace
     n_eval: int         # the other programs' (its first n_eval slots)
     blocks: list[Block]
@@ -426,8 +439,8 @@ class _Function:
             return self.op(f"xor i1 {self.cond(c.args[0])}, true")
         raise BgcError(f"internal: no code for the condition {c}")
 
-    def text(self) -> str:
-        return "\n".join([f"define internal void @{self.name}({ARGS}) noinline nounwind {{",
+    def text(self, linkage: str = "internal ") -> str:
+        return "\n".join([f"define {linkage}void @{self.name}({ARGS}) noinline nounwind {{",
                           "entry:", *self.body, "  ret void", "}"])
 
 
@@ -658,7 +671,7 @@ _LU = """\
 ; code before it: A is copied to LU; a pivot not above 1e-13 of the largest |A| (or a
 ; NaN in A) is a singular configuration and fills X with NaN, which stops the run where
 ; the simulator reports it.
-define internal void @{P}_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, \
+define void @{P}_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, \
 double* noalias %LU) nounwind {
 entry:
   %k.v = alloca i64
@@ -1019,7 +1032,7 @@ def _lstsq_ir(P: str) -> str:
     (n x m, row-major) is overwritten with X; ``ws`` holds ``lstsq_work(n, m)`` doubles.
     A's buffer read as column-major is A^T = U' S V'^T, so A = V' S U'^T: A's left
     singular vectors are the rows of V'^T, its right ones the columns of U'."""
-    a = _Asm(f"define internal void @{P}_lstsq(i64 %n, i64 %m, double* noalias %A, "
+    a = _Asm(f"define void @{P}_lstsq(i64 %n, i64 %m, double* noalias %A, "
              f"double* noalias %B, i64 %r, double* noalias %ws) nounwind {{",
              ["i", "j", "q"])
     for v, ty in (("jobz", "i8"), ("dim", "i32"), ("lwork", "i32"), ("info", "i32"),
@@ -1109,7 +1122,7 @@ def lstsq_work(n: int, m: int) -> int:
 def _assemble_ir(P: str) -> str:
     """``@<P>_assemble(n, d, A, K, B)``: A = -K B (K: n x d, B: d x n), skipping the
     zeros of K, as the numba code before it did."""
-    a = _Asm(f"define internal void @{P}_assemble(i64 %n, i64 %d, double* noalias %A, "
+    a = _Asm(f"define void @{P}_assemble(i64 %n, i64 %d, double* noalias %A, "
              f"double* noalias %K, double* noalias %F) nounwind {{", ["i", "j", "q"])
     nn = a.op("mul i64 %n, %n")
     a.loop("i", "0", nn, lambda i: a.store("0.0", "%A", i))
@@ -1144,6 +1157,7 @@ class _Module:
         self.params = {s: i for i, (s, _, _) in enumerate(system.params)}
         self.decls: set[str] = set()
         self.functions: list[str] = []
+        self.straight: list[str] = []       # the programs' chunks (their own module)
         self.globals: list[str] = []
 
     @staticmethod
@@ -1197,7 +1211,7 @@ class _Module:
         def flush():
             nonlocal fn, count
             if fn is not None and (fn.body or not chunks):
-                self.functions.append(fn.text())
+                self.straight.append(fn.text(linkage=""))
                 chunks.append(f"  call void @{fn.name}(double %t, double* %x, double* %p, "
                               f"double* %w, double* %out)")
             fn = _Function(f"{self.prefix}_{name}_{len(chunks)}", self.layout, self.states,
@@ -1213,7 +1227,7 @@ class _Module:
                 self.copy(fn, blk.u, blk.b, blk.n)
                 flush()                 # what follows reads the unknowns from w
                 continue
-            if count >= CHUNK:
+            if count >= CHUNK or fn.n >= CHUNK_OPS:
                 flush()
             count += 1
             if kind == "set":
@@ -1314,7 +1328,28 @@ class _Module:
             "  ret void", "}"]))
 
     def text(self) -> str:
-        return "\n\n".join(sorted(self.decls) + self.globals + self.functions) + "\n"
+        """The loops' module: it declares the chunks it calls."""
+        return "\n\n".join(sorted(self.decls) + self.globals + self.functions
+                           + [_declaration(f) for f in self.straight]) + "\n"
+
+    def straight_text(self) -> str:
+        """The chunks' module: it declares the solves (of the other module) it calls."""
+        called = set(re.findall(r"call void @(\w+)\(", "\n".join(self.straight)))
+        solves = [_declaration(f) for f in self.functions
+                  if _DEFINE.search(f).group(3) in called]
+        return "\n\n".join(sorted(self.decls) + solves + self.straight) + "\n"
+
+
+_DEFINE = re.compile(r"^define (internal )?(\w+) @(\w+)\(([^)]*)\)", re.M)
+
+
+def _declaration(definition: str) -> str:
+    """``declare ...`` for the function that ``definition`` defines (no attributes)."""
+    m = _DEFINE.search(definition)
+    if m is None or m.group(1):
+        raise BgcError("internal: only a function with external linkage is called from "
+                       "the other IR module")
+    return f"declare {m.group(2)} @{m.group(3)}({m.group(4)})"
 
 
 # the programs a module has, and the C entry points of the native integrators
@@ -1347,7 +1382,7 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:
         mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
-    return Kernels(mod.text(), layout.size, n_eval,
+    return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
 
 

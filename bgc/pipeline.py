@@ -81,7 +81,7 @@ def machine_code(path: Path):
     with progress.stage("machine code") as st:
         module = emit.import_module(path)
         module.compile_all()
-        size = len(module._KERNEL_IR)
+        size = len(module._KERNEL_IR) + len(module._KERNEL_IR_STRAIGHT)
         st.done(f"{progress.count(module.KERNEL_FUNCTIONS, 'kernel')}, " + (
             f"{size / 1e6:.1f} MB" if size >= 1e6 else f"{size / 1e3:.0f} kB") + " of LLVM IR")
     return module

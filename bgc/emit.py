@@ -218,6 +218,7 @@ def render(system: EquationSystem) -> str:
     prefix = f"{canonical}_{digest}"
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ir_straight = kern.ir_straight.replace(kernels.PLACEHOLDER, prefix)
+    x0_symbols = set().union(*(st.initial.free_symbols for st in system.states))
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         model_hash=model_hash(m.digest, system.variant),
@@ -234,7 +235,7 @@ def render(system: EquationSystem) -> str:
         param_names=[name for _, name, _ in system.params],
         output_names=[name for name, _ in system.outputs],
         x0_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)
-                   if any(st.initial.has(sy) for st in system.states)],
+                   if sy in x0_symbols],
         freq_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)
                      if any(f.has(sy) for f in freqs)],
         freq=code(sp.Max(sp.S.Zero, *freqs)) if freqs else "0.0",

@@ -133,17 +133,17 @@ def _colour(n: int, pattern) -> tuple[list[int], int]:
     """Greedy distance-2 colouring: columns sharing a row of the pattern get different
     colours (largest columns first, which keeps the count near the densest row)."""
     rows_of: dict[int, set] = {}
-    cols_of: dict[int, set] = {}
     for i, j, _ in pattern:
         rows_of.setdefault(j, set()).add(i)
-        cols_of.setdefault(i, set()).add(j)
     colour = [0] * n
-    done: set = set()
+    in_row: dict[int, set] = {}      # row -> the colours of its columns coloured so far
     for j in sorted(range(n), key=lambda j: (-len(rows_of.get(j, ())), j)):
-        taken = {colour[k] for i in rows_of.get(j, ()) for k in cols_of[i] if k in done}
+        rows = rows_of.get(j, ())
+        taken = set().union(*(in_row.get(i, ()) for i in rows))
         c = 0
         while c in taken:
             c += 1
         colour[j] = c
-        done.add(j)
+        for i in rows:
+            in_row.setdefault(i, set()).add(c)
     return colour, max(colour, default=0) + 1

@@ -12,7 +12,7 @@ import hashlib
 import keyword
 import math
 import re
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import jinja2
@@ -67,6 +67,13 @@ def _float(value) -> str:
     as ``float('nan')`` / ``float('inf')``, which are no Python literals)."""
     v = float(value)
     return repr(v) if math.isfinite(v) else f'float("{v}")'
+
+
+def _literal(value) -> str:
+    """A setting's value (text, whole number or float) as a Python literal."""
+    if isinstance(value, str):
+        return py_str(value)
+    return str(value) if isinstance(value, int) else _float(value)
 
 
 def _doc(text: str) -> str:
@@ -194,6 +201,7 @@ def render(system: EquationSystem) -> str:
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
+        settings=[(f.name, _literal(getattr(m.settings, f.name))) for f in fields(m.settings)],
         model_hash=model_hash(m.digest, system.variant),
         canonical=canonical, prefix=prefix, ir=ir, n_functions=ir.count("\ndefine "),
         n_work=kern.n_work, n_eval=kern.n_eval,

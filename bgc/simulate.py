@@ -201,10 +201,10 @@ LOCATE_MAXITER = 60
 class NativeSolver(Solver):
     """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``, imported when a run takes
     it), compiled once for every model, that calls the module's rhs, Jacobian and guards
-    through their C entry points without returning to Python per step. Guards are checked in the loop; other events
-    (the rank monitor, Python functions) and rk4's stability limit are checked while the
-    loop pauses every so many steps, an event located by bisection, re-integrating from
-    the last pause."""
+    through their C entry points without returning to Python per step. Guards are
+    checked in the loop; other events (the rank monitor, Python functions) and rk4's
+    stability limit are checked while the loop pauses every so many steps, an event
+    located by bisection, re-integrating from the last pause."""
     STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
 
     def __init__(self, name: str, loop: str, description: str):

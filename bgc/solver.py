@@ -49,7 +49,7 @@ class Stats:
     rejected_steps: int | None = None     # scipy's solve_ivp does not report them
     wall_time: float = 0.0                # integration only
     max_step: float | None = None         # the step limit the input signals set
-    compile_time: float = 0.0             # numba JIT / cache load of the module's functions
+    compile_time: float = 0.0             # JIT / cache load, scipy.integrate's import
     # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
     drift_position: float | None = None
     drift_velocity: float | None = None

@@ -444,8 +444,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out, states))
-    title = f"{module.MODEL_NAME} ({result.solver}" + (f", {exc['kind']} {exc['direction']}" if exc
-                                            else "") + ")"
+    title = f"{module.MODEL_NAME} ({result.solver}" + (
+        f", {exc['kind']} {exc['direction']}" if exc else "") + ")"
     if plot:
         files["png"] = str(plot_png(result, plot, title=title))
     minima = None

@@ -18,11 +18,11 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import __version__, emit, progress
+from . import __version__, progress
 from .errors import BgcError, SimulationError
 from .fileio import check_writable
-from .joints import JOINT_KINDS
-from .model import MAX_POINTS
+from .model import MAX_POINTS, Settings
+from .module_file import stored_hash
 from .parasitic import SEPARATION
 from .pipeline import METHODS, build, compile_model, ensure_module
 from .simulate import SOLVERS, Interrupted
@@ -162,8 +162,9 @@ def check(model, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
     Given a scene file: the state count before and after each reduction pass."""
-    from .zcp import paths
     from . import scene as bscene
+    from .joints import JOINT_KINDS
+    from .zcp import paths
     if bscene.is_scene(model):
         sc = bscene.load_scene(model)
         passes = bscene.check_scene(sc)
@@ -260,7 +261,7 @@ def compile_cmd(model, out_dir, method, keep_loops, as_json):
     text = path.read_text()
     info = {"module": str(path), "states": len(c.system.states),
             "assignments": len(c.system.assignments), "bytes": len(text.encode()),
-            "model_hash": emit.stored_hash(path), "timings": c.timings}
+            "model_hash": stored_hash(path), "timings": c.timings}
     if as_json:
         click.echo(json.dumps(info, indent=2))
     else:
@@ -297,9 +298,9 @@ def _check_overrides(model, items) -> None:
     """Refuse ``-p`` values that the model's own checks refuse (a capacitance, inertance
     or mass not > 0, a constant that becomes infinite or complex): the model is read
     again with them, and its error is told as the option's."""
-    from . import load
     if not items:
         return
+    from . import load
     try:
         load.load(model, overrides=dict(items))
     except BgcError as exc:
@@ -310,10 +311,10 @@ def _check_overrides(model, items) -> None:
 
 
 def _check_plan(module, p, t_end, step, key):
-    """Refuse a run whose step plan alone exceeds ``signals.MAX_PLANNED_STEPS``: a fixed
+    """Refuse a run whose step plan alone exceeds ``solver.MAX_PLANNED_STEPS``: a fixed
     ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
     ``key``: the option the error names when the signal is too fast."""
-    from .signals import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
+    from .solver import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
     if step is not None and t_end / step > MAX_PLANNED_STEPS:
         raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
                        f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
@@ -406,12 +407,16 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         plot_format(plot, "--plot")
     from .simulate import precompile_loop
 
-    def loop_beside(m):                 # the native loop compiles beside the model's build
-        precompile_loop(solver or m.settings.solver)
+    def loop_beside(settings):          # the native loop compiles beside the model's build
+        precompile_loop(solver or settings.solver)
+    # the Model only for what reads it (an excitation, --parasitic auto): else a fresh
+    # module is found from the model file's YAML, without sympy (pipeline.ensure_module)
+    need_model = exc_kind is not None or exc_dir is not None or parasitic_mode == "auto"
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(model, out_dir, method,
-                                            open_loops=not keep_loops, on_load=loop_beside)
-    st = m.settings
+                                            open_loops=not keep_loops, on_load=loop_beside,
+                                            need_model=need_model)
+    st = Settings(**module.SETTINGS)        # the model's, as the module was written
     _check_overrides(model, params)
     p, choice = _parse_params(module, params), None
     exc = _excitation(module, m, p, exc_kind, exc_dir, amplitude, frequency)
@@ -439,8 +444,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     files = {}
     if out:
         files["csv"] = str(write_csv(result, out, states))
-    title = f"{m.name} ({result.solver}" + (f", {exc['kind']} {exc['direction']}" if exc
-                                            else "") + ")"
+    title = f"{module.MODEL_NAME} ({result.solver}" + (
+        f", {exc['kind']} {exc['direction']}" if exc else "") + ")"
     if plot:
         files["png"] = str(plot_png(result, plot, title=title))
     minima = None
@@ -462,7 +467,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     stats = result.stats.to_dict()
     proj = result.projection
     if as_json:
-        click.echo(json.dumps({"model": m.name, "method": method, "solver": result.solver,
+        click.echo(json.dumps({"model": module.MODEL_NAME, "method": method,
+                               "solver": result.solver,
                                "t_end": float(result.t[-1]), "stats": stats,
                                "projection": proj.to_dict() if proj else None,
                                "parasitic": choice.to_dict() if choice else None,
@@ -474,7 +480,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         click.echo(proj.describe())
     if choice is not None:
         click.echo(choice.describe())
-    click.echo(f"{m.name}: {result.solver} to t = {result.t[-1]:g} s: {stats['steps']} steps, "
+    click.echo(f"{module.MODEL_NAME}: {result.solver} to t = {result.t[-1]:g} s: "
+               f"{stats['steps']} steps, "
                f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
                f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "
                f"(+{stats['compile_time']:.2f} s JIT/cache load"

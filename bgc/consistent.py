@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from .errors import SimulationError
 
@@ -301,6 +300,7 @@ class RankMonitor:
         return float(np.linalg.det(K[np.ix_(self.rows, self.cols)]))
 
     def repick(self, x) -> None:
+        import scipy.linalg      # its import (0.25 s) paid only by the runs that use it
         K = self._rows(x)[0]
         self.rows = np.sort(scipy.linalg.qr(K.T, pivoting=True)[2][:self.rank])
         self.cols = np.sort(scipy.linalg.qr(K[self.rows], pivoting=True)[2][:self.rank])

@@ -30,6 +30,7 @@ from .expand import AXES, body_junction, position, rotation_matrix
 from .forward_mode import directional, propagate, trivial
 from .graphs import is_cyclic, strongly_connected
 from .model import Model, Table
+from .module_file import variant
 
 # Largest loop solved symbolically (tearing variables); larger loops become numeric blocks.
 MAX_SYMBOLIC_LOOP = 6
@@ -167,11 +168,6 @@ def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
         for j in range(o):
             out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
     return sp.Matrix(m, o, out)
-
-
-def variant(method: str, open_loops: bool = True) -> str:
-    """``method``, or ``zcp_closed`` for method zcp with its loops kept closed."""
-    return "zcp_closed" if method == "zcp" and not open_loops else method
 
 
 class Dt(sp.Function):

@@ -8,10 +8,12 @@ state of the graph (the M- elements).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-
-import sympy as sp
+from typing import TYPE_CHECKING
 
 from .errors import Loc
+
+if TYPE_CHECKING:       # annotations only: a fresh module's run reads Settings without sympy
+    import sympy as sp
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SimulationError
-from .expand import _initial_pose, _twist_row, expand, joint_param
 
 SEPARATION = 100.0       # parasitic frequencies >= this x the highest functional one
 DAMPING_RATIO = 1.0      # of the slowest blocked direction of each joint
@@ -77,6 +76,7 @@ def _functional_rate(module, x, p, stiff: list[int], damp: list[int]) -> float:
 def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarray, Choice]:
     """Parameters ``p`` with every joint's parasitic stiffness and damping chosen, and
     the Choice made (reported by ``bgc simulate --parasitic auto``)."""
+    from .expand import _initial_pose, _twist_row, expand, joint_param
     names = list(module.PARAM_NAMES)
     graph = expand(model)
     pose = _initial_pose(model)

@@ -1,15 +1,24 @@
-"""The stages chained: model file -> equation system -> generated module."""
+"""The stages chained: model file -> equation system -> generated module.
+
+The stages that need sympy (load past the YAML, causality, equations, emit) are imported
+when they run: a run whose generated module is fresh reads the model file's YAML, finds
+the module by the digest and imports it, and pays for none of them (``ensure_module``).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from . import causality, emit, equations, expand, load, progress, zcp
-from .causality import CausalGraph
-from .equations import EquationSystem
+from . import document, progress
 from .fileio import check_writable
-from .model import Model
+from .model import Model, Settings
+from .module_file import import_module, is_stale, module_name_problem, module_path, variant
+
+if TYPE_CHECKING:
+    from .causality import CausalGraph
+    from .equations import EquationSystem
 
 # what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
 METHODS = ("parasitic", "lagrange", "zcp")
@@ -29,6 +38,7 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
     progress stage (timed in ``Compiled.timings``). ``open_loops``: method zcp opens
     kinematic loops with break variables (else refuses them). ``derive_options`` go to
     ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
+    from . import causality, equations, expand, zcp
     with progress.record() as timings:
         if not isinstance(model, Model):
             model = _load(model)
@@ -49,13 +59,35 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
 def _load(path: str | Path) -> Model:
     """The load stage: the model file read and checked."""
     with progress.stage("load") as st:
-        model = load.load(path)
-        parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
-                 ("joint", model.joints)]
-        st.done(f"{model.name}: " + ", ".join(
-            progress.count(len(v), k, "bodies" if k == "body" else None) for k, v in parts
-            if v))
+        model = _model(document.read(path), str(path), st)
     return model
+
+
+def _model(doc, file: str, st: progress.Stage) -> Model:
+    """The Model of a model file's document, counted in the load stage ``st``."""
+    from . import load
+    model = load.from_document(doc, file)
+    parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
+             ("joint", model.joints)]
+    st.done(f"{model.name}: " + ", ".join(
+        progress.count(len(v), k, "bodies" if k == "body" else None) for k, v in parts if v))
+    return model
+
+
+def _fresh(doc, file: str, out_dir: str | Path, kind: str) -> Path | None:
+    """The path of the generated module of a model file's YAML document if that module
+    is fresh, else None. Fresh: its MODEL_HASH is this document's digest under this method
+    and this compiler (``module_file.is_stale``), so it was written from this very document
+    after it loaded without error; the document is not loaded again. None also when the
+    digest does not capture the whole document (``document.plain_json``) or the model's
+    name is refused: the full load then decides, and reports any error."""
+    if not isinstance(doc, dict) or not document.plain_json(doc):
+        return None
+    name = doc.get("name", Path(file).stem)       # as load names it
+    if module_name_problem(name) is not None:
+        return None
+    path = module_path(name, out_dir, kind)
+    return None if is_stale(path, document.digest(doc), kind) else path
 
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
@@ -63,6 +95,7 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
     """Build and write ``out_dir/<name>.py``, then compile its machine code, so that a
     later ``import`` or ``bgc simulate`` compiles nothing; nothing is written if a stage
     before the module's fails."""
+    from . import emit
     check_writable(out_dir, "output directory", directory=True)   # before the work
     with progress.record() as timings:
         c = build(model, method, **derive_options)
@@ -79,7 +112,7 @@ def machine_code(path: Path):
     kernels for this machine (``bgc.kernels``; or loads them, compiled before), and
     compile its numba wrappers (or load them from numba's cache)."""
     with progress.stage("machine code") as st:
-        module = emit.import_module(path)
+        module = import_module(path)
         module.compile_all()
         size = len(module._KERNEL_IR) + len(module._KERNEL_IR_STRAIGHT)
         st.done(f"{progress.count(module.KERNEL_FUNCTIONS, 'kernel')}, " + (
@@ -88,21 +121,36 @@ def machine_code(path: Path):
 
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
-                  method: str = "parasitic", open_loops: bool = True, on_load=None):
+                  method: str = "parasitic", open_loops: bool = True, on_load=None,
+                  need_model: bool = True):
     """The generated module for a model, recompiled only if missing or stale (method zcp
-    with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``). ``on_load`` is
-    called with the Model as soon as it is read (e.g. to start other work beside the
-    build)."""
+    with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``); returns the
+    module, the Model and the Compiled (None if nothing was compiled). ``on_load`` is
+    called with the model's Settings as soon as they are known (e.g. to start other work
+    beside the build). ``need_model=False``: a fresh module is found from the YAML alone
+    (``_fresh``) and the Model comes back as None; the module's SETTINGS and MODEL_NAME
+    are the model's."""
+    kind = variant(method, open_loops)
     with progress.record() as timings:
-        model = _load(model_path)
+        with progress.stage("load") as st:
+            doc = document.read(model_path)
+            fresh = None if need_model else _fresh(doc, str(model_path), out_dir, kind)
+            if fresh is not None:
+                st.done(f"{fresh.stem}: its generated module is up to date")
+            else:
+                model = _model(doc, str(model_path), st)
+        if fresh is not None:
+            module = import_module(fresh)
+            if on_load is not None:
+                on_load(Settings(**module.SETTINGS))
+            return module, None, None
         if on_load is not None:
-            on_load(model)
-        kind = equations.variant(method, open_loops)
-        path = emit.module_path(model.name, out_dir, kind)
+            on_load(model.settings)
+        path = module_path(model.name, out_dir, kind)
         compiled = None
-        if emit.is_stale(path, model.digest, kind):
+        if is_stale(path, model.digest, kind):
             compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
-        module = emit.import_module(path)
+        module = import_module(path)
     if compiled is not None:
         compiled.timings = timings        # its load too
     return module, model, compiled

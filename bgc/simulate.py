@@ -12,11 +12,9 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
-from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
-from . import consistent, native, radau5, rk4
+from . import consistent, native
 from .errors import SimulationError
 from .solver import GUARD_TOLERANCE, Problem, Segment, Solver, Stats
 from .sundials import SundialsSolver
@@ -52,8 +50,14 @@ class ScipySolver(Solver):
     def __init__(self, name: str, method: str, description: str):
         self.name, self.method, self.description = name, method, description
 
+    def warm_up(self, problem, x0):
+        """Import scipy.integrate (0.3 s, which only these solvers need: imported here, not
+        with bgc), so wall time is the run's."""
+        import scipy.integrate  # noqa: F401
+
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
+        from scipy.integrate import solve_ivp
         kw = {"jac": problem.jac} if self.method in ("BDF", "Radau", "LSODA") else {}
         stop = StopEvent(problem, stats, span=t1 - t0)
         try:
@@ -200,12 +204,12 @@ LOCATE_MAXITER = 60
 
 
 class NativeSolver(Solver):
-    """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``), compiled once for every
-    model, that calls the module's rhs, Jacobian and guards through their C entry points
-    without returning to Python per step. Guards are checked in the loop; other events
-    (the rank monitor, Python functions) and rk4's stability limit are checked while the
-    loop pauses every so many steps, an event located by bisection, re-integrating from
-    the last pause."""
+    """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``, imported when a run takes
+    it), compiled once for every model, that calls the module's rhs, Jacobian and guards
+    through their C entry points without returning to Python per step. Guards are
+    checked in the loop; other events (the rank monitor, Python functions) and rk4's
+    stability limit are checked while the loop pauses every so many steps, an event
+    located by bisection, re-integrating from the last pause."""
     STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
 
     def __init__(self, name: str, loop: str, description: str):
@@ -228,6 +232,7 @@ class NativeSolver(Solver):
                                        "Jacobian's eigenvalues lambda")
         unstable = problem.check_stability and self._unstable(problem, t0, x0)
         if unstable:
+            from . import rk4
             h_max = rk4.stable_step(np.linalg.eigvals(problem.jac(t0, x0)))[0]
             raise SimulationError(f"rk4 {unstable}", hint=f"take --step {h_max:.3g} or "
                                                           "less, or a stiff solver (native, "
@@ -237,6 +242,7 @@ class NativeSolver(Solver):
     def _unstable(problem, t, x) -> str | None:
         """Why rk4's step is unstable at (t, x) (h lambda outside the stability region
         for an eigenvalue of the Jacobian there), or None."""
+        from . import rk4
         h_max, lam = rk4.stable_step(np.linalg.eigvals(problem.jac(t, x)))
         if problem.step <= h_max:
             return None
@@ -252,6 +258,7 @@ class NativeSolver(Solver):
         n_guards = len(problem.module.GUARD_NAMES)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
         if self.loop == "rk4":
+            from . import rk4
             # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
@@ -261,6 +268,7 @@ class NativeSolver(Solver):
         else:
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
+            from . import radau5
             self.diag = np.zeros(len(x0))
             res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
                                 mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
@@ -339,6 +347,7 @@ class NativeSolver(Solver):
         if not np.all(np.isfinite(J)):     # a singular configuration: no spectrum there
             return (f"the state became non-finite after t = {t:.6g}, where the Jacobian "
                     "already is not (a singular configuration, or beyond the model's range)")
+        from . import rk4
         h_max, lam = rk4.stable_step(np.linalg.eigvals(J))
         if problem.step > h_max:
             return (f"the state became non-finite: the step {problem.step:.3g} s is beyond "
@@ -476,6 +485,7 @@ def _check_index2(module, x, p, algebraic, t):
     s = np.linalg.svd(B, compute_uv=False)
     rank = int(np.sum(s > consistent.RANK_TOL * max(s[0], 1e-300)))
     if rank < len(algebraic):
+        import scipy.linalg
         _, _, piv = scipy.linalg.qr(B, pivoting=True)
         dep = [module.STATE_NAMES[algebraic[i]] for i in sorted(piv[rank:])]
         raise SimulationError(

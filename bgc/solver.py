@@ -17,6 +17,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# An adaptive step is at most a period / STEPS_PER_PERIOD of the fastest input signal
+# (``max_step`` of a generated module, whose template holds the same number); a run whose
+# plan alone needs more than MAX_PLANNED_STEPS steps (a 1e12 Hz sine over 1 s: 8e12) is
+# refused before it starts: at ~1 us a step it would take more than a minute and a
+# result that never resolves the signal is no answer.
+STEPS_PER_PERIOD = 8
+MAX_PLANNED_STEPS = 10 ** 8
+
+
+def too_fast(frequency: float, t_span: float) -> str | None:
+    """Why a signal of ``frequency`` [Hz] cannot be followed over ``t_span`` [s], or None."""
+    steps = frequency * t_span * STEPS_PER_PERIOD
+    if steps > MAX_PLANNED_STEPS:
+        return (f"{frequency:g} Hz over {t_span:g} s needs {steps:.3g} steps "
+                f"({STEPS_PER_PERIOD} a period), more than bgc's limit of "
+                f"{MAX_PLANNED_STEPS:.0e}")
+    return None
+
+
 # A run stops where a guard margin (e.g. |cos b| of a body's Cardan angles) falls below this.
 GUARD_TOLERANCE = 1e-3
 
@@ -30,7 +49,7 @@ class Stats:
     rejected_steps: int | None = None     # scipy's solve_ivp does not report them
     wall_time: float = 0.0                # integration only
     max_step: float | None = None         # the step limit the input signals set
-    compile_time: float = 0.0             # numba JIT / cache load of the module's functions
+    compile_time: float = 0.0             # JIT / cache load, scipy.integrate's import
     # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
     drift_position: float | None = None
     drift_velocity: float | None = None

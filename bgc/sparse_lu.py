@@ -20,8 +20,6 @@ False, and the integrator factors that matrix dense with partial pivoting (LAPAC
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spl
 from numba import njit
 
 GROWTH_LIMIT = 1e4
@@ -62,6 +60,8 @@ def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
         pattern[np.arange(n), np.arange(n)] = True
     # the ordering: values that make the diagonal the pivots, so SuperLU's row order is
     # its column order (the ordering of the structure alone)
+    import scipy.sparse as sp        # only the symbolic analysis needs scipy
+    import scipy.sparse.linalg as spl
     a = sp.csc_matrix(pattern.astype(np.float64) + n * np.eye(n))
     lu = spl.splu(a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                   options={"SymmetricMode": True})

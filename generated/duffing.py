@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "5c5dd2bfa1fa1683dcc15c31a8b5b99d"
+MODEL_HASH = "90f98567faece7b1e690d1b94ddafcee"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "bdf", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d", sys.modules[__name__])
-__name__ = "_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d"
+    sys.modules.setdefault("_bgc_duffing_90f98567faece7b1e690d1b94ddafcee", sys.modules[__name__])
+__name__ = "_bgc_duffing_90f98567faece7b1e690d1b94ddafcee"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )
@@ -89,7 +92,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27"
+_KERNEL_PREFIX = "_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -98,175 +101,49 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape_src = internal constant [4 x i64] [i64 -1, i64 -1, i64 1, i64 0]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape_src = internal constant [4 x i64] [i64 -1, i64 -1, i64 1, i64 0]
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_i = internal constant [2 x i64] [i64 0, i64 1]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_i = internal constant [2 x i64] [i64 0, i64 1]
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_j = internal constant [2 x i64] [i64 1, i64 0]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_j = internal constant [2 x i64] [i64 1, i64 0]
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_row = internal constant [2 x i64] [i64 2, i64 3]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_row = internal constant [2 x i64] [i64 2, i64 3]
 
-@_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_col = internal constant [2 x i64] [i64 0, i64 0]
+@_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_col = internal constant [2 x i64] [i64 0, i64 0]
 
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 0
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 2
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v10
-  %v15 = fmul double %v10, %v14
-  %v16 = fmul double %v13, %v15
-  %v17 = fadd double %v11, %v16
-  %v18 = getelementptr inbounds double, double* %w, i64 1
-  store double %v17, double* %v18, align 8
-  %v19 = fneg double %v17
-  %v20 = getelementptr inbounds double, double* %w, i64 2
-  store double %v19, double* %v20, align 8
-  %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v5, double* %v21, align 8
-  %v22 = getelementptr inbounds double, double* %out, i64 0
-  store double %v19, double* %v22, align 8
-  %v23 = getelementptr inbounds double, double* %out, i64 1
-  store double %v5, double* %v23, align 8
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 0
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 2
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v10
-  %v15 = fmul double %v10, %v14
-  %v16 = fmul double %v13, %v15
-  %v17 = fadd double %v11, %v16
-  %v18 = getelementptr inbounds double, double* %w, i64 1
-  store double %v17, double* %v18, align 8
-  %v19 = fdiv double 0x3FF0000000000000, %v4
-  %v20 = fmul double 0x3FF0000000000000, %v19
-  %v21 = getelementptr inbounds double, double* %out, i64 0
-  store double %v20, double* %v21, align 8
-  %v22 = fmul double 0x3FF0000000000000, %v13
-  %v23 = fmul double %v10, %v10
-  %v24 = fmul double 0x4008000000000000, %v23
-  %v25 = fmul double %v22, %v24
-  %v26 = fmul double 0x3FF0000000000000, %v8
-  %v27 = fadd double %v25, %v26
-  %v28 = getelementptr inbounds double, double* %out, i64 1
-  store double %v27, double* %v28, align 8
-  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v30 = getelementptr inbounds double, double* %out, i64 2
-  store double %v29, double* %v30, align 8
-  %v31 = getelementptr inbounds double, double* %out, i64 3
-  store double 0x3FF0000000000000, double* %v31, align 8
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 1
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %x, i64 1
-  %v4 = load double, double* %v3, align 8
-  %v5 = fmul double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %p, i64 2
-  %v7 = load double, double* %v6, align 8
-  %v8 = fmul double %v4, %v4
-  %v9 = fmul double %v4, %v8
-  %v10 = fmul double %v7, %v9
-  %v11 = fadd double %v5, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 1
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %out, i64 0
-  store double %v4, double* %v13, align 8
-  %v14 = getelementptr inbounds double, double* %out, i64 1
-  store double %v11, double* %v14, align 8
-  %v15 = fmul double %v4, %v4
-  %v16 = fmul double 0x3FE0000000000000, %v2
-  %v17 = fmul double %v16, %v15
-  %v18 = getelementptr inbounds double, double* %p, i64 0
-  %v19 = load double, double* %v18, align 8
-  %v20 = getelementptr inbounds double, double* %x, i64 0
-  %v21 = load double, double* %v20, align 8
-  %v22 = fmul double %v21, %v21
-  %v23 = fmul double 0x3FE0000000000000, %v22
-  %v24 = fdiv double %v23, %v19
-  %v25 = fmul double %v4, %v4
-  %v26 = fmul double %v25, %v25
-  %v27 = fmul double 0x3FD0000000000000, %v7
-  %v28 = fmul double %v27, %v26
-  %v29 = fadd double %v17, %v24
-  %v30 = fadd double %v29, %v28
-  %v31 = getelementptr inbounds double, double* %out, i64 2
-  store double %v30, double* %v31, align 8
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -325,7 +202,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -356,7 +233,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -414,46 +291,189 @@ ends:
 }
 
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4
   %v2 = getelementptr inbounds double, double* %w, i64 8
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 8
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_tape_src, i64 0, i64 0))
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 32, i1 false)
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_scatter(double* %J, double* %v2, i64 2, i64 2, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_col, i64 0, i64 0))
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_scatter(double* %J, double* %v2, i64 2, i64 2, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 32)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 32)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_5c5dd2bfa1fa1683dcc15c31a8b5b99d_ed8023ffda27_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 0
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = load double, double* %v9, align 8
+  %v11 = fmul double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %p, i64 2
+  %v13 = load double, double* %v12, align 8
+  %v14 = fmul double %v10, %v10
+  %v15 = fmul double %v10, %v14
+  %v16 = fmul double %v13, %v15
+  %v17 = fadd double %v11, %v16
+  %v18 = getelementptr inbounds double, double* %w, i64 1
+  store double %v17, double* %v18, align 8
+  %v19 = fneg double %v17
+  %v20 = getelementptr inbounds double, double* %w, i64 2
+  store double %v19, double* %v20, align 8
+  %v21 = getelementptr inbounds double, double* %w, i64 3
+  store double %v5, double* %v21, align 8
+  %v22 = getelementptr inbounds double, double* %out, i64 0
+  store double %v19, double* %v22, align 8
+  %v23 = getelementptr inbounds double, double* %out, i64 1
+  store double %v5, double* %v23, align 8
+  ret void
+}
+
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 0
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = load double, double* %v9, align 8
+  %v11 = fmul double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %p, i64 2
+  %v13 = load double, double* %v12, align 8
+  %v14 = fmul double %v10, %v10
+  %v15 = fmul double %v10, %v14
+  %v16 = fmul double %v13, %v15
+  %v17 = fadd double %v11, %v16
+  %v18 = getelementptr inbounds double, double* %w, i64 1
+  store double %v17, double* %v18, align 8
+  %v19 = fdiv double 0x3FF0000000000000, %v4
+  %v20 = fmul double 0x3FF0000000000000, %v19
+  %v21 = getelementptr inbounds double, double* %out, i64 0
+  store double %v20, double* %v21, align 8
+  %v22 = fmul double 0x3FF0000000000000, %v13
+  %v23 = fmul double %v10, %v10
+  %v24 = fmul double 0x4008000000000000, %v23
+  %v25 = fmul double %v22, %v24
+  %v26 = fmul double 0x3FF0000000000000, %v8
+  %v27 = fadd double %v25, %v26
+  %v28 = getelementptr inbounds double, double* %out, i64 1
+  store double %v27, double* %v28, align 8
+  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v30 = getelementptr inbounds double, double* %out, i64 2
+  store double %v29, double* %v30, align 8
+  %v31 = getelementptr inbounds double, double* %out, i64 3
+  store double 0x3FF0000000000000, double* %v31, align 8
+  ret void
+}
+
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %p, i64 1
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %x, i64 1
+  %v4 = load double, double* %v3, align 8
+  %v5 = fmul double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %p, i64 2
+  %v7 = load double, double* %v6, align 8
+  %v8 = fmul double %v4, %v4
+  %v9 = fmul double %v4, %v8
+  %v10 = fmul double %v7, %v9
+  %v11 = fadd double %v5, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 1
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %out, i64 0
+  store double %v4, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %out, i64 1
+  store double %v11, double* %v14, align 8
+  %v15 = fmul double %v4, %v4
+  %v16 = fmul double 0x3FE0000000000000, %v2
+  %v17 = fmul double %v16, %v15
+  %v18 = getelementptr inbounds double, double* %p, i64 0
+  %v19 = load double, double* %v18, align 8
+  %v20 = getelementptr inbounds double, double* %x, i64 0
+  %v21 = load double, double* %v20, align 8
+  %v22 = fmul double %v21, %v21
+  %v23 = fmul double 0x3FE0000000000000, %v22
+  %v24 = fdiv double %v23, %v19
+  %v25 = fmul double %v4, %v4
+  %v26 = fmul double %v25, %v25
+  %v27 = fmul double 0x3FD0000000000000, %v7
+  %v28 = fmul double %v27, %v26
+  %v29 = fadd double %v17, %v24
+  %v30 = fadd double %v29, %v28
+  %v31 = getelementptr inbounds double, double* %out, i64 2
+  store double %v30, double* %v31, align 8
+  ret void
+}
+
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_duffing_90f98567faece7b1e690d1b94ddafcee_152fd1a9b502_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
   ret void
 }
 """
@@ -486,8 +506,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -500,12 +521,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "b368533162e25b987a2ce3a9263d41af"
+MODEL_HASH = "2bf5ec35761194c0a7edbbf903052218"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "bdf", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_b368533162e25b987a2ce3a9263d41af", sys.modules[__name__])
-__name__ = "_bgc_msd_free_b368533162e25b987a2ce3a9263d41af"
+    sys.modules.setdefault("_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218", sys.modules[__name__])
+__name__ = "_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )
@@ -89,7 +92,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2"
+_KERNEL_PREFIX = "_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -98,170 +101,49 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 0
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 1
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 2
-  %v14 = load double, double* %v13, align 8
-  %v15 = fmul double %v5, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 2
-  store double %v15, double* %v16, align 8
-  %v17 = fneg double %v11
-  %v18 = fneg double %v15
-  %v19 = fadd double %v17, %v18
-  %v20 = getelementptr inbounds double, double* %w, i64 3
-  store double %v19, double* %v20, align 8
-  %v21 = getelementptr inbounds double, double* %w, i64 4
-  store double %v19, double* %v21, align 8
-  %v22 = getelementptr inbounds double, double* %w, i64 5
-  store double %v5, double* %v22, align 8
-  %v23 = getelementptr inbounds double, double* %out, i64 0
-  store double %v19, double* %v23, align 8
-  %v24 = getelementptr inbounds double, double* %out, i64 1
-  store double %v5, double* %v24, align 8
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 0
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 1
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 2
-  %v14 = load double, double* %v13, align 8
-  %v15 = fmul double %v5, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 2
-  store double %v15, double* %v16, align 8
-  %v17 = fneg double %v11
-  %v18 = fneg double %v15
-  %v19 = fadd double %v17, %v18
-  %v20 = getelementptr inbounds double, double* %w, i64 3
-  store double %v19, double* %v20, align 8
-  %v21 = fdiv double 0x3FF0000000000000, %v4
-  %v22 = fmul double 0x3FF0000000000000, %v21
-  %v23 = getelementptr inbounds double, double* %out, i64 0
-  store double %v22, double* %v23, align 8
-  %v24 = fmul double 0x3FF0000000000000, %v8
-  %v25 = getelementptr inbounds double, double* %out, i64 1
-  store double %v24, double* %v25, align 8
-  %v26 = fmul double 0x3FF0000000000000, %v14
-  %v27 = getelementptr inbounds double, double* %out, i64 2
-  store double %v26, double* %v27, align 8
-  %v28 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v30 = getelementptr inbounds double, double* %out, i64 3
-  store double %v29, double* %v30, align 8
-  %v31 = getelementptr inbounds double, double* %out, i64 4
-  store double %v28, double* %v31, align 8
-  %v32 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v32, align 8
-  %v33 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v33, align 8
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 0
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 1
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %out, i64 0
-  store double %v10, double* %v13, align 8
-  %v14 = getelementptr inbounds double, double* %out, i64 1
-  store double %v5, double* %v14, align 8
-  %v15 = getelementptr inbounds double, double* %out, i64 2
-  store double %v11, double* %v15, align 8
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -320,7 +202,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -351,7 +233,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -409,46 +291,184 @@ ends:
 }
 
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 6
   %v2 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 13
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_tape_src, i64 0, i64 0))
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_b368533162e25b987a2ce3a9263d41af_e6ca082095f2_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 0
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = load double, double* %v9, align 8
+  %v11 = fmul double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 1
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %p, i64 2
+  %v14 = load double, double* %v13, align 8
+  %v15 = fmul double %v5, %v14
+  %v16 = getelementptr inbounds double, double* %w, i64 2
+  store double %v15, double* %v16, align 8
+  %v17 = fneg double %v11
+  %v18 = fneg double %v15
+  %v19 = fadd double %v17, %v18
+  %v20 = getelementptr inbounds double, double* %w, i64 3
+  store double %v19, double* %v20, align 8
+  %v21 = getelementptr inbounds double, double* %w, i64 4
+  store double %v19, double* %v21, align 8
+  %v22 = getelementptr inbounds double, double* %w, i64 5
+  store double %v5, double* %v22, align 8
+  %v23 = getelementptr inbounds double, double* %out, i64 0
+  store double %v19, double* %v23, align 8
+  %v24 = getelementptr inbounds double, double* %out, i64 1
+  store double %v5, double* %v24, align 8
+  ret void
+}
+
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 0
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = load double, double* %v9, align 8
+  %v11 = fmul double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 1
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %p, i64 2
+  %v14 = load double, double* %v13, align 8
+  %v15 = fmul double %v5, %v14
+  %v16 = getelementptr inbounds double, double* %w, i64 2
+  store double %v15, double* %v16, align 8
+  %v17 = fneg double %v11
+  %v18 = fneg double %v15
+  %v19 = fadd double %v17, %v18
+  %v20 = getelementptr inbounds double, double* %w, i64 3
+  store double %v19, double* %v20, align 8
+  %v21 = fdiv double 0x3FF0000000000000, %v4
+  %v22 = fmul double 0x3FF0000000000000, %v21
+  %v23 = getelementptr inbounds double, double* %out, i64 0
+  store double %v22, double* %v23, align 8
+  %v24 = fmul double 0x3FF0000000000000, %v8
+  %v25 = getelementptr inbounds double, double* %out, i64 1
+  store double %v24, double* %v25, align 8
+  %v26 = fmul double 0x3FF0000000000000, %v14
+  %v27 = getelementptr inbounds double, double* %out, i64 2
+  store double %v26, double* %v27, align 8
+  %v28 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v30 = getelementptr inbounds double, double* %out, i64 3
+  store double %v29, double* %v30, align 8
+  %v31 = getelementptr inbounds double, double* %out, i64 4
+  store double %v28, double* %v31, align 8
+  %v32 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v32, align 8
+  %v33 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v33, align 8
+  ret void
+}
+
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 0
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = load double, double* %v9, align 8
+  %v11 = fmul double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 1
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %out, i64 0
+  store double %v10, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %out, i64 1
+  store double %v5, double* %v14, align 8
+  %v15 = getelementptr inbounds double, double* %out, i64 2
+  store double %v11, double* %v15, align 8
+  ret void
+}
+
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_msd_free_2bf5ec35761194c0a7edbbf903052218_3aed9ce8ba4d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
   ret void
 }
 """
@@ -481,8 +501,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -495,12 +516,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "449758e50397802179bf19c12a6f74fe"
+MODEL_HASH = "dfddc499ff17346565d20ed957ed0fd0"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 4.0, "rtol": 1e-08, "atol": 1e-10, "solver": "radau", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_449758e50397802179bf19c12a6f74fe", sys.modules[__name__])
-__name__ = "_bgc_pendulum_449758e50397802179bf19c12a6f74fe"
+    sys.modules.setdefault("_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0", sys.modules[__name__])
+__name__ = "_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )
@@ -88,7 +91,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa"
+_KERNEL_PREFIX = "_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -103,19 +106,263 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape_ptr = internal constant [83 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 14, i64 16, i64 19, i64 20, i64 21, i64 23, i64 24, i64 25, i64 26, i64 31, i64 37, i64 39, i64 40, i64 42, i64 44, i64 45, i64 48, i64 50, i64 56, i64 58, i64 59, i64 61, i64 66, i64 68, i64 71, i64 76, i64 82, i64 84, i64 85, i64 87, i64 88, i64 90, i64 91, i64 97, i64 103, i64 107, i64 108, i64 110, i64 112, i64 114, i64 115, i64 121, i64 125, i64 126, i64 128, i64 130, i64 132, i64 134, i64 140, i64 146, i64 152, i64 154, i64 157, i64 159, i64 165, i64 171, i64 172, i64 175, i64 181, i64 182, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 196, i64 197, i64 201, i64 202, i64 209]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape_ptr = internal constant [83 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 14, i64 16, i64 19, i64 20, i64 21, i64 23, i64 24, i64 25, i64 26, i64 31, i64 37, i64 39, i64 40, i64 42, i64 44, i64 45, i64 48, i64 50, i64 56, i64 58, i64 59, i64 61, i64 66, i64 68, i64 71, i64 76, i64 82, i64 84, i64 85, i64 87, i64 88, i64 90, i64 91, i64 97, i64 103, i64 107, i64 108, i64 110, i64 112, i64 114, i64 115, i64 121, i64 125, i64 126, i64 128, i64 130, i64 132, i64 134, i64 140, i64 146, i64 152, i64 154, i64 157, i64 159, i64 165, i64 171, i64 172, i64 175, i64 181, i64 182, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 196, i64 197, i64 201, i64 202, i64 209]
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape_src = internal constant [209 x i64] [i64 -9, i64 -4, i64 -3, i64 -9, i64 -4, i64 -3, i64 -6, i64 -7, i64 -8, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 10, i64 -10, i64 -2, i64 -5, i64 12, i64 13, i64 -1, i64 15, i64 15, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 18, i64 9, i64 10, i64 19, i64 6, i64 20, i64 11, i64 21, i64 4, i64 2, i64 1, i64 23, i64 24, i64 -11, i64 4, i64 5, i64 14, i64 16, i64 17, i64 26, i64 23, i64 24, i64 27, i64 7, i64 28, i64 25, i64 29, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 31, i64 32, i64 -12, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 34, i64 31, i64 32, i64 35, i64 8, i64 36, i64 33, i64 37, i64 38, i64 12, i64 13, i64 34, i64 15, i64 12, i64 13, i64 18, i64 9, i64 10, i64 15, i64 12, i64 13, i64 26, i64 23, i64 24, i64 42, i64 43, i64 18, i64 26, i64 44, i64 41, i64 45, i64 46, i64 26, i64 46, i64 18, i64 18, i64 15, i64 12, i64 13, i64 34, i64 31, i64 32, i64 43, i64 50, i64 26, i64 34, i64 51, i64 49, i64 52, i64 53, i64 34, i64 48, i64 54, i64 53, i64 26, i64 55, i64 47, i64 56, i64 18, i64 26, i64 34, i64 22, i64 30, i64 38, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 10, i64 24, i64 32, i64 58, i64 59, i64 40, i64 57, i64 60, i64 15, i64 13, i64 55, i64 47, i64 56, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 18, i64 26, i64 34, i64 64, i64 62, i64 63, i64 65, i64 55, i64 47, i64 56, i64 10, i64 24, i64 32, i64 64, i64 67, i64 68, i64 22, i64 30, i64 39, i64 61, i64 66, i64 69, i64 6, i64 4, i64 5, i64 15, i64 12, i64 2, i64 7, i64 5, i64 15, i64 12, i64 2, i64 8, i64 4, i64 5, i64 15, i64 12, i64 13, i64 1, i64 2]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape_src = internal constant [209 x i64] [i64 -9, i64 -4, i64 -3, i64 -9, i64 -4, i64 -3, i64 -6, i64 -7, i64 -8, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 10, i64 -10, i64 -2, i64 -5, i64 12, i64 13, i64 -1, i64 15, i64 15, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 18, i64 9, i64 10, i64 19, i64 6, i64 20, i64 11, i64 21, i64 4, i64 2, i64 1, i64 23, i64 24, i64 -11, i64 4, i64 5, i64 14, i64 16, i64 17, i64 26, i64 23, i64 24, i64 27, i64 7, i64 28, i64 25, i64 29, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 31, i64 32, i64 -12, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 34, i64 31, i64 32, i64 35, i64 8, i64 36, i64 33, i64 37, i64 38, i64 12, i64 13, i64 34, i64 15, i64 12, i64 13, i64 18, i64 9, i64 10, i64 15, i64 12, i64 13, i64 26, i64 23, i64 24, i64 42, i64 43, i64 18, i64 26, i64 44, i64 41, i64 45, i64 46, i64 26, i64 46, i64 18, i64 18, i64 15, i64 12, i64 13, i64 34, i64 31, i64 32, i64 43, i64 50, i64 26, i64 34, i64 51, i64 49, i64 52, i64 53, i64 34, i64 48, i64 54, i64 53, i64 26, i64 55, i64 47, i64 56, i64 18, i64 26, i64 34, i64 22, i64 30, i64 38, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 10, i64 24, i64 32, i64 58, i64 59, i64 40, i64 57, i64 60, i64 15, i64 13, i64 55, i64 47, i64 56, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 18, i64 26, i64 34, i64 64, i64 62, i64 63, i64 65, i64 55, i64 47, i64 56, i64 10, i64 24, i64 32, i64 64, i64 67, i64 68, i64 22, i64 30, i64 39, i64 61, i64 66, i64 69, i64 6, i64 4, i64 5, i64 15, i64 12, i64 2, i64 7, i64 5, i64 15, i64 12, i64 2, i64 8, i64 4, i64 5, i64 15, i64 12, i64 13, i64 1, i64 2]
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_i = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_i = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_j = internal constant [74 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_j = internal constant [74 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_row = internal constant [74 x i64] [i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 76, i64 77, i64 77, i64 77, i64 77, i64 78, i64 79, i64 79, i64 79, i64 80, i64 81, i64 81, i64 81, i64 81, i64 81]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_row = internal constant [74 x i64] [i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 76, i64 77, i64 77, i64 77, i64 77, i64 78, i64 79, i64 79, i64 79, i64 80, i64 81, i64 81, i64 81, i64 81, i64 81]
 
-@_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_col = internal constant [74 x i64] [i64 5, i64 0, i64 1, i64 4, i64 9, i64 8, i64 3, i64 2, i64 6, i64 0, i64 1, i64 4, i64 10, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 8, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 0, i64 1, i64 3, i64 2, i64 6, i64 0, i64 1, i64 2, i64 7, i64 0, i64 1, i64 4, i64 3, i64 2]
+@_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_col = internal constant [74 x i64] [i64 5, i64 0, i64 1, i64 4, i64 9, i64 8, i64 3, i64 2, i64 6, i64 0, i64 1, i64 4, i64 10, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 8, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 0, i64 1, i64 3, i64 2, i64 6, i64 0, i64 1, i64 2, i64 7, i64 0, i64 1, i64 4, i64 3, i64 2]
 
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+entry:
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  ret void
+}
+
+define internal void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+entry:
+  %none = icmp sge i64 %start, %stop
+  br i1 %none, label %exit, label %row
+row:
+  %r = phi i64 [ %start, %entry ], [ %r.next, %row.end ]
+  %m0.a = getelementptr inbounds i64, i64* %ptr, i64 %r
+  %m0 = load i64, i64* %m0.a, align 8
+  %r.next = add i64 %r, 1
+  %m1.a = getelementptr inbounds i64, i64* %ptr, i64 %r.next
+  %m1 = load i64, i64* %m1.a, align 8
+  %rbase = mul i64 %r, %nc
+  %some = icmp slt i64 %m0, %m1
+  br i1 %some, label %edge, label %row.end
+edge:
+  %m = phi i64 [ %m0, %row ], [ %m.next, %edge.end ]
+  %s.a = getelementptr inbounds i64, i64* %src, i64 %m
+  %s = load i64, i64* %s.a, align 8
+  %wv.a = getelementptr inbounds double, double* %pv, i64 %m
+  %wv = load double, double* %wv.a, align 8
+  %seed = icmp slt i64 %s, 0
+  br i1 %seed, label %state, label %chain
+state:
+  %col = sub i64 -1, %s
+  %i.s = add i64 %rbase, %col
+  %p.s = getelementptr inbounds double, double* %d, i64 %i.s
+  %v.s = load double, double* %p.s, align 8
+  %v.s1 = fadd double %v.s, %wv
+  store double %v.s1, double* %p.s, align 8
+  br label %edge.end
+chain:
+  %sbase = mul i64 %s, %nc
+  %nocol = icmp sle i64 %nc, 0
+  br i1 %nocol, label %edge.end, label %cols
+cols:
+  %j = phi i64 [ 0, %chain ], [ %j.next, %cols ]
+  %i.d = add i64 %rbase, %j
+  %i.r = add i64 %sbase, %j
+  %p.d = getelementptr inbounds double, double* %d, i64 %i.d
+  %p.r = getelementptr inbounds double, double* %d, i64 %i.r
+  %v.d = load double, double* %p.d, align 8
+  %v.r = load double, double* %p.r, align 8
+  %prod = fmul double %wv, %v.r
+  %sum = fadd double %v.d, %prod
+  store double %sum, double* %p.d, align 8
+  %j.next = add i64 %j, 1
+  %jdone = icmp sge i64 %j.next, %nc
+  br i1 %jdone, label %edge.end, label %cols
+edge.end:
+  %m.next = add i64 %m, 1
+  %mdone = icmp sge i64 %m.next, %m1
+  br i1 %mdone, label %row.end, label %edge
+row.end:
+  %rdone = icmp sge i64 %r.next, %stop
+  br i1 %rdone, label %exit, label %row
+exit:
+  ret void
+}
+
+define internal void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+entry:
+  %none = icmp sle i64 %nnz, 0
+  br i1 %none, label %exit, label %loop
+loop:
+  %k = phi i64 [ 0, %entry ], [ %k.next, %loop ]
+  %i.a = getelementptr inbounds i64, i64* %ii, i64 %k
+  %i = load i64, i64* %i.a, align 8
+  %j.a = getelementptr inbounds i64, i64* %jj, i64 %k
+  %j = load i64, i64* %j.a, align 8
+  %r.a = getelementptr inbounds i64, i64* %row, i64 %k
+  %r = load i64, i64* %r.a, align 8
+  %c.a = getelementptr inbounds i64, i64* %col, i64 %k
+  %c = load i64, i64* %c.a, align 8
+  %in = mul i64 %i, %n
+  %to = add i64 %in, %j
+  %rn = mul i64 %r, %nc
+  %from = add i64 %rn, %c
+  %p.from = getelementptr inbounds double, double* %d, i64 %from
+  %v = load double, double* %p.from, align 8
+  %p.to = getelementptr inbounds double, double* %J, i64 %to
+  store double %v, double* %p.to, align 8
+  %k.next = add i64 %k, 1
+  %done = icmp sge i64 %k.next, %nnz
+  br i1 %done, label %exit, label %loop
+exit:
+  ret void
+}
+
+; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
+; the slope of the segment t lies in (0 outside), as the numba code had it
+define internal double @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+entry:
+  br label %scan
+scan:
+  %k = phi i64 [ -1, %entry ], [ %k1, %next ]
+  %k1 = add i64 %k, 1
+  %end = icmp sge i64 %k1, %n
+  br i1 %end, label %found, label %test
+test:
+  %tk.a = getelementptr inbounds double, double* %tt, i64 %k1
+  %tk = load double, double* %tk.a, align 8
+  %le = fcmp ole double %tk, %t
+  br i1 %le, label %next, label %found
+next:
+  br label %scan
+found:
+  %last = add i64 %n, -1
+  %below = icmp slt i64 %k, 0
+  %above = icmp sge i64 %k, %last
+  %out = or i1 %below, %above
+  br i1 %out, label %outside, label %inside
+inside:
+  %t0.a = getelementptr inbounds double, double* %tt, i64 %k
+  %t0 = load double, double* %t0.a, align 8
+  %t1.a = getelementptr inbounds double, double* %tt, i64 %k1
+  %t1 = load double, double* %t1.a, align 8
+  %y0.a = getelementptr inbounds double, double* %yy, i64 %k
+  %y0 = load double, double* %y0.a, align 8
+  %y1.a = getelementptr inbounds double, double* %yy, i64 %k1
+  %y1 = load double, double* %y1.a, align 8
+  %dy = fsub double %y1, %y0
+  %dt = fsub double %t1, %t0
+  %m = fdiv double %dy, %dt
+  br i1 %slope, label %ret.m, label %value
+ret.m:
+  ret double %m
+value:
+  %u = fsub double %t, %t0
+  %mu = fmul double %m, %u
+  %v = fadd double %mu, %y0
+  ret double %v
+outside:
+  br i1 %slope, label %ret.zero, label %clamp
+ret.zero:
+  ret double 0.0
+clamp:
+  %nan = fcmp uno double %t, %t
+  br i1 %nan, label %ret.t, label %ends
+ret.t:
+  ret double %t
+ends:
+  %at = select i1 %below, i64 0, i64 %last
+  %ye.a = getelementptr inbounds double, double* %yy, i64 %at
+  %ye = load double, double* %ye.a, align 8
+  ret double %ye
+}
+
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 82
+  %v2 = getelementptr inbounds double, double* %w, i64 291
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  %v3 = getelementptr inbounds double, double* %w, i64 291
+  %v4 = bitcast double* %v3 to i8*
+  call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 7872, i1 false)
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_tape_src, i64 0, i64 0))
+  %v5 = getelementptr inbounds double, double* %J, i64 0
+  %v6 = bitcast double* %v5 to i8*
+  call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 1152, i1 false)
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_scatter(double* %J, double* %v2, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 656)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 10200)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 656)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare double @llvm.cos.f64(double)
+
+declare double @llvm.sin.f64(double)
+
+declare double @llvm.sqrt.f64(double)
+
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -544,13 +791,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1577,13 +1818,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -2031,13 +2266,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -2049,211 +2278,8 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_dfddc499ff17346565d20ed957ed0fd0_cd7959f54345_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
-entry:
-  %none = icmp sge i64 %start, %stop
-  br i1 %none, label %exit, label %row
-row:
-  %r = phi i64 [ %start, %entry ], [ %r.next, %row.end ]
-  %m0.a = getelementptr inbounds i64, i64* %ptr, i64 %r
-  %m0 = load i64, i64* %m0.a, align 8
-  %r.next = add i64 %r, 1
-  %m1.a = getelementptr inbounds i64, i64* %ptr, i64 %r.next
-  %m1 = load i64, i64* %m1.a, align 8
-  %rbase = mul i64 %r, %nc
-  %some = icmp slt i64 %m0, %m1
-  br i1 %some, label %edge, label %row.end
-edge:
-  %m = phi i64 [ %m0, %row ], [ %m.next, %edge.end ]
-  %s.a = getelementptr inbounds i64, i64* %src, i64 %m
-  %s = load i64, i64* %s.a, align 8
-  %wv.a = getelementptr inbounds double, double* %pv, i64 %m
-  %wv = load double, double* %wv.a, align 8
-  %seed = icmp slt i64 %s, 0
-  br i1 %seed, label %state, label %chain
-state:
-  %col = sub i64 -1, %s
-  %i.s = add i64 %rbase, %col
-  %p.s = getelementptr inbounds double, double* %d, i64 %i.s
-  %v.s = load double, double* %p.s, align 8
-  %v.s1 = fadd double %v.s, %wv
-  store double %v.s1, double* %p.s, align 8
-  br label %edge.end
-chain:
-  %sbase = mul i64 %s, %nc
-  %nocol = icmp sle i64 %nc, 0
-  br i1 %nocol, label %edge.end, label %cols
-cols:
-  %j = phi i64 [ 0, %chain ], [ %j.next, %cols ]
-  %i.d = add i64 %rbase, %j
-  %i.r = add i64 %sbase, %j
-  %p.d = getelementptr inbounds double, double* %d, i64 %i.d
-  %p.r = getelementptr inbounds double, double* %d, i64 %i.r
-  %v.d = load double, double* %p.d, align 8
-  %v.r = load double, double* %p.r, align 8
-  %prod = fmul double %wv, %v.r
-  %sum = fadd double %v.d, %prod
-  store double %sum, double* %p.d, align 8
-  %j.next = add i64 %j, 1
-  %jdone = icmp sge i64 %j.next, %nc
-  br i1 %jdone, label %edge.end, label %cols
-edge.end:
-  %m.next = add i64 %m, 1
-  %mdone = icmp sge i64 %m.next, %m1
-  br i1 %mdone, label %row.end, label %edge
-row.end:
-  %rdone = icmp sge i64 %r.next, %stop
-  br i1 %rdone, label %exit, label %row
-exit:
-  ret void
-}
-
-define internal void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
-entry:
-  %none = icmp sle i64 %nnz, 0
-  br i1 %none, label %exit, label %loop
-loop:
-  %k = phi i64 [ 0, %entry ], [ %k.next, %loop ]
-  %i.a = getelementptr inbounds i64, i64* %ii, i64 %k
-  %i = load i64, i64* %i.a, align 8
-  %j.a = getelementptr inbounds i64, i64* %jj, i64 %k
-  %j = load i64, i64* %j.a, align 8
-  %r.a = getelementptr inbounds i64, i64* %row, i64 %k
-  %r = load i64, i64* %r.a, align 8
-  %c.a = getelementptr inbounds i64, i64* %col, i64 %k
-  %c = load i64, i64* %c.a, align 8
-  %in = mul i64 %i, %n
-  %to = add i64 %in, %j
-  %rn = mul i64 %r, %nc
-  %from = add i64 %rn, %c
-  %p.from = getelementptr inbounds double, double* %d, i64 %from
-  %v = load double, double* %p.from, align 8
-  %p.to = getelementptr inbounds double, double* %J, i64 %to
-  store double %v, double* %p.to, align 8
-  %k.next = add i64 %k, 1
-  %done = icmp sge i64 %k.next, %nnz
-  br i1 %done, label %exit, label %loop
-exit:
-  ret void
-}
-
-; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
-; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
-entry:
-  br label %scan
-scan:
-  %k = phi i64 [ -1, %entry ], [ %k1, %next ]
-  %k1 = add i64 %k, 1
-  %end = icmp sge i64 %k1, %n
-  br i1 %end, label %found, label %test
-test:
-  %tk.a = getelementptr inbounds double, double* %tt, i64 %k1
-  %tk = load double, double* %tk.a, align 8
-  %le = fcmp ole double %tk, %t
-  br i1 %le, label %next, label %found
-next:
-  br label %scan
-found:
-  %last = add i64 %n, -1
-  %below = icmp slt i64 %k, 0
-  %above = icmp sge i64 %k, %last
-  %out = or i1 %below, %above
-  br i1 %out, label %outside, label %inside
-inside:
-  %t0.a = getelementptr inbounds double, double* %tt, i64 %k
-  %t0 = load double, double* %t0.a, align 8
-  %t1.a = getelementptr inbounds double, double* %tt, i64 %k1
-  %t1 = load double, double* %t1.a, align 8
-  %y0.a = getelementptr inbounds double, double* %yy, i64 %k
-  %y0 = load double, double* %y0.a, align 8
-  %y1.a = getelementptr inbounds double, double* %yy, i64 %k1
-  %y1 = load double, double* %y1.a, align 8
-  %dy = fsub double %y1, %y0
-  %dt = fsub double %t1, %t0
-  %m = fdiv double %dy, %dt
-  br i1 %slope, label %ret.m, label %value
-ret.m:
-  ret double %m
-value:
-  %u = fsub double %t, %t0
-  %mu = fmul double %m, %u
-  %v = fadd double %mu, %y0
-  ret double %v
-outside:
-  br i1 %slope, label %ret.zero, label %clamp
-ret.zero:
-  ret double 0.0
-clamp:
-  %nan = fcmp uno double %t, %t
-  br i1 %nan, label %ret.t, label %ends
-ret.t:
-  ret double %t
-ends:
-  %at = select i1 %below, i64 0, i64 %last
-  %ye.a = getelementptr inbounds double, double* %yy, i64 %at
-  %ye = load double, double* %ye.a, align 8
-  ret double %ye
-}
-
-
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
-entry:
-  %v1 = getelementptr inbounds double, double* %w, i64 82
-  %v2 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
-  %v3 = getelementptr inbounds double, double* %w, i64 291
-  %v4 = bitcast double* %v3 to i8*
-  call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 7872, i1 false)
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_tape_src, i64 0, i64 0))
-  %v5 = getelementptr inbounds double, double* %J, i64 0
-  %v6 = bitcast double* %v5 to i8*
-  call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 1152, i1 false)
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_scatter(double* %J, double* %v2, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_col, i64 0, i64 0))
-  ret void
-}
-
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
-entry:
-  %raw = call i8* @malloc(i64 656)
-  %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @free(i8* %raw)
-  ret void
-}
-
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
-entry:
-  %raw = call i8* @malloc(i64 10200)
-  %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @free(i8* %raw)
-  ret void
-}
-
-define void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
-entry:
-  %raw = call i8* @malloc(i64 656)
-  %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_449758e50397802179bf19c12a6f74fe_a1194a0fc9aa_guard(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @free(i8* %raw)
   ret void
 }
 """
@@ -2286,8 +2312,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -2300,12 +2327,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

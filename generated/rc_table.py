@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "dd7917022f56cb7d30dc76137b6f70dd"
+MODEL_HASH = "f6ecbdec5b4d43c13dc8a6eb6fab2c9c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 0.03, "rtol": 1e-06, "atol": 1e-08, "solver": "bdf", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd", sys.modules[__name__])
-__name__ = "_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd"
+    sys.modules.setdefault("_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c", sys.modules[__name__])
+__name__ = "_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
@@ -90,7 +93,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99"
+_KERNEL_PREFIX = "_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9"
 KERNEL_FUNCTIONS = 18
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -99,166 +102,69 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_i = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_j = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_row = internal constant [1 x i64] [i64 3]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_row = internal constant [1 x i64] [i64 3]
 
-@_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_col = internal constant [1 x i64] [i64 0]
 
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w) nounwind {
+define internal void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w) nounwind {
 entry:
-  %v5 = call double @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_y0, i64 0, i64 0), i64 3, i1 false)
+  %v5 = call double @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_y0, i64 0, i64 0), i64 3, i1 false)
   %p5 = getelementptr inbounds double, double* %w, i64 5
   store double %v5, double* %p5, align 8
-  %v6 = call double @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_table_y0, i64 0, i64 0), i64 3, i1 true)
+  %v6 = call double @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_table_y0, i64 0, i64 0), i64 3, i1 true)
   %p6 = getelementptr inbounds double, double* %w, i64 6
   store double %v6, double* %p6, align 8
   ret void
 }
 
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %w, i64 5
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %w, i64 0
-  store double %v2, double* %v3, align 8
-  %v4 = getelementptr inbounds double, double* %x, i64 0
-  %v5 = load double, double* %v4, align 8
-  %v6 = getelementptr inbounds double, double* %p, i64 1
-  %v7 = load double, double* %v6, align 8
-  %v8 = fdiv double %v5, %v7
-  %v9 = getelementptr inbounds double, double* %w, i64 1
-  store double %v8, double* %v9, align 8
-  %v10 = fneg double %v8
-  %v11 = fadd double %v2, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 0
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v11, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 3
-  store double %v15, double* %v16, align 8
-  %v17 = getelementptr inbounds double, double* %w, i64 4
-  store double %v15, double* %v17, align 8
-  %v18 = getelementptr inbounds double, double* %out, i64 0
-  store double %v15, double* %v18, align 8
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %w, i64 5
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %w, i64 0
-  store double %v2, double* %v3, align 8
-  %v4 = getelementptr inbounds double, double* %x, i64 0
-  %v5 = load double, double* %v4, align 8
-  %v6 = getelementptr inbounds double, double* %p, i64 1
-  %v7 = load double, double* %v6, align 8
-  %v8 = fdiv double %v5, %v7
-  %v9 = getelementptr inbounds double, double* %w, i64 1
-  store double %v8, double* %v9, align 8
-  %v10 = fneg double %v8
-  %v11 = fadd double %v2, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 0
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v11, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 3
-  store double %v15, double* %v16, align 8
-  %v17 = fdiv double 0x3FF0000000000000, %v7
-  %v18 = fmul double 0x3FF0000000000000, %v17
-  %v19 = getelementptr inbounds double, double* %out, i64 0
-  store double %v18, double* %v19, align 8
-  %v20 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v21 = getelementptr inbounds double, double* %out, i64 1
-  store double %v20, double* %v21, align 8
-  %v22 = fdiv double 0x3FF0000000000000, %v14
-  %v23 = fmul double 0x3FF0000000000000, %v22
-  %v24 = getelementptr inbounds double, double* %out, i64 2
-  store double %v23, double* %v24, align 8
-  %v25 = getelementptr inbounds double, double* %out, i64 3
-  store double 0x3FF0000000000000, double* %v25, align 8
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %w, i64 5
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %w, i64 0
-  store double %v2, double* %v3, align 8
-  %v4 = getelementptr inbounds double, double* %x, i64 0
-  %v5 = load double, double* %v4, align 8
-  %v6 = getelementptr inbounds double, double* %p, i64 1
-  %v7 = load double, double* %v6, align 8
-  %v8 = fdiv double %v5, %v7
-  %v9 = getelementptr inbounds double, double* %w, i64 1
-  store double %v8, double* %v9, align 8
-  %v10 = getelementptr inbounds double, double* %out, i64 0
-  store double %v2, double* %v10, align 8
-  %v11 = getelementptr inbounds double, double* %out, i64 1
-  store double %v8, double* %v11, align 8
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tables(double %t, double* %w)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tables(double %t, double* %w)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -317,7 +223,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -348,7 +254,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -406,46 +312,160 @@ ends:
 }
 
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 11
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_tape_src, i64 0, i64 0))
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 8, i1 false)
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 120)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_dd7917022f56cb7d30dc76137b6f70dd_cf6bf5475e99_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 5
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %w, i64 0
+  store double %v2, double* %v3, align 8
+  %v4 = getelementptr inbounds double, double* %x, i64 0
+  %v5 = load double, double* %v4, align 8
+  %v6 = getelementptr inbounds double, double* %p, i64 1
+  %v7 = load double, double* %v6, align 8
+  %v8 = fdiv double %v5, %v7
+  %v9 = getelementptr inbounds double, double* %w, i64 1
+  store double %v8, double* %v9, align 8
+  %v10 = fneg double %v8
+  %v11 = fadd double %v2, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 2
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %p, i64 0
+  %v14 = load double, double* %v13, align 8
+  %v15 = fdiv double %v11, %v14
+  %v16 = getelementptr inbounds double, double* %w, i64 3
+  store double %v15, double* %v16, align 8
+  %v17 = getelementptr inbounds double, double* %w, i64 4
+  store double %v15, double* %v17, align 8
+  %v18 = getelementptr inbounds double, double* %out, i64 0
+  store double %v15, double* %v18, align 8
+  ret void
+}
+
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 5
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %w, i64 0
+  store double %v2, double* %v3, align 8
+  %v4 = getelementptr inbounds double, double* %x, i64 0
+  %v5 = load double, double* %v4, align 8
+  %v6 = getelementptr inbounds double, double* %p, i64 1
+  %v7 = load double, double* %v6, align 8
+  %v8 = fdiv double %v5, %v7
+  %v9 = getelementptr inbounds double, double* %w, i64 1
+  store double %v8, double* %v9, align 8
+  %v10 = fneg double %v8
+  %v11 = fadd double %v2, %v10
+  %v12 = getelementptr inbounds double, double* %w, i64 2
+  store double %v11, double* %v12, align 8
+  %v13 = getelementptr inbounds double, double* %p, i64 0
+  %v14 = load double, double* %v13, align 8
+  %v15 = fdiv double %v11, %v14
+  %v16 = getelementptr inbounds double, double* %w, i64 3
+  store double %v15, double* %v16, align 8
+  %v17 = fdiv double 0x3FF0000000000000, %v7
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 0
+  store double %v18, double* %v19, align 8
+  %v20 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v21 = getelementptr inbounds double, double* %out, i64 1
+  store double %v20, double* %v21, align 8
+  %v22 = fdiv double 0x3FF0000000000000, %v14
+  %v23 = fmul double 0x3FF0000000000000, %v22
+  %v24 = getelementptr inbounds double, double* %out, i64 2
+  store double %v23, double* %v24, align 8
+  %v25 = getelementptr inbounds double, double* %out, i64 3
+  store double 0x3FF0000000000000, double* %v25, align 8
+  ret void
+}
+
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 5
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %w, i64 0
+  store double %v2, double* %v3, align 8
+  %v4 = getelementptr inbounds double, double* %x, i64 0
+  %v5 = load double, double* %v4, align 8
+  %v6 = getelementptr inbounds double, double* %p, i64 1
+  %v7 = load double, double* %v6, align 8
+  %v8 = fdiv double %v5, %v7
+  %v9 = getelementptr inbounds double, double* %w, i64 1
+  store double %v8, double* %v9, align 8
+  %v10 = getelementptr inbounds double, double* %out, i64 0
+  store double %v2, double* %v10, align 8
+  %v11 = getelementptr inbounds double, double* %out, i64 1
+  store double %v8, double* %v11, align 8
+  ret void
+}
+
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_rc_table_f6ecbdec5b4d43c13dc8a6eb6fab2c9c_2b174e145bb9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
   ret void
 }
 """
@@ -478,8 +498,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -492,12 +513,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "19690d4cda21987bac3d9de0a14fe270"
+MODEL_HASH = "aa4f716a8643ab91352ecc71bc1abedf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 0.05, "rtol": 1e-06, "atol": 1e-08, "solver": "bdf", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rlc_19690d4cda21987bac3d9de0a14fe270", sys.modules[__name__])
-__name__ = "_bgc_rlc_19690d4cda21987bac3d9de0a14fe270"
+    sys.modules.setdefault("_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf", sys.modules[__name__])
+__name__ = "_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )
@@ -88,7 +91,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310"
+_KERNEL_PREFIX = "_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -97,190 +100,49 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 -2, i64 1, i64 2, i64 3, i64 0]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 -2, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x3F50624DD2F1A9FC
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 0
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 2
-  %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 1
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v13
-  %v15 = getelementptr inbounds double, double* %w, i64 2
-  store double %v14, double* %v15, align 8
-  %v16 = getelementptr inbounds double, double* %x, i64 1
-  %v17 = load double, double* %v16, align 8
-  %v18 = getelementptr inbounds double, double* %p, i64 3
-  %v19 = load double, double* %v18, align 8
-  %v20 = fdiv double %v17, %v19
-  %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v20, double* %v21, align 8
-  %v22 = fneg double %v14
-  %v23 = fneg double %v20
-  %v24 = fadd double %v4, %v22
-  %v25 = fadd double %v24, %v23
-  %v26 = getelementptr inbounds double, double* %w, i64 4
-  store double %v25, double* %v26, align 8
-  %v27 = getelementptr inbounds double, double* %w, i64 5
-  store double %v25, double* %v27, align 8
-  %v28 = getelementptr inbounds double, double* %w, i64 6
-  store double %v10, double* %v28, align 8
-  %v29 = getelementptr inbounds double, double* %out, i64 0
-  store double %v25, double* %v29, align 8
-  %v30 = getelementptr inbounds double, double* %out, i64 1
-  store double %v10, double* %v30, align 8
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x3F50624DD2F1A9FC
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 0
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 2
-  %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 1
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v13
-  %v15 = getelementptr inbounds double, double* %w, i64 2
-  store double %v14, double* %v15, align 8
-  %v16 = getelementptr inbounds double, double* %x, i64 1
-  %v17 = load double, double* %v16, align 8
-  %v18 = getelementptr inbounds double, double* %p, i64 3
-  %v19 = load double, double* %v18, align 8
-  %v20 = fdiv double %v17, %v19
-  %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v20, double* %v21, align 8
-  %v22 = fneg double %v14
-  %v23 = fneg double %v20
-  %v24 = fadd double %v4, %v22
-  %v25 = fadd double %v24, %v23
-  %v26 = getelementptr inbounds double, double* %w, i64 4
-  store double %v25, double* %v26, align 8
-  %v27 = fdiv double 0x3FF0000000000000, %v9
-  %v28 = fmul double 0x3FF0000000000000, %v27
-  %v29 = getelementptr inbounds double, double* %out, i64 0
-  store double %v28, double* %v29, align 8
-  %v30 = fmul double 0x3FF0000000000000, %v13
-  %v31 = getelementptr inbounds double, double* %out, i64 1
-  store double %v30, double* %v31, align 8
-  %v32 = fdiv double 0x3FF0000000000000, %v19
-  %v33 = fmul double 0x3FF0000000000000, %v32
-  %v34 = getelementptr inbounds double, double* %out, i64 2
-  store double %v33, double* %v34, align 8
-  %v35 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v36 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v37 = getelementptr inbounds double, double* %out, i64 3
-  store double %v36, double* %v37, align 8
-  %v38 = getelementptr inbounds double, double* %out, i64 4
-  store double %v35, double* %v38, align 8
-  %v39 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v39, align 8
-  %v40 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v40, align 8
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 2
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 1
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = fmul double %v5, %v8
-  %v10 = getelementptr inbounds double, double* %w, i64 2
-  store double %v9, double* %v10, align 8
-  %v11 = getelementptr inbounds double, double* %x, i64 1
-  %v12 = load double, double* %v11, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 3
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v12, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 3
-  store double %v15, double* %v16, align 8
-  %v17 = getelementptr inbounds double, double* %out, i64 0
-  store double %v5, double* %v17, align 8
-  %v18 = getelementptr inbounds double, double* %out, i64 1
-  store double %v15, double* %v18, align 8
-  %v19 = getelementptr inbounds double, double* %out, i64 2
-  store double %v9, double* %v19, align 8
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -339,7 +201,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -370,7 +232,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -428,46 +290,204 @@ ends:
 }
 
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_tape_src, i64 0, i64 0))
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 32, i1 false)
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_col, i64 0, i64 0))
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 208)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_19690d4cda21987bac3d9de0a14fe270_9e6b3b5c2310_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %p, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = fcmp olt double %t, 0x3F50624DD2F1A9FC
+  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
+  %v5 = getelementptr inbounds double, double* %w, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 0
+  %v7 = load double, double* %v6, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 2
+  %v9 = load double, double* %v8, align 8
+  %v10 = fdiv double %v7, %v9
+  %v11 = getelementptr inbounds double, double* %w, i64 1
+  store double %v10, double* %v11, align 8
+  %v12 = getelementptr inbounds double, double* %p, i64 1
+  %v13 = load double, double* %v12, align 8
+  %v14 = fmul double %v10, %v13
+  %v15 = getelementptr inbounds double, double* %w, i64 2
+  store double %v14, double* %v15, align 8
+  %v16 = getelementptr inbounds double, double* %x, i64 1
+  %v17 = load double, double* %v16, align 8
+  %v18 = getelementptr inbounds double, double* %p, i64 3
+  %v19 = load double, double* %v18, align 8
+  %v20 = fdiv double %v17, %v19
+  %v21 = getelementptr inbounds double, double* %w, i64 3
+  store double %v20, double* %v21, align 8
+  %v22 = fneg double %v14
+  %v23 = fneg double %v20
+  %v24 = fadd double %v4, %v22
+  %v25 = fadd double %v24, %v23
+  %v26 = getelementptr inbounds double, double* %w, i64 4
+  store double %v25, double* %v26, align 8
+  %v27 = getelementptr inbounds double, double* %w, i64 5
+  store double %v25, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %w, i64 6
+  store double %v10, double* %v28, align 8
+  %v29 = getelementptr inbounds double, double* %out, i64 0
+  store double %v25, double* %v29, align 8
+  %v30 = getelementptr inbounds double, double* %out, i64 1
+  store double %v10, double* %v30, align 8
+  ret void
+}
+
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %p, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = fcmp olt double %t, 0x3F50624DD2F1A9FC
+  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
+  %v5 = getelementptr inbounds double, double* %w, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 0
+  %v7 = load double, double* %v6, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 2
+  %v9 = load double, double* %v8, align 8
+  %v10 = fdiv double %v7, %v9
+  %v11 = getelementptr inbounds double, double* %w, i64 1
+  store double %v10, double* %v11, align 8
+  %v12 = getelementptr inbounds double, double* %p, i64 1
+  %v13 = load double, double* %v12, align 8
+  %v14 = fmul double %v10, %v13
+  %v15 = getelementptr inbounds double, double* %w, i64 2
+  store double %v14, double* %v15, align 8
+  %v16 = getelementptr inbounds double, double* %x, i64 1
+  %v17 = load double, double* %v16, align 8
+  %v18 = getelementptr inbounds double, double* %p, i64 3
+  %v19 = load double, double* %v18, align 8
+  %v20 = fdiv double %v17, %v19
+  %v21 = getelementptr inbounds double, double* %w, i64 3
+  store double %v20, double* %v21, align 8
+  %v22 = fneg double %v14
+  %v23 = fneg double %v20
+  %v24 = fadd double %v4, %v22
+  %v25 = fadd double %v24, %v23
+  %v26 = getelementptr inbounds double, double* %w, i64 4
+  store double %v25, double* %v26, align 8
+  %v27 = fdiv double 0x3FF0000000000000, %v9
+  %v28 = fmul double 0x3FF0000000000000, %v27
+  %v29 = getelementptr inbounds double, double* %out, i64 0
+  store double %v28, double* %v29, align 8
+  %v30 = fmul double 0x3FF0000000000000, %v13
+  %v31 = getelementptr inbounds double, double* %out, i64 1
+  store double %v30, double* %v31, align 8
+  %v32 = fdiv double 0x3FF0000000000000, %v19
+  %v33 = fmul double 0x3FF0000000000000, %v32
+  %v34 = getelementptr inbounds double, double* %out, i64 2
+  store double %v33, double* %v34, align 8
+  %v35 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v36 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v37 = getelementptr inbounds double, double* %out, i64 3
+  store double %v36, double* %v37, align 8
+  %v38 = getelementptr inbounds double, double* %out, i64 4
+  store double %v35, double* %v38, align 8
+  %v39 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v39, align 8
+  %v40 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v40, align 8
+  ret void
+}
+
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 2
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 1
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = fmul double %v5, %v8
+  %v10 = getelementptr inbounds double, double* %w, i64 2
+  store double %v9, double* %v10, align 8
+  %v11 = getelementptr inbounds double, double* %x, i64 1
+  %v12 = load double, double* %v11, align 8
+  %v13 = getelementptr inbounds double, double* %p, i64 3
+  %v14 = load double, double* %v13, align 8
+  %v15 = fdiv double %v12, %v14
+  %v16 = getelementptr inbounds double, double* %w, i64 3
+  store double %v15, double* %v16, align 8
+  %v17 = getelementptr inbounds double, double* %out, i64 0
+  store double %v5, double* %v17, align 8
+  %v18 = getelementptr inbounds double, double* %out, i64 1
+  store double %v15, double* %v18, align 8
+  %v19 = getelementptr inbounds double, double* %out, i64 2
+  store double %v9, double* %v19, align 8
+  ret void
+}
+
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_rlc_aa4f716a8643ab91352ecc71bc1abedf_18616901d7f6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
   ret void
 }
 """
@@ -500,8 +520,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -514,12 +535,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

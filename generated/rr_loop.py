@@ -25,17 +25,20 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "1256945ada94e1cdf3b46d95a41c6efd"
+MODEL_HASH = "7014bf9489c4ad026d12d86c4e12e8e8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
+# the model file's run settings (simulation:), which `bgc simulate` takes from here when
+# this module is fresh, without loading the model
+SETTINGS = {"t_end": 0.01, "rtol": 1e-06, "atol": 1e-08, "solver": "bdf", "points": 1001}
 
 # numba's on-disk cache (cache=True: __pycache__ beside this file) records the module's
 # __name__ and imports the module by that name when it loads a compiled function. One
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd", sys.modules[__name__])
-__name__ = "_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd"
+    sys.modules.setdefault("_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8", sys.modules[__name__])
+__name__ = "_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )
@@ -88,7 +91,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf"
+_KERNEL_PREFIX = "_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -97,207 +100,49 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_i = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_j = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_row = internal constant [1 x i64] [i64 4]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_row = internal constant [1 x i64] [i64 4]
 
-@_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_col = internal constant [1 x i64] [i64 0]
 
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 4
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %p, i64 2
-  %v10 = load double, double* %v9, align 8
-  %v11 = fdiv double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 3
-  %v13 = load double, double* %v12, align 8
-  %v14 = fdiv double %v8, %v13
-  %v15 = fadd double 0x3FF0000000000000, %v11
-  %v16 = fadd double %v15, %v14
-  %v17 = getelementptr inbounds double, double* %p, i64 0
-  %v18 = load double, double* %v17, align 8
-  %v19 = fmul double %v5, %v8
-  %v20 = fdiv double %v19, %v13
-  %v21 = fadd double %v18, %v20
-  %v22 = fdiv double %v21, %v16
-  %v23 = getelementptr inbounds double, double* %w, i64 1
-  store double %v22, double* %v23, align 8
-  %v24 = fneg double %v5
-  %v25 = fadd double %v22, %v24
-  %v26 = getelementptr inbounds double, double* %w, i64 3
-  store double %v25, double* %v26, align 8
-  %v27 = fdiv double %v25, %v13
-  %v28 = getelementptr inbounds double, double* %w, i64 4
-  store double %v27, double* %v28, align 8
-  %v29 = getelementptr inbounds double, double* %w, i64 7
-  store double %v27, double* %v29, align 8
-  %v30 = getelementptr inbounds double, double* %out, i64 0
-  store double %v27, double* %v30, align 8
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 4
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %p, i64 2
-  %v10 = load double, double* %v9, align 8
-  %v11 = fdiv double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 3
-  %v13 = load double, double* %v12, align 8
-  %v14 = fdiv double %v8, %v13
-  %v15 = fadd double 0x3FF0000000000000, %v11
-  %v16 = fadd double %v15, %v14
-  %v17 = getelementptr inbounds double, double* %p, i64 0
-  %v18 = load double, double* %v17, align 8
-  %v19 = fmul double %v5, %v8
-  %v20 = fdiv double %v19, %v13
-  %v21 = fadd double %v18, %v20
-  %v22 = fdiv double %v21, %v16
-  %v23 = getelementptr inbounds double, double* %w, i64 1
-  store double %v22, double* %v23, align 8
-  %v24 = fneg double %v5
-  %v25 = fadd double %v22, %v24
-  %v26 = getelementptr inbounds double, double* %w, i64 3
-  store double %v25, double* %v26, align 8
-  %v27 = fdiv double %v25, %v13
-  %v28 = getelementptr inbounds double, double* %w, i64 4
-  store double %v27, double* %v28, align 8
-  %v29 = fdiv double 0x3FF0000000000000, %v4
-  %v30 = fmul double 0x3FF0000000000000, %v29
-  %v31 = getelementptr inbounds double, double* %out, i64 0
-  store double %v30, double* %v31, align 8
-  %v32 = fdiv double 0x3FF0000000000000, %v16
-  %v33 = fmul double 0x3FF0000000000000, %v32
-  %v34 = fdiv double 0x3FF0000000000000, %v13
-  %v35 = fmul double %v8, %v34
-  %v36 = fmul double %v33, %v35
-  %v37 = getelementptr inbounds double, double* %out, i64 1
-  store double %v36, double* %v37, align 8
-  %v38 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v39 = getelementptr inbounds double, double* %out, i64 2
-  store double 0x3FF0000000000000, double* %v39, align 8
-  %v40 = getelementptr inbounds double, double* %out, i64 3
-  store double %v38, double* %v40, align 8
-  %v41 = fmul double 0x3FF0000000000000, %v34
-  %v42 = getelementptr inbounds double, double* %out, i64 4
-  store double %v41, double* %v42, align 8
-  %v43 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v43, align 8
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %x, i64 0
-  %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 4
-  %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %p, i64 2
-  %v10 = load double, double* %v9, align 8
-  %v11 = fdiv double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 3
-  %v13 = load double, double* %v12, align 8
-  %v14 = fdiv double %v8, %v13
-  %v15 = fadd double 0x3FF0000000000000, %v11
-  %v16 = fadd double %v15, %v14
-  %v17 = getelementptr inbounds double, double* %p, i64 0
-  %v18 = load double, double* %v17, align 8
-  %v19 = fmul double %v5, %v8
-  %v20 = fdiv double %v19, %v13
-  %v21 = fadd double %v18, %v20
-  %v22 = fdiv double %v21, %v16
-  %v23 = getelementptr inbounds double, double* %w, i64 1
-  store double %v22, double* %v23, align 8
-  %v24 = fdiv double %v22, %v10
-  %v25 = getelementptr inbounds double, double* %w, i64 2
-  store double %v24, double* %v25, align 8
-  %v26 = fneg double %v5
-  %v27 = fadd double %v22, %v26
-  %v28 = getelementptr inbounds double, double* %w, i64 3
-  store double %v27, double* %v28, align 8
-  %v29 = fdiv double %v27, %v13
-  %v30 = getelementptr inbounds double, double* %w, i64 4
-  store double %v29, double* %v30, align 8
-  %v31 = fadd double %v24, %v29
-  %v32 = getelementptr inbounds double, double* %w, i64 5
-  store double %v31, double* %v32, align 8
-  %v33 = getelementptr inbounds double, double* %out, i64 0
-  store double %v5, double* %v33, align 8
-  %v34 = getelementptr inbounds double, double* %out, i64 1
-  store double %v22, double* %v34, align 8
-  %v35 = getelementptr inbounds double, double* %out, i64 2
-  store double %v31, double* %v35, align 8
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
-entry:
-  ret void
-}
-
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
-entry:
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  ret void
-}
-
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) nounwind {
+define internal void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -356,7 +201,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -387,7 +232,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -445,46 +290,221 @@ ends:
 }
 
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 40, i1 false)
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_tape_src, i64 0, i64 0))
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 8, i1 false)
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_col, i64 0, i64 0))
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_1256945ada94e1cdf3b46d95a41c6efd_2fd71b971adf_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
+  ret void
+}
+
+declare void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+"""
+_KERNEL_IR_STRAIGHT = """\
+declare i8* @malloc(i64)
+
+declare void @free(i8*)
+
+declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
+
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 4
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %p, i64 2
+  %v10 = load double, double* %v9, align 8
+  %v11 = fdiv double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %p, i64 3
+  %v13 = load double, double* %v12, align 8
+  %v14 = fdiv double %v8, %v13
+  %v15 = fadd double 0x3FF0000000000000, %v11
+  %v16 = fadd double %v15, %v14
+  %v17 = getelementptr inbounds double, double* %p, i64 0
+  %v18 = load double, double* %v17, align 8
+  %v19 = fmul double %v5, %v8
+  %v20 = fdiv double %v19, %v13
+  %v21 = fadd double %v18, %v20
+  %v22 = fdiv double %v21, %v16
+  %v23 = getelementptr inbounds double, double* %w, i64 1
+  store double %v22, double* %v23, align 8
+  %v24 = fneg double %v5
+  %v25 = fadd double %v22, %v24
+  %v26 = getelementptr inbounds double, double* %w, i64 3
+  store double %v25, double* %v26, align 8
+  %v27 = fdiv double %v25, %v13
+  %v28 = getelementptr inbounds double, double* %w, i64 4
+  store double %v27, double* %v28, align 8
+  %v29 = getelementptr inbounds double, double* %w, i64 7
+  store double %v27, double* %v29, align 8
+  %v30 = getelementptr inbounds double, double* %out, i64 0
+  store double %v27, double* %v30, align 8
+  ret void
+}
+
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 4
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %p, i64 2
+  %v10 = load double, double* %v9, align 8
+  %v11 = fdiv double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %p, i64 3
+  %v13 = load double, double* %v12, align 8
+  %v14 = fdiv double %v8, %v13
+  %v15 = fadd double 0x3FF0000000000000, %v11
+  %v16 = fadd double %v15, %v14
+  %v17 = getelementptr inbounds double, double* %p, i64 0
+  %v18 = load double, double* %v17, align 8
+  %v19 = fmul double %v5, %v8
+  %v20 = fdiv double %v19, %v13
+  %v21 = fadd double %v18, %v20
+  %v22 = fdiv double %v21, %v16
+  %v23 = getelementptr inbounds double, double* %w, i64 1
+  store double %v22, double* %v23, align 8
+  %v24 = fneg double %v5
+  %v25 = fadd double %v22, %v24
+  %v26 = getelementptr inbounds double, double* %w, i64 3
+  store double %v25, double* %v26, align 8
+  %v27 = fdiv double %v25, %v13
+  %v28 = getelementptr inbounds double, double* %w, i64 4
+  store double %v27, double* %v28, align 8
+  %v29 = fdiv double 0x3FF0000000000000, %v4
+  %v30 = fmul double 0x3FF0000000000000, %v29
+  %v31 = getelementptr inbounds double, double* %out, i64 0
+  store double %v30, double* %v31, align 8
+  %v32 = fdiv double 0x3FF0000000000000, %v16
+  %v33 = fmul double 0x3FF0000000000000, %v32
+  %v34 = fdiv double 0x3FF0000000000000, %v13
+  %v35 = fmul double %v8, %v34
+  %v36 = fmul double %v33, %v35
+  %v37 = getelementptr inbounds double, double* %out, i64 1
+  store double %v36, double* %v37, align 8
+  %v38 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v39 = getelementptr inbounds double, double* %out, i64 2
+  store double 0x3FF0000000000000, double* %v39, align 8
+  %v40 = getelementptr inbounds double, double* %out, i64 3
+  store double %v38, double* %v40, align 8
+  %v41 = fmul double 0x3FF0000000000000, %v34
+  %v42 = getelementptr inbounds double, double* %out, i64 4
+  store double %v41, double* %v42, align 8
+  %v43 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v43, align 8
+  ret void
+}
+
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %x, i64 0
+  %v2 = load double, double* %v1, align 8
+  %v3 = getelementptr inbounds double, double* %p, i64 4
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double %v2, %v4
+  %v6 = getelementptr inbounds double, double* %w, i64 0
+  store double %v5, double* %v6, align 8
+  %v7 = getelementptr inbounds double, double* %p, i64 1
+  %v8 = load double, double* %v7, align 8
+  %v9 = getelementptr inbounds double, double* %p, i64 2
+  %v10 = load double, double* %v9, align 8
+  %v11 = fdiv double %v8, %v10
+  %v12 = getelementptr inbounds double, double* %p, i64 3
+  %v13 = load double, double* %v12, align 8
+  %v14 = fdiv double %v8, %v13
+  %v15 = fadd double 0x3FF0000000000000, %v11
+  %v16 = fadd double %v15, %v14
+  %v17 = getelementptr inbounds double, double* %p, i64 0
+  %v18 = load double, double* %v17, align 8
+  %v19 = fmul double %v5, %v8
+  %v20 = fdiv double %v19, %v13
+  %v21 = fadd double %v18, %v20
+  %v22 = fdiv double %v21, %v16
+  %v23 = getelementptr inbounds double, double* %w, i64 1
+  store double %v22, double* %v23, align 8
+  %v24 = fdiv double %v22, %v10
+  %v25 = getelementptr inbounds double, double* %w, i64 2
+  store double %v24, double* %v25, align 8
+  %v26 = fneg double %v5
+  %v27 = fadd double %v22, %v26
+  %v28 = getelementptr inbounds double, double* %w, i64 3
+  store double %v27, double* %v28, align 8
+  %v29 = fdiv double %v27, %v13
+  %v30 = getelementptr inbounds double, double* %w, i64 4
+  store double %v29, double* %v30, align 8
+  %v31 = fadd double %v24, %v29
+  %v32 = getelementptr inbounds double, double* %w, i64 5
+  store double %v31, double* %v32, align 8
+  %v33 = getelementptr inbounds double, double* %out, i64 0
+  store double %v5, double* %v33, align 8
+  %v34 = getelementptr inbounds double, double* %out, i64 1
+  store double %v22, double* %v34, align 8
+  %v35 = getelementptr inbounds double, double* %out, i64 2
+  store double %v31, double* %v35, align 8
+  ret void
+}
+
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
+  ret void
+}
+
+define void @_bgc_rr_loop_7014bf9489c4ad026d12d86c4e12e8e8_65e79e8249a6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+entry:
   ret void
 }
 """
@@ -517,8 +537,9 @@ def _load_kernels():
     # SARIB, and no slower at run time than numba's -O3 on the same code
     machine = llvm.Target.from_default_triple().create_target_machine(
         cpu=cpu, features=features, opt=0, codemodel="jitdefault")
-    key = hashlib.sha256("|".join((_KERNEL_IR, cpu, features, machine.triple,
-                                   llvmlite.__version__)).encode()).hexdigest()[:24]
+    key = hashlib.sha256("|".join((_KERNEL_IR, _KERNEL_IR_STRAIGHT, cpu, features,
+                                   machine.triple, llvmlite.__version__)).encode()
+                         ).hexdigest()[:24]
     name = f"{__name__}.{key}.o"
     obj = None
     for folder in _object_caches():
@@ -531,12 +552,21 @@ def _load_kernels():
             obj = data[32:]
             break
     if obj is None:
-        module = llvm.parse_assembly(_KERNEL_IR)
-        module.triple, module.data_layout = machine.triple, str(machine.target_data)
-        module.verify()
+        module, straight = (llvm.parse_assembly(_KERNEL_IR),
+                            llvm.parse_assembly(_KERNEL_IR_STRAIGHT))
+        for m in (module, straight):
+            m.triple, m.data_layout = machine.triple, str(machine.target_data)
+            m.verify()
+        # the loops at -O1; the straight-line chunks (most of the code) by local passes
         passes = llvm.create_pass_builder(
             machine, llvm.create_pipeline_tuning_options(speed_level=1))
         passes.getModulePassManager().run(module, passes)
+        local = llvm.create_new_module_pass_manager()
+        local.add_instruction_combine_pass()
+        local.add_simplify_cfg_pass()
+        local.add_dead_code_elimination_pass()
+        local.run(straight, passes)
+        module.link_in(straight)
         obj = machine.emit_object(module)
         for folder in _object_caches():     # the first that takes it
             tmp = os.path.join(folder, f"{name}.{os.getpid()}.tmp")

@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SERVER = r"""
 import atexit, json, os, runpy, signal, sys, time, traceback
 import bgc.cli, bgc.pipeline, bgc.simulate          # what the CLI's commands import
+print(json.dumps(dict(os.environ)), flush=True)     # as these imports left it
 
 
 def child(req):
@@ -84,12 +85,13 @@ for line in sys.stdin:
 """
 
 _server: subprocess.Popen | None = None
-_env: dict | None = None
+_env: dict | None = None            # the server's environment, as the caller's would be
+_own: set = {"PYTEST_CURRENT_TEST"}  # variables not compared: pytest's per-test one, and
+                                    # those the server's imports set (bgc sets some)
 
 
 def _key(env: dict) -> dict:
-    """The environment but pytest's per-test variable."""
-    return {k: v for k, v in env.items() if k != "PYTEST_CURRENT_TEST"}
+    return {k: v for k, v in env.items() if k not in _own}
 
 
 def _stop():
@@ -105,17 +107,19 @@ def run(*args, cwd: Path, umask: int = -1, timeout: float = 10,
     module's docstring). The server is started with ``env``; a call with another ``env``
     than the server's runs a fresh interpreter instead."""
     global _server, _env
-    env = _key(env if env is not None else os.environ)
+    env = dict(env if env is not None else os.environ)
     argv = [str(a) for a in args]
-    if _server is not None and env != _env:
+    if _server is not None and _key(env) != _env:
         return subprocess.run([sys.executable, "-m", "bgc.cli", *argv], check=False, cwd=cwd,
                               capture_output=True, text=True, timeout=timeout, env=env,
                               umask=umask)
     if _server is None:
         _server = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE,
                                    stdout=subprocess.PIPE, text=True, env=env)
-        _env = env
         atexit.register(_stop)
+        imported = json.loads(_server.stdout.readline())
+        _own.update(k for k in imported.keys() | env.keys() if imported.get(k) != env.get(k))
+        _env = _key(env)
     with tempfile.TemporaryDirectory(prefix="bgc-cli-") as tmp:
         out, err = Path(tmp) / "stdout", Path(tmp) / "stderr"
         _server.stdin.write(json.dumps({"args": argv, "cwd": str(cwd), "umask": umask,

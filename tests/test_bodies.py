@@ -31,7 +31,8 @@ def columns(mod, r, *names):
 
 def test_torque_free_body_conserves_energy_and_angular_momentum(compiled):
     mod = compiled("tumbling_box")
-    r = simulate(mod, t_end=25.0, points=2001, **TIGHT)    # about 20 revolutions
+    # about 20 revolutions; native Radau (scipy's: 5.5 s, the same errors to 1e-14)
+    r = simulate(mod, t_end=25.0, points=2001, **{**TIGHT, "solver": "native"})
     h = np.column_stack(columns(mod, r, "box.J.px", "box.J.py", "box.J.pz"))
     ang = np.column_stack(columns(mod, r, "box.ax", "box.ay", "box.az"))
     energy = 0.5 * (h ** 2 / J).sum(axis=1)

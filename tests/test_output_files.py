@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import os
 import stat
-import subprocess
-import sys
 from pathlib import Path
 
+import forked_cli
 import pytest
+from conftest import error_lines
 
 from bgc.errors import BgcError
 from bgc.fileio import atomic_write, check_writable
-from conftest import error_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 RLC = ROOT / "models" / "rlc.yaml"
@@ -34,10 +33,10 @@ def snapshot(root: Path) -> dict:
 
 
 def bgc(*args, cwd: Path, umask: int = -1, timeout: float = 10):
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "bgc.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout, env=env,
-                          umask=umask)
+    """``bgc ARGS`` in its own process (forked from a server that has imported bgc:
+    ``forked_cli``)."""
+    return forked_cli.run(*args, cwd=cwd, umask=umask, timeout=timeout,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
 
 
 def refused(tmp_path: Path, *args, names: str):

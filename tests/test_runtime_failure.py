@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+import forked_cli
 import pytest
 from conftest import error_lines
 
@@ -38,8 +39,9 @@ def env() -> dict:
 
 
 def run(*args, cwd, timeout=120) -> subprocess.CompletedProcess:
-    return subprocess.run(bgc_args(*args), cwd=cwd, capture_output=True, text=True,
-                          timeout=timeout, env=env())
+    """``bgc ARGS`` in its own process, forked from a server that has imported bgc
+    (``forked_cli``; Ctrl-C is sent to a fresh ``python -m bgc.cli``)."""
+    return forked_cli.run(*args, cwd=cwd, timeout=timeout, env=env())
 
 
 def rows(path: Path) -> list[list[float]]:

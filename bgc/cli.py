@@ -52,6 +52,15 @@ def _progress_opt(fn):
 EXIT_INTERRUPTED = 130
 
 
+def _points(st, t_end: float | None) -> int:
+    """The model's output times over ``t_end``: its spacing (``st.points`` over its own
+    t_end) kept, so that ``--t-end 0.01`` on the 28 s SARIB (28001 points, 1 ms) gives 11
+    output times, not 28001 within 10 ms."""
+    if t_end is None or t_end == st.t_end or not st.t_end > 0:
+        return st.points
+    return min(max(round((st.points - 1) * t_end / st.t_end) + 1, 2), MAX_POINTS)
+
+
 class _Number(click.ParamType):
     """A finite number (click's float takes nan and inf); ``positive``: > 0."""
 
@@ -358,7 +367,9 @@ def _excitation(module, m, p, kind, direction, amplitude, frequency) -> dict | N
 @click.option("--solver", help="integrator (default: the model's, else bdf): "
               + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
 @click.option("--step", type=POSITIVE, help="fixed-step solvers (rk4): the step [s]")
-@click.option("--points", type=POINTS, help="number of output times (default 1001)")
+@click.option("--points", type=POINTS,
+              help="number of output times (default: the model's simulation.points, or "
+                   "1001, over its t_end; a --t-end keeps that spacing)")
 @click.option("--max-steps", type=click.IntRange(1), help="stop the run after this many "
               "steps, keeping its results (default: 10^6; rk4: its planned steps)")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
@@ -437,7 +448,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     with progress.stage("integrate") as stage:
         result = run(module, t_end=t_end or st.t_end, rtol=rtol or st.rtol,
                      atol=atol or st.atol, solver=solver or st.solver,
-                     points=points or st.points, params=p, step=step, max_steps=max_steps)
+                     points=points or _points(st, t_end), params=p, step=step,
+                     max_steps=max_steps)
         stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
                    f"t = {result.t[-1]:g} s, "
                    f"{progress.seconds(result.stats.compile_time)} of it JIT/cache load")

@@ -770,8 +770,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     stats.wall_time = time.perf_counter() - wall
     t_all = np.concatenate(ts) if ts else np.empty(0)
     x_all = np.vstack(xs) if xs else np.empty((0, len(module.STATE_NAMES)))
-    y_all = np.array([module.outputs(t, xi, p) for t, xi in zip(t_all, x_all)]).reshape(
-        len(t_all), len(module.OUTPUT_NAMES))
+    y_all = module.outputs_at(t_all, x_all, p)
     if projection is not None and len(x_all):
         g_t, v_t = consistent.drift_history(module, x_all, p)
         # a state gone non-finite has no drift: NaN there, the run's message says why

@@ -160,11 +160,17 @@ def _other_states(module, n: int) -> list[int]:
     return [j for j in range(n) if j not in pose]
 
 
+def _imposed(module) -> np.ndarray:
+    """Which constraint rows method zcp imposes: its flow sources hold them by
+    construction (their rows on the states are zero, their rates round-off)."""
+    return np.asarray(module.IMPOSED, dtype=bool)
+
+
 def _measured_rows(module, K):
     """The rows of ``K`` whose rank is measured, their names, and how many rows are left
     out: method zcp's imposed flows hold by construction (zero rows on the states), each
     one rank of the constraints."""
-    imposed = np.asarray(module.IMPOSED, dtype=bool)
+    imposed = _imposed(module)
     names = [n for n, i in zip(module.CONSTRAINT_NAMES, imposed) if not i]
     return K[~imposed], names, int(imposed.sum())
 
@@ -215,13 +221,13 @@ def project(module, x, p, tol: float = 1e-12, max_iter: int = 50):
                                         "a quarter turn stalls the Newton steps): check the "
                                         "joint points and the bodies' com/frame or x0")
     K, other = velocity_jacobian(module, x, p)
-    measured = ~np.asarray(module.IMPOSED, dtype=bool)
-    if measured.any():            # imposed rows hold by construction: K is round-off there
+    Kb, free, n_imposed = _measured_rows(module, K)
+    measured = ~_imposed(module)
+    if measured.any():
         for _ in range(2):
             r = _split(module, x, p)[1]
-            x[other] += np.linalg.lstsq(K[measured], -r[measured], rcond=RANK_TOL)[0]
+            x[other] += np.linalg.lstsq(Kb, -r[measured], rcond=RANK_TOL)[0]
     r = _split(module, x, p)[1]
-    Kb, free, n_imposed = _measured_rows(module, K)
     Ke = equilibrate(Kb)
     rank = n_imposed + _rank(Ke)
     if np.abs(r).max(initial=0.0) > 1e-8 * max(1.0, np.abs(x[other]).max(initial=0.0)):

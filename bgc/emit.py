@@ -207,7 +207,7 @@ def render(system: EquationSystem) -> str:
         settings=[(f.name, _literal(getattr(m.settings, f.name))) for f in fields(m.settings)],
         model_hash=model_hash(m.digest, system.variant),
         canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight,
-        n_functions=(ir + ir_straight).count("\ndefine "),
+        n_functions=ir.count("\ndefine ") + ir_straight.count("\ndefine "),
         n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,

@@ -1310,7 +1310,7 @@ class _Module:
         fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
                        f"i64 {len(pattern)}, i64 {n}, i64 {nc}, {', '.join(args)})")
         self.functions.append(_TAPE.replace("{P}", P))
-        self.functions.append(fn.text().replace("define internal", "define", 1)
+        self.functions.append(fn.text(linkage="")
                               .replace("double* noalias %out", "double* noalias %J", 1))
 
     def entry(self, name: str, program: str, n_work: int):
@@ -1336,11 +1336,10 @@ class _Module:
                            + [_declaration(f) for f in self.straight]) + "\n"
 
     def straight_text(self) -> str:
-        """The chunks' module: it declares the solves (of the other module) it calls."""
-        called = set(re.findall(r"call void @(\w+)\(", "\n".join(self.straight)))
-        solves = [_declaration(f) for f in self.functions
-                  if _DEFINE.search(f).group(3) in called]
-        return "\n\n".join(sorted(self.decls) + solves + self.straight) + "\n"
+        """The chunks' module: it declares what the other module defines with external
+        linkage (among it the solves the chunks call)."""
+        shared = [_declaration(f) for f in self.functions if not _DEFINE.search(f).group(1)]
+        return "\n\n".join(sorted(self.decls) + shared + self.straight) + "\n"
 
 
 _DEFINE = re.compile(r"^define (internal )?(\w+) @(\w+)\(([^)]*)\)", re.M)
@@ -1349,9 +1348,6 @@ _DEFINE = re.compile(r"^define (internal )?(\w+) @(\w+)\(([^)]*)\)", re.M)
 def _declaration(definition: str) -> str:
     """``declare ...`` for the function that ``definition`` defines (no attributes)."""
     m = _DEFINE.search(definition)
-    if m is None or m.group(1):
-        raise BgcError("internal: only a function with external linkage is called from "
-                       "the other IR module")
     return f"declare {m.group(2)} @{m.group(3)}({m.group(4)})"
 
 

@@ -2,7 +2,8 @@
 already imported bgc, so that a test of what the CLI answers does not pay Python's and
 bgc's start-up (about 1.5 s) each time.
 
-One server per test process (started on first use, ended with it) imports the CLI, then
+One server per test process (started on first use, ended with it) imports the CLI and what
+loading a model pulls in lazily (sympy: 0.3 s a child otherwise), then
 for each request forks a child that runs ``bgc.cli`` as ``__main__`` (``runpy``, as
 ``python -m`` does) in the request's directory, with its umask, stdin from /dev/null and
 stdout/stderr to files; an uncaught exception prints its traceback and exits 1, as the
@@ -24,7 +25,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 SERVER = r"""
 import atexit, json, os, runpy, signal, sys, time, traceback
-import bgc.cli, bgc.pipeline, bgc.simulate          # what the CLI's commands import
+import bgc.cli, bgc.pipeline, bgc.simulate          # what the CLI's commands import,
+import bgc.load, bgc.expand, bgc.causality, bgc.equations, bgc.scene  # and, lazily,
+import sympy, scipy.integrate                        # what a model's load pulls in
 print(json.dumps(dict(os.environ)), flush=True)     # as these imports left it
 
 

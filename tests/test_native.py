@@ -32,15 +32,19 @@ def _error(r, ref) -> float:
 
 @pytest.mark.parametrize("name, method, t_end", CASES)
 def test_native_radau_agrees_with_scipy(compiled, name, method, t_end):
-    """Same error as scipy's Radau at the same tolerance (measured within a factor 2
-    either way), with honest statistics: every rhs and Jacobian call and factorization
-    counted, rejected steps reported."""
+    """Same error as scipy's Radau at the same tolerance (within a factor 10), with honest
+    statistics: every rhs and Jacobian call and factorization counted, rejected steps
+    reported. The reference is native Radau at rtol 1e-11 (scipy's Radau there agrees to
+    ~1e-12 but takes 40 000 Python steps on the pendulum, 15 s); scipy's run at 1e-7
+    must lie within 1e-5 of it, so a wrong native scheme cannot pass as its own
+    reference."""
     mod = compiled(name, method)
     t_end = t_end or load.load(MODELS / f"{name}.yaml").settings.t_end
-    ref = simulate(mod, t_end=t_end, rtol=1e-11, atol=1e-13, solver="radau", points=101)
+    ref = simulate(mod, t_end=t_end, rtol=1e-11, atol=1e-13, solver="native", points=101)
     runs = {s: simulate(mod, t_end=t_end, rtol=1e-7, atol=1e-9, solver=s, points=101)
             for s in ("native", "radau")}
     e_native, e_scipy = _error(runs["native"], ref), _error(runs["radau"], ref)
+    assert e_scipy < 1e-5, e_scipy
     assert e_native < max(10 * e_scipy, 1e-9), (e_native, e_scipy)
     st = runs["native"].stats
     assert st.steps > 10 and st.rhs_calls > 3 * st.steps and st.jac_calls >= 1
@@ -49,14 +53,14 @@ def test_native_radau_agrees_with_scipy(compiled, name, method, t_end):
 
 @pytest.mark.parametrize("name", model_params())
 def test_every_shipped_model_agrees_with_scipy_at_the_tolerance_asked(compiled, name):
-    """At rtol = 1e-7, atol = 1e-10 (over the model's run, at most 2 s), against a
+    """At rtol = 1e-7, atol = 1e-10 (over the model's run, at most 1 s), against a
     reference at tolerances 1000 times tighter,
     error in units of the tolerance asked (|dx| / (atol + rtol max|x|), per state): native
     Radau within 20, like scipy's Radau (the same scheme), and scipy's BDF, CVODE and
     IDA on the same generated code within their usual global-error factors (< 5e4: a
     wrong Jacobian or a lost event would be far beyond)."""
     mod = compiled(name)
-    t_end = min(load.load(MODELS / f"{name}.yaml").settings.t_end, 2.0)
+    t_end = min(load.load(MODELS / f"{name}.yaml").settings.t_end, 1.0)
     rtol, atol = 1e-7, 1e-10
     ref = simulate(mod, t_end=t_end, rtol=rtol / 1000, atol=atol / 1000, solver="native",
                    points=51)

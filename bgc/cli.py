@@ -18,14 +18,14 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import __version__, progress
-from .errors import BgcError, SimulationError
-from .fileio import check_writable
-from .model import MAX_POINTS, Settings
-from .module_file import stored_hash
-from .parasitic import SEPARATION
-from .pipeline import METHODS, build, compile_model, ensure_module
-from .simulate import SOLVERS, Interrupted
+from bgc import __version__, progress
+from bgc.codegen.module_file import stored_hash
+from bgc.errors import BgcError, SimulationError
+from bgc.fileio import check_writable
+from bgc.methods.parasitic import SEPARATION
+from bgc.model.model import MAX_POINTS, Settings
+from bgc.pipeline import METHODS, build, compile_model, ensure_module
+from bgc.simulate import SOLVERS, Interrupted
 
 _json_opt = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 _method_opt = click.option("--method", type=click.Choice(METHODS), default="parasitic",
@@ -146,7 +146,7 @@ def _user_errors(fn):
 
 
 def _save_partial(result, kwargs):
-    from .results import write_csv
+    from bgc.analysis.results import write_csv
     out = kwargs.get("out")
     if out and len(result.t):
         write_csv(result, out, kwargs.get("states", True))
@@ -171,9 +171,9 @@ def check(model, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
     Given a scene file: the state count before and after each reduction pass."""
-    from . import scene as bscene
-    from .joints import JOINT_KINDS
-    from .zcp import paths
+    from bgc.mechanics.joints import JOINT_KINDS
+    from bgc.methods.zcp import paths
+    from bgc.scene import scenes as bscene
     if bscene.is_scene(model):
         sc = bscene.load_scene(model)
         passes = bscene.check_scene(sc)
@@ -309,7 +309,7 @@ def _check_overrides(model, items) -> None:
     again with them, and its error is told as the option's."""
     if not items:
         return
-    from . import load
+    from bgc.model import load
     try:
         load.load(model, overrides=dict(items))
     except BgcError as exc:
@@ -320,10 +320,10 @@ def _check_overrides(model, items) -> None:
 
 
 def _check_plan(module, p, t_end, step, key):
-    """Refuse a run whose step plan alone exceeds ``solver.MAX_PLANNED_STEPS``: a fixed
+    """Refuse a run whose step plan alone exceeds ``limits.MAX_PLANNED_STEPS``: a fixed
     ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
     ``key``: the option the error names when the signal is too fast."""
-    from .solver import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
+    from bgc.model.limits import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
     if step is not None and t_end / step > MAX_PLANNED_STEPS:
         raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
                        f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
@@ -405,18 +405,18 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
              parasitic_mode, separation, exc_kind, exc_dir, amplitude, frequency, zoom,
              method, keep_loops, as_json):
     """Compile MODEL if needed and integrate it; print solver statistics."""
-    from .results import plot as plot_png
-    from .results import write_csv
-    from .simulate import simulate as run
+    from bgc.analysis.results import plot as plot_png
+    from bgc.analysis.results import write_csv
+    from bgc.simulate import simulate as run
     if solver is not None and solver not in SOLVERS:
         raise BgcError(f"unknown solver '{solver}'", key="--solver",
                        hint="valid solvers: " + ", ".join(SOLVERS))
     check_writable(out, "--out")       # before the run: a bad path fails at once
     check_writable(plot, "--plot")
     if plot:
-        from .results import plot_format
+        from bgc.analysis.results import plot_format
         plot_format(plot, "--plot")
-    from .simulate import precompile_loop
+    from bgc.simulate import precompile_loop
 
     def loop_beside(settings):          # the native loop compiles beside the model's build
         precompile_loop(solver or settings.solver)
@@ -434,7 +434,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if exc:
         p = _parse_params(module, params, base=p)     # explicit -p values still win
     if parasitic_mode == "auto":
-        from . import parasitic
+        from bgc.methods import parasitic
         if method != "parasitic":
             raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
                            key="--parasitic", hint="drop --parasitic or use --method "
@@ -462,8 +462,8 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
         files["png"] = str(plot_png(result, plot, title=title))
     minima = None
     if exc and m.excitation.kinds[exc["kind"]].kind == "chirp":
-        from .envelope import analyse
-        from .results import plot_envelopes
+        from bgc.analysis.envelope import analyse
+        from bgc.analysis.results import plot_envelopes
         chirp = m.excitation.kinds[exc["kind"]].numbers
         if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
             curves = analyse(result, chirp)
@@ -528,7 +528,7 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
 def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as_json):
     """Frequency response of an output to an excitation direction, linearized about the
     static equilibrium; its anti-resonances and resonances in the band."""
-    from . import frf as bfrf
+    from bgc.analysis import frf as bfrf
     if not 0 < f_min < f_max:
         raise BgcError(f"need 0 < --f-min < --f-max, got {f_min} and {f_max}", key="--f-min")
     check_writable(out, "--out")
@@ -549,7 +549,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
               "antiresonances_hz": [round(f, 2) for f in anti],
               "resonances_hz": [round(f, 2) for f in res]}
     if out:
-        from .results import write_table
+        from bgc.analysis.results import write_table
         report["files"] = {"csv": str(write_table(out, ["f_hz", "abs_H", "phase_deg"],
                                                   [f, np.abs(h), np.degrees(np.angle(h))]))}
     if as_json:
@@ -577,7 +577,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
 def run_cmd(scene, out_dir, gen_dir, params, as_json):
     """Run a scene: build its reduced model (once), simulate, write CSV, PNG and a JSON
     summary."""
-    from . import scene as bscene
+    from bgc.scene import scenes as bscene
     sc = bscene.load_scene(scene)
     values = {}
     for name, value in params:
@@ -630,7 +630,7 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
 def bench(out, parts, quick, repeats, budget, build, as_json):
     """Measure speed against accuracy: peers, work-precision, parasitic stiffness,
     stability maps, compile cost (CSV + PNG + summary.md in --out)."""
-    from . import bench as bbench
+    from bgc import bench as bbench
     if repeats < 1:
         raise BgcError(f"--repeats must be >= 1, got {repeats}", key="--repeats")
     check_writable(out, "--out", directory=True)

@@ -15,7 +15,7 @@ import threading
 from pathlib import Path
 from typing import Callable
 
-from .errors import BgcError
+from bgc.errors import BgcError
 
 _UMASK_LOCK = threading.Lock()
 

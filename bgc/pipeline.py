@@ -11,14 +11,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from . import document, progress
-from .fileio import check_writable
-from .model import Model, Settings
-from .module_file import import_module, is_stale, module_name_problem, module_path, variant
+from bgc import progress
+from bgc.codegen.module_file import (
+    import_module,
+    is_stale,
+    module_name_problem,
+    module_path,
+    variant,
+)
+from bgc.fileio import check_writable
+from bgc.model import document
+from bgc.model.model import Model, Settings
 
 if TYPE_CHECKING:
-    from .causality import CausalGraph
-    from .equations import EquationSystem
+    from bgc.codegen.equations import EquationSystem
+    from bgc.graph.causality import CausalGraph
 
 # what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
 METHODS = ("parasitic", "lagrange", "zcp")
@@ -38,7 +45,9 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
     progress stage (timed in ``Compiled.timings``). ``open_loops``: method zcp opens
     kinematic loops with break variables (else refuses them). ``derive_options`` go to
     ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
-    from . import causality, equations, expand, zcp
+    from bgc.codegen import equations
+    from bgc.graph import causality, expand
+    from bgc.methods import zcp
     with progress.record() as timings:
         if not isinstance(model, Model):
             model = _load(model)
@@ -65,7 +74,7 @@ def _load(path: str | Path) -> Model:
 
 def _model(doc, file: str, st: progress.Stage) -> Model:
     """The Model of a model file's document, counted in the load stage ``st``."""
-    from . import load
+    from bgc.model import load
     model = load.from_document(doc, file)
     parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
              ("joint", model.joints)]
@@ -95,7 +104,7 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
     """Build and write ``out_dir/<name>.py``, then compile its machine code, so that a
     later ``import`` or ``bgc simulate`` compiles nothing; nothing is written if a stage
     before the module's fails."""
-    from . import emit
+    from bgc.codegen import emit
     check_writable(out_dir, "output directory", directory=True)   # before the work
     with progress.record() as timings:
         c = build(model, method, **derive_options)
@@ -109,7 +118,7 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
 
 def machine_code(path: Path):
     """The machine-code stage: import the generated module, which compiles its LLVM
-    kernels for this machine (``bgc.kernels``; or loads them, compiled before), and
+    kernels for this machine (``bgc.codegen.kernels``; or loads them, compiled before), and
     compile its numba wrappers (or load them from numba's cache)."""
     with progress.stage("machine code") as st:
         module = import_module(path)

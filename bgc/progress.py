@@ -5,7 +5,7 @@ and how long each stage took, and a benchmark should read the same per-stage tim
 
 A stage is timed with a context manager; ``done`` gives the counts shown when it ends::
 
-    from . import progress
+    from bgc import progress
 
     with progress.stage("jacobian") as st:
         jt = jacobian.derive(system)
@@ -125,8 +125,7 @@ class Live(Silent):
 
     def _open(self):
         from rich.console import Console
-        from rich.progress import (BarColumn, Progress, ProgressColumn, SpinnerColumn,
-                                   TextColumn)
+        from rich.progress import BarColumn, Progress, ProgressColumn, SpinnerColumn, TextColumn
         from rich.text import Text
 
         class Status(SpinnerColumn):

@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import consistent, native
-from .errors import SimulationError
-from .solver import GUARD_TOLERANCE, Problem, Segment, Solver, Stats
-from .sundials import SundialsSolver
+from bgc.errors import SimulationError
+from bgc.methods import consistent
+from bgc.solvers import native
+from bgc.solvers.base import GUARD_TOLERANCE, Problem, Segment, Solver, Stats
+from bgc.solvers.sundials import SundialsSolver
 
 
 class Interrupted(SimulationError):
@@ -232,7 +233,7 @@ class NativeSolver(Solver):
                                        "Jacobian's eigenvalues lambda")
         unstable = problem.check_stability and self._unstable(problem, t0, x0)
         if unstable:
-            from . import rk4
+            from bgc.solvers import rk4
             h_max = rk4.stable_step(np.linalg.eigvals(problem.jac(t0, x0)))[0]
             raise SimulationError(f"rk4 {unstable}", hint=f"take --step {h_max:.3g} or "
                                                           "less, or a stiff solver (native, "
@@ -242,7 +243,7 @@ class NativeSolver(Solver):
     def _unstable(problem, t, x) -> str | None:
         """Why rk4's step is unstable at (t, x) (h lambda outside the stability region
         for an eigenvalue of the Jacobian there), or None."""
-        from . import rk4
+        from bgc.solvers import rk4
         h_max, lam = rk4.stable_step(np.linalg.eigvals(problem.jac(t, x)))
         if problem.step <= h_max:
             return None
@@ -258,7 +259,7 @@ class NativeSolver(Solver):
         n_guards = len(problem.module.GUARD_NAMES)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
         if self.loop == "rk4":
-            from . import rk4
+            from bgc.solvers import rk4
             # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
@@ -268,7 +269,7 @@ class NativeSolver(Solver):
         else:
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
-            from . import radau5
+            from bgc.solvers import radau5
             self.diag = np.zeros(len(x0))
             res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
                                 mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
@@ -347,7 +348,7 @@ class NativeSolver(Solver):
         if not np.all(np.isfinite(J)):     # a singular configuration: no spectrum there
             return (f"the state became non-finite after t = {t:.6g}, where the Jacobian "
                     "already is not (a singular configuration, or beyond the model's range)")
-        from . import rk4
+        from bgc.solvers import rk4
         h_max, lam = rk4.stable_step(np.linalg.eigvals(J))
         if problem.step > h_max:
             return (f"the state became non-finite: the step {problem.step:.3g} s is beyond "

@@ -17,8 +17,9 @@ if "numpy" not in sys.modules:
 
 import pytest
 
-from bgc import emit, load
-from bgc.emit import import_module
+from bgc.codegen import emit
+from bgc.codegen.emit import import_module
+from bgc.model import load
 from bgc.pipeline import compile_model
 
 ROOT = Path(__file__).resolve().parent.parent

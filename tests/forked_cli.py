@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SERVER = r"""
 import atexit, json, os, runpy, signal, sys, time, traceback
 import bgc.cli, bgc.pipeline, bgc.simulate          # what the CLI's commands import,
-import bgc.load, bgc.expand, bgc.causality, bgc.equations, bgc.scene  # and, lazily,
+import bgc.model.load, bgc.graph.expand, bgc.graph.causality, bgc.codegen.equations, bgc.scene.scenes  # and, lazily,
 import sympy, scipy.integrate                        # what a model's load pulls in
 print(json.dumps(dict(os.environ)), flush=True)     # as these imports left it
 

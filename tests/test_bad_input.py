@@ -24,11 +24,11 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from conftest import error_lines
 
 from bgc.cli import main
-from bgc.model import KINDS
+from bgc.model.model import KINDS
 from bgc.simulate import SOLVERS
-from conftest import error_lines
 
 ERROR_LINE = re.compile(
     r"^error: (?P<file>.+?):(?P<line>\d+):(?P<col>\d+): (?P<key>[^\s:]+): (?P<msg>.+) "

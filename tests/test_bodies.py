@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import cardan
-from bgc.emit import import_module
+from bgc.codegen.emit import import_module
 from bgc.errors import ModelError, SimulationError
-from bgc.load import loads
+from bgc.mechanics import cardan
+from bgc.model.load import loads
 from bgc.pipeline import compile_model
 from bgc.simulate import simulate
 

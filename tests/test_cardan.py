@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from bgc import cardan
+from bgc.mechanics import cardan
 
 
 def num(M):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bgc.bench.chain import LINK, chain, write_chain
-from bgc.load import load
+from bgc.model.load import load
 
 ROOT = Path(__file__).resolve().parent.parent
 

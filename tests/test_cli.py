@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 from click.testing import CliRunner
-
-from bgc.cli import main
-from bgc.results import read_csv
 from conftest import MODELS
+
+from bgc.analysis.results import read_csv
+from bgc.cli import main
 
 
 def run(*args):

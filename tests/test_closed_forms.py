@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import rel_err
 from scipy.integrate import quad, solve_ivp
 from scipy.linalg import expm
 
 from bgc.simulate import simulate
-from conftest import rel_err
 
 TIGHT = dict(rtol=1e-11, atol=1e-13, solver="radau")
 

@@ -10,12 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import MODELS, ROOT, model_params
 
-from bgc import emit, load
-from bgc.kernels import program_functions
+from bgc.codegen import emit
+from bgc.codegen.kernels import program_functions
+from bgc.model import load
 from bgc.pipeline import compile_model
 from bgc.simulate import simulate
-from conftest import MODELS, ROOT, model_params
 
 ALL_MODELS = sorted(p.stem for p in MODELS.glob("*.yaml"))
 
@@ -154,8 +155,8 @@ def test_fourteen_body_model_stays_lean(tmp_path):
     mass) compiles to causal assignments that grow with the graph, not with its depth:
     no long substituted expressions, a bounded number of statements per state, and a
     Jacobian tape whose compressed width is the densest row of the Jacobian."""
-    from bgc.emit import _cone
-    from bgc.jacobian import tape
+    from bgc.codegen.emit import _cone
+    from bgc.codegen.jacobian import tape
     c, path = compile_model(MODELS / "sarib.yaml", tmp_path)
     assert len(c.model.bodies) == 14 and len(c.model.joints) == 18
     s = c.system

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from bgc import consistent
+from bgc.methods import consistent
 
 
 def _module(imposed: bool):

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import rel_err
 from scipy.integrate import solve_ivp
 
+from bgc.codegen.emit import import_module
 from bgc.errors import EquationError
 from bgc.pipeline import build, compile_model
-from bgc.emit import import_module
 from bgc.simulate import simulate
-from conftest import rel_err
 
 TIGHT = dict(rtol=1e-11, atol=1e-13, solver="radau")
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import load, signals, symbols
 from bgc.errors import BgcError
+from bgc.model import load, signals, symbols
 from bgc.simulate import simulate
 
 T1, T2, T3, F0, F1 = 3.0, 5.0, 25.0, 5.0, 25.0     # the SARIB rig's chirp
@@ -134,7 +134,7 @@ def test_excitation_acts_on_the_free_direction_it_names(tmp_path):
     along tz, roll and pitch about rx and ry). A constant force along the slide lifts the
     rod straight up (z only); a constant moment about axis2 = y swings its lower end
     along x (x only)."""
-    from bgc.emit import import_module
+    from bgc.codegen.emit import import_module
     from bgc.pipeline import compile_model
     m = load.loads(GIMBAL, "gimbal.yaml")
     assert m.excitation.directions == {"pumping": ("pu", 20.0), "pitch": ("pu", 2.0)}
@@ -166,7 +166,7 @@ def test_excitation_acts_on_the_free_direction_it_names(tmp_path):
 
 @pytest.fixture(scope="module")
 def absorber(tmp_path_factory):
-    from bgc.emit import import_module
+    from bgc.codegen.emit import import_module
     from bgc.pipeline import compile_model
     d = tmp_path_factory.mktemp("absorber")
     (d / "absorber.yaml").write_text(ABSORBER.replace("K_TOP", repr(K_TOP)))
@@ -175,7 +175,7 @@ def absorber(tmp_path_factory):
 
 
 def test_frf_finds_the_tuned_absorbers_anti_resonance(absorber):
-    from bgc import frf
+    from bgc.analysis import frf
     mod, model = absorber
     lin = frf.linearize(mod, model, "push")
     anti, res = frf.extrema(lin, "z", 2.0, 20.0)
@@ -202,7 +202,7 @@ def dwell_amplitude(t, y, f, periods: int = 10) -> float:
 def test_sine_dwell_matches_the_frequency_response(absorber):
     """A sine dwell (nonlinear run, transients decayed) against |H(f)| within 1 %, with
     more damping (parameters, no recompilation) so the transient dies in the run."""
-    from bgc import frf
+    from bgc.analysis import frf
     mod, model = absorber
     names = list(mod.PARAM_NAMES)
     p = np.array(mod.PARAMS)
@@ -249,8 +249,8 @@ def test_cli_chirp_run_and_frf_report_the_anti_resonance(absorber, tmp_path):
 
     from click.testing import CliRunner
 
+    from bgc.analysis.results import read_csv
     from bgc.cli import main
-    from bgc.results import read_csv
     mod, model = absorber
     src = Path(model.file)
     run = CliRunner().invoke

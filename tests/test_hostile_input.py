@@ -10,7 +10,7 @@ counted per category.
 
 The limits the cases run into are bgc's documented ones: ``load.MAX_FILE_BYTES``,
 ``MAX_NODES``, ``MAX_DEPTH``; ``expr.MAX_CHARS``, ``MAX_DEPTH``, ``MAX_EXPONENT``;
-``model.MAX_POINTS``; ``signals.MAX_PLANNED_STEPS``.
+``model.MAX_POINTS``; ``limits.MAX_PLANNED_STEPS``.
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ import stat
 from pathlib import Path
 
 import pytest
+from conftest import error_lines
 from test_bad_input import ERROR_LINE
 from test_output_files import bgc, snapshot
 
-from bgc import load, signals
-from bgc.model import MAX_POINTS
-from conftest import error_lines
+from bgc.model import limits, load
+from bgc.model.model import MAX_POINTS
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -326,7 +326,7 @@ def test_number_signal_frequency_the_run_cannot_resolve(tmp_path, signal, key):
             .replace("C: C1", "C: 1.0") + "signals:\n  " + signal + "\n")
     m = refused(tmp_path, "check", write(tmp_path, text), key=key,
                 line=line_of(text, "sig: {"))
-    assert f"{signals.MAX_PLANNED_STEPS:.0e}" in m["msg"]
+    assert f"{limits.MAX_PLANNED_STEPS:.0e}" in m["msg"]
 
 
 @pytest.mark.parametrize("text, key, rule", [
@@ -383,7 +383,7 @@ def msd(tmp_path_factory):
 def test_number_run_that_would_plan_billions_of_steps(msd, args, key):
     m = refused(msd.parent, "simulate", MODELS / "msd_forced.yaml", "-o", msd,
                 *args, key=key, option=True)
-    assert f"{signals.MAX_PLANNED_STEPS:.0e}" in m["msg"]
+    assert f"{limits.MAX_PLANNED_STEPS:.0e}" in m["msg"]
 
 
 

@@ -15,7 +15,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 ROOT = Path(__file__).resolve().parent.parent
 RLC = ROOT / "models" / "rlc.yaml"
 
@@ -101,7 +100,7 @@ import sys
 sys.path[:0] = [{str(tmp_path / 'gen')!r}, {str(tmp_path)!r}]
 import rlc
 from gen import rlc as rlc2
-from bgc.emit import import_module
+from bgc.codegen.emit import import_module
 rlc3 = import_module({str(tmp_path / 'gen' / 'rlc.py')!r})
 for m in (rlc, rlc2, rlc3):
     assert m.rhs(0.0, m.X0, m.PARAMS).shape == (2,)

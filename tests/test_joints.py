@@ -7,15 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import fd_jacobian
 from scipy.special import ellipk
 
-from bgc.emit import import_module
+from bgc.codegen.emit import import_module
 from bgc.errors import ModelError
-from bgc.joints import JOINT_KINDS, NEEDS_AXIS2
-from bgc.load import loads
+from bgc.mechanics.joints import JOINT_KINDS, NEEDS_AXIS2
+from bgc.model.load import loads
 from bgc.pipeline import compile_model
 from bgc.simulate import simulate
-from conftest import fd_jacobian
 
 
 def crossings(t, x):

@@ -10,11 +10,11 @@ import csv
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import MODELS, fd_jacobian
+from test_mechanisms import _slider_closure, _stiffer
 
 from bgc.cli import main
 from bgc.simulate import simulate
-from conftest import MODELS, fd_jacobian
-from test_mechanisms import _slider_closure, _stiffer
 
 # Andrews' squeezing mechanism at t = 0.03: the IVP test set's reference (PSIDE, tol 1e-14)
 ANDREWS_REF = {"beta": 15.81077119629904, "Theta": -15.75637105984298,

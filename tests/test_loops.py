@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import MODELS
 
-from bgc.emit import import_module
-from bgc.equations import LinearBlock
+from bgc.codegen.emit import import_module
+from bgc.codegen.equations import LinearBlock
 from bgc.pipeline import compile_model
 from bgc.simulate import simulate
-from conftest import MODELS
 
 
 @pytest.fixture(scope="module")

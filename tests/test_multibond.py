@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from bgc.emit import import_module
+from bgc.codegen.emit import import_module
 from bgc.errors import BgcError, CausalityError, ModelError
-from bgc.load import loads
+from bgc.model.load import loads
 from bgc.pipeline import build, compile_model
 from bgc.simulate import simulate
 

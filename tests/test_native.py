@@ -11,14 +11,15 @@ import re
 import numpy as np
 import pytest
 from click.testing import CliRunner
-
-from bgc import load, rk4
-from bgc.cli import main
-from bgc.errors import SimulationError
-from bgc.simulate import SOLVERS, prepare, simulate
 from conftest import MODELS, model_params
 from test_bodies import body_model
 from test_loud_failure import T_SINGULAR
+
+from bgc.cli import main
+from bgc.errors import SimulationError
+from bgc.model import load
+from bgc.simulate import SOLVERS, prepare, simulate
+from bgc.solvers import rk4
 
 # (model, method, t_end): smooth and switching inputs, bodies, constraints by each method
 CASES = [("msd_forced", "parasitic", None), ("pendulum", "parasitic", None),
@@ -145,7 +146,7 @@ def test_rk4_divergence_at_a_singular_configuration_is_reported_not_raised():
     so instead of failing in the eigenvalue check of its stability limit."""
     from types import SimpleNamespace
 
-    from bgc.solver import Problem
+    from bgc.solvers.base import Problem
     module = SimpleNamespace(jac=lambda t, x, p: np.full((2, 2), np.nan))
     why = SOLVERS["rk4"]._diverged(Problem(module, np.zeros(0), step=1e-3), 0.25,
                                    np.zeros(2))
@@ -176,7 +177,7 @@ def test_a_segment_with_no_output_point_in_it_yields_no_rows(compiled, solver):
     """A run is split into segments (at breakpoints, where the rank monitor re-picks its
     minor); with few output points one may hold none: the solver returns no rows and the
     state it reached (scipy's dense output fails on an empty time array)."""
-    from bgc.solver import Problem, Stats
+    from bgc.solvers.base import Problem, Stats
     mod = compiled("msd_forced")
     p = np.array(mod.PARAMS, dtype=np.float64)
     x0 = np.array(mod.initial_state(p), dtype=np.float64)

@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
-from bgc import native, radau5, rk4
 from bgc.simulate import simulate
+from bgc.solvers import native, radau5, rk4
 
 
 @pytest.mark.parametrize("loop, kw", [(radau5, {"solver": "native"}),
@@ -35,7 +35,7 @@ def test_loops_return_at_once_with_nothing_to_integrate():
     x0 = np.array([1.0, 2.0])
     counts = np.zeros(native.N_STATS, dtype=np.int64)
     flag = np.zeros(0, dtype=np.uint8)
-    from bgc import sparse_lu
+    from bgc.solvers import sparse_lu
     r = radau5.radau5(0, 0, 0, 0, 1.0, 1.0, x0, np.array([1.0]), np.zeros(1),
                       np.empty((0, 0)), np.empty(0), sparse_lu.DENSE, 1e-6, 1e-6, np.inf,
                       0.25, 1e-3, 0, counts, flag, np.zeros(2))

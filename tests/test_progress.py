@@ -14,11 +14,11 @@ import sys
 
 import pytest
 from click.testing import CliRunner
+from conftest import MODELS, ROOT
 
 from bgc import progress
 from bgc.cli import main
 from bgc.pipeline import compile_model, ensure_module
-from conftest import MODELS, ROOT
 
 RLC = MODELS / "rlc.yaml"
 LINE = re.compile(r"^bgc: ( *)([a-z][a-z ]*?)(?:: (.+))? \((\d+(?:\.\d+)?) s\)$")
@@ -96,7 +96,7 @@ def test_every_long_command_takes_quiet():
 
 
 def test_ctrl_c_in_a_stage_exits_130_after_the_stages_done(tmp_path, monkeypatch):
-    from bgc import equations
+    from bgc.codegen import equations
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

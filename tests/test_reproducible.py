@@ -20,10 +20,12 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import sympy as sp
-
-from bgc import emit, exact, load
-from bgc.pipeline import build
 from conftest import MODELS
+
+from bgc.codegen import emit
+from bgc.mechanics import exact
+from bgc.model import load
+from bgc.pipeline import build
 
 # the shipped models with bodies and joints whose numbers are decimals of at most 15
 # digits (andrews and four_bar give theirs to 17 digits: a nudged 17-digit number is

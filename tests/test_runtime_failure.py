@@ -185,7 +185,7 @@ def test_collapsing_step_size_stops_a_scipy_run_at_once(solver):
     import numpy as np
 
     from bgc.simulate import SOLVERS
-    from bgc.solver import Problem, Stats
+    from bgc.solvers.base import Problem, Stats
     module = types.SimpleNamespace(rhs=lambda t, x, p: -np.sign(x),
                                    jac=lambda t, x, p: np.zeros((1, 1)), STATE_NAMES=("x",))
     start = time.monotonic()

@@ -18,13 +18,14 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-
-from bgc import emit, load
-from bgc.cli import main
-from bgc.emit import module_name_problem, py_str
-from bgc.errors import BgcError
-from bgc.pipeline import compile_model
 from conftest import error_lines
+
+from bgc.cli import main
+from bgc.codegen import emit
+from bgc.codegen.emit import module_name_problem, py_str
+from bgc.errors import BgcError
+from bgc.model import load
+from bgc.pipeline import compile_model
 
 ROOT = Path(__file__).resolve().parent.parent
 

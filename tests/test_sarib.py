@@ -10,13 +10,14 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from scipy.signal import StateSpace, lsim
-
-from bgc import frf, load
-from bgc.cli import main
-from bgc.simulate import simulate
 from conftest import MODELS
+from scipy.signal import StateSpace, lsim
 from test_excitation import dwell_amplitude
+
+from bgc.analysis import frf
+from bgc.cli import main
+from bgc.model import load
+from bgc.simulate import simulate
 
 SARIB = MODELS / "sarib.yaml"
 

@@ -9,13 +9,14 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-
-from bgc import frf, load
-from bgc.cli import main
-from bgc.pipeline import ensure_module
-from bgc.scene import ensure_scene_module, load_scene, scene_values
-from bgc.simulate import simulate
 from conftest import MODELS, ROOT
+
+from bgc.analysis import frf
+from bgc.cli import main
+from bgc.model import load
+from bgc.pipeline import ensure_module
+from bgc.scene.scenes import ensure_scene_module, load_scene, scene_values
+from bgc.simulate import simulate
 
 TWO_OSCILLATORS = """
 name: two_oscillators
@@ -215,7 +216,7 @@ def test_relay_chain_becomes_the_prismatic_universal_it_is():
     exposed parameters that read the chain, or axes that do not meet, leave it alone."""
     from dataclasses import replace
 
-    from bgc.reduce import merge_relays
+    from bgc.scene.reduce import merge_relays
     m = load.loads(RELAY_CHAIN.format(joints=FORWARD), "chain.yaml")
     out, removed, note = merge_relays(m)
     assert removed == ["s1", "s2", "slide", "r1", "r2"] and "-> relay_chain" not in note
@@ -261,9 +262,9 @@ def test_merged_relay_chain_moves_as_the_chain(tmp_path, joints):
     revolute) keep their sense whichever way the chain's joints were written."""
     from dataclasses import replace
 
-    from bgc.emit import import_module
+    from bgc.codegen.emit import import_module
     from bgc.pipeline import compile_model
-    from bgc.reduce import merge_relays
+    from bgc.scene.reduce import merge_relays
     m = load.loads(RELAY_CHAIN.format(joints=joints), "chain.yaml")
     merged, removed, _ = merge_relays(m)
     assert len(removed) == 5
@@ -290,7 +291,7 @@ def test_sarib_relay_chains_merge_where_the_scene_allows():
     would merge and leaves it (each joint's compliance is part of that model) unless the
     scene says merge_relays: true; then 152 -> 128 states and the relays' algebraic loops
     are gone."""
-    from bgc.scene import reduced_system
+    from bgc.scene.scenes import reduced_system
     plain = _check(ROOT / "scenes" / "pumping_chirp.yaml")["merge_relays"]
     assert plain["states_before"] == plain["states_after"] == 152 and not plain["removed"]
     assert plain["note"].startswith("would merge attach_pumping - attach_roll - attach_pitch "

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bgc import sparse_lu
-from bgc.radau5 import _MU_COMPLEX, _MU_REAL
 from bgc.simulate import simulate
+from bgc.solvers import sparse_lu
+from bgc.solvers.radau5 import _MU_COMPLEX, _MU_REAL
 
 
 def _mechanical(n_bodies: int, rng):

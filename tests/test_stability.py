@@ -9,9 +9,10 @@ import re
 import numpy as np
 import pytest
 
-from bgc import consistent, rk4
 from bgc.errors import SimulationError
+from bgc.methods import consistent
 from bgc.simulate import prepare, simulate
+from bgc.solvers import rk4
 
 
 def test_rk4_is_stopped_where_the_spectrum_moves_past_its_step(compiled):

@@ -13,10 +13,9 @@ import subprocess
 import sys
 
 import pytest
-
-from bgc import module_file
-
 from conftest import MODELS, ROOT
+
+from bgc.codegen import module_file
 
 # what `bgc simulate` runs in the subprocess, then which of these it imported
 SCRIPT = """
@@ -27,8 +26,8 @@ try:
     main(sys.argv[1:], standalone_mode=False)
 except SystemExit as exc:
     rc = exc.code
-heavy = ("sympy", "jinja2", "bgc.load", "bgc.equations", "bgc.emit", "scipy.integrate",
-         "bgc.radau5")
+heavy = ("sympy", "jinja2", "bgc.model.load", "bgc.codegen.equations", "bgc.codegen.emit", "scipy.integrate",
+         "bgc.solvers.radau5")
 print(json.dumps({"rc": rc, "loaded": [m for m in heavy if m in sys.modules]}))
 """
 
@@ -55,7 +54,7 @@ def test_fresh_module_runs_without_sympy(compiled, gen_dir, tmp_path, solver, sc
     report, proc = _simulate(model, gen_dir, "--solver", solver)
     assert report["rc"] == 0, proc.stderr
     assert "rlc: " + solver in proc.stdout and "recompiled" not in proc.stdout
-    heavy = {"scipy.integrate"} if scipy_ivp else {"bgc.radau5"}
+    heavy = {"scipy.integrate"} if scipy_ivp else {"bgc.solvers.radau5"}
     assert set(report["loaded"]) == heavy, report
 
 
@@ -73,7 +72,7 @@ def test_a_stale_or_unproven_module_takes_the_full_load(tmp_path):
     gen = tmp_path / "gen"
     report, proc = _simulate(good, gen)
     assert report["rc"] == 0 and "recompiled" in proc.stdout, proc.stderr
-    assert {"sympy", "bgc.load", "bgc.equations", "bgc.emit"} <= set(report["loaded"])
+    assert {"sympy", "bgc.model.load", "bgc.codegen.equations", "bgc.codegen.emit"} <= set(report["loaded"])
     report, proc = _simulate(good, gen)
     assert report["rc"] == 0 and "sympy" not in report["loaded"], proc.stderr
     report, proc = _simulate(bad, gen)

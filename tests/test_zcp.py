@@ -12,15 +12,15 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-
-from bgc import parasitic
-from bgc.cli import main
-from bgc.emit import import_module
-from bgc.errors import SimulationError
-from bgc.pipeline import compile_model, ensure_module
-from bgc.simulate import simulate
 from conftest import MODELS, fd_jacobian, rel_err
 from test_mechanisms import _slider_closure
+
+from bgc.cli import main
+from bgc.codegen.emit import import_module
+from bgc.errors import SimulationError
+from bgc.methods import parasitic
+from bgc.pipeline import compile_model, ensure_module
+from bgc.simulate import simulate
 
 
 def _check(model, *extra):
@@ -174,7 +174,7 @@ def test_parasitic_auto_error_falls_with_the_separation(compiled, gen_dir):
     ref = simulate(compiled("double_pendulum", "zcp"), t_end=2.0, rtol=1e-9, atol=1e-11,
                    solver="radau")
     mod = compiled("double_pendulum")
-    from bgc import load
+    from bgc.model import load
     model = load.load(MODELS / "double_pendulum.yaml")
     errs = []
     for sep in (100.0, 1000.0):

@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fileio import atomic_write
-from . import charts, compile_cost, precision, scenes, stability, symmetry
-from .cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
-from .peers import at_equal_error, peers
+from bgc.bench import charts, compile_cost, precision, scenes, stability, symmetry
+from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
+from bgc.bench.peers import at_equal_error, peers
+from bgc.fileio import atomic_write
 
 PARTS = ("peers", "precision", "stiffness", "stability", "compile", "symmetry", "scenes")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -413,7 +413,7 @@ class Run:
 
     def scenes(self):
         """Each shipped scene (quick: a four-bar scene) reduced against its full model."""
-        from ..scene import load_scene
+        from bgc.scene.scenes import load_scene
         if self.quick:
             path = self.out / "build" / "four_bar_scene.yaml"
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import load
-from ..errors import SimulationError
-from ..pipeline import ensure_module
-from ..simulate import Result, prepare, simulate
+from bgc.errors import SimulationError
+from bgc.model import load
+from bgc.pipeline import ensure_module
+from bgc.simulate import Result, prepare, simulate
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 # the references' tolerance (a scenario may ask for less: see Scenario.ref_tol)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import yaml
 
-from ..fileio import atomic_write
+from bgc.fileio import atomic_write
 
 LINK, MASS, RADIUS, TILT_DEG = 0.2, 0.5, 0.01, 30.0
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results import _panels, _save
+from bgc.analysis.results import _panels, _save
 
 _MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^"}
 _LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, (5, 1)),

@@ -28,9 +28,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..kernels import program_functions
-from ..pipeline import build
-from .chain import write_chain
+from bgc.bench.chain import write_chain
+from bgc.codegen.kernels import program_functions
+from bgc.pipeline import build
 
 # the stages bgc reports (read as given: a stage a report lacks is NaN, one it adds is kept)
 STAGES = ("load", "causality", "equations", "jacobian", "emit", "machine code", "integrate")
@@ -48,7 +48,7 @@ FUNCTIONS = ("rhs", "jac", "outputs", "guards", "constraints")
 
 def operations(path: Path) -> dict[str, int]:
     """Instructions of the LLVM IR of ``rhs``, ``jac`` (its partials) and ``outputs`` in a
-    generated module (``bgc.kernels``): arithmetic, calls, loads and stores."""
+    generated module (``bgc.codegen.kernels``): arithmetic, calls, loads and stores."""
     text = Path(path).read_text()
     return {name: sum(body.count("\n  ") for body in program_functions(text, program))
             for name, program in (("rhs", "rhs"), ("jac", "jac"), ("outputs", "out"))}
@@ -62,7 +62,7 @@ def module_size(path: Path) -> dict:
 
 
 # What runs in the fresh interpreter (for ``scenes.py``): only what a user's script
-# imports (``bgc.emit``, ``bgc.simulate``), not this benchmark package. ``cold`` times each
+# imports (``bgc.codegen.emit``, ``bgc.simulate``), not this benchmark package. ``cold`` times each
 # function's first call (its compile) and the entry points' and stops there (the native
 # loop is bgc's, not the module's: compiling it into the empty cache took 11 s per module
 # for nothing scenes reports); ``warm`` (the cache filled) imports the module and takes
@@ -72,7 +72,7 @@ WORKER = """
 import json, os, sys, time
 from pathlib import Path
 t0 = time.perf_counter()
-from bgc.emit import import_module
+from bgc.codegen.emit import import_module
 from bgc.simulate import simulate
 mode, path = sys.argv[1], sys.argv[2]
 out = {"import_s": time.perf_counter() - t0}

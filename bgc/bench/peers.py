@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SimulationError
-from .cases import Bench, Scenario
+from bgc.bench.cases import Bench, Scenario
+from bgc.errors import SimulationError
 
 PEERS = ("native", "bdf", "radau", "lsoda", "cvode", "ida")
 

@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from ..errors import SimulationError
-from ..rk4 import stable_step
-from .cases import Bench, Scenario
+from bgc.bench.cases import Bench, Scenario
+from bgc.errors import SimulationError
+from bgc.solvers.rk4 import stable_step
 
 TOLERANCES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 INTEGRATORS = ("native", "bdf", "lsoda", "cvode", "ida", "rk4")

@@ -1,5 +1,5 @@
 """The measured gain of a scene's reductions (issue 7): for each scene, the full model
-under the scene's method against the scene's reduced module (``bgc.scene``): states,
+under the scene's method against the scene's reduced module (``bgc.scene.scenes``): states,
 derivation and cold numba compile time, run time on the scene's own settings, and the
 largest difference of the scene's outputs, relative to each output's peak, set beside
 the full model's own integration error on the scene's tolerances (against a run at
@@ -17,11 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import emit, load
-from ..pipeline import compile_model
-from ..scene import Scene, reduced_system, scene_values
-from ..simulate import simulate
-from .compile_cost import FUNCTIONS, _subprocess
+from bgc.bench.compile_cost import FUNCTIONS, _subprocess
+from bgc.codegen import emit
+from bgc.model import load
+from bgc.pipeline import compile_model
+from bgc.scene.scenes import Scene, reduced_system, scene_values
+from bgc.simulate import simulate
 
 
 def _cold(path: Path) -> float:

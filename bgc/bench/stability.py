@@ -18,11 +18,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import consistent
-from ..errors import SimulationError
-from ..rk4 import stable_step
-from .cases import Bench, Scenario
-from .precision import stiffness_overrides
+from bgc.bench.cases import Bench, Scenario
+from bgc.bench.precision import stiffness_overrides
+from bgc.errors import SimulationError
+from bgc.methods import consistent
+from bgc.solvers.rk4 import stable_step
 
 RK4_STEP_FRACTIONS = (0.5, 0.8, 0.95, 1.05, 1.25, 2.0)
 ALPHAS = (0.0, 0.3, 1.0, 3.0, 10.0, 100.0)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .cases import MODELS, Bench, Scenario
-from .precision import _series
+from bgc.bench.cases import MODELS, Bench, Scenario
+from bgc.bench.precision import _series
 
 ONE_LEG = MODELS / "sarib_one_leg.yaml"
 # the outputs the one-leg model has (leg 1 stands for every leg)

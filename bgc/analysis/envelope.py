@@ -1,0 +1,58 @@
+"""A chirp response read against frequency (paper 11.5, Figs 11.27-11.31): the envelope
+of an output over the sweep, against the excitation's instantaneous frequency, and its
+minima (the anti-resonances as the chirp shows them; the sweep's finite rate delays and
+skews them against the linear model's, ``bgc frf``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bgc.model.signals import chirp_frequency
+
+
+def envelope(t, y, chirp: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency [Hz], amplitude) of ``y`` over the sweep [t2, t3] of a chirp signal's
+    ``numbers`` (t1, t2, t3, f_start, f_end): half the peak-to-peak of y over each period
+    of the excitation, at that period's instantaneous frequency."""
+    t, y = np.asarray(t), np.asarray(y)
+    t2, t3 = chirp["t2"], min(chirp["t3"], float(t[-1]))
+    freq = []
+    amp = []
+    a = t2
+    while True:
+        f = float(chirp_frequency(a, chirp["t2"], chirp["t3"], chirp["f_start"],
+                                  chirp["f_end"]))
+        b = a + 1.0 / f
+        if b > t3:
+            break
+        sel = (t >= a) & (t < b)
+        if sel.sum() >= 4:
+            freq.append(float(chirp_frequency((a + b) / 2, chirp["t2"], chirp["t3"],
+                                              chirp["f_start"], chirp["f_end"])))
+            amp.append((y[sel].max() - y[sel].min()) / 2)
+        a = b
+    return np.array(freq), np.array(amp)
+
+
+def minima(freq, amp, separation: float = 0.5) -> list[float]:
+    """The frequencies of the envelope's local minima, deepest first: each the lowest
+    point within ``separation`` Hz on either side and 5 % below the highest there."""
+    freq, amp = np.asarray(freq), np.asarray(amp)
+    out = []
+    for i in np.argsort(amp):
+        near = np.abs(freq - freq[i]) <= separation
+        if (amp[i] <= amp[near].min() and amp[near].max() > amp[i] * 1.05
+                and all(abs(freq[i] - f) > separation for f in out)):
+            out.append(float(freq[i]))
+    return out
+
+
+def analyse(result, chirp: dict, skip=("g",)) -> dict:
+    """Every output's envelope over the sweep and its minima: name -> (freq, amp, minima)."""
+    out = {}
+    for name in result.output_names:
+        if name in skip:
+            continue
+        f, a = envelope(result.t, result.column(name), chirp)
+        out[name] = (f, a, minima(f, a))
+    return out

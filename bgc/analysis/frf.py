@@ -1,0 +1,114 @@
+"""Frequency response about the static equilibrium (paper 11.5: the anti-resonances read
+from the linear model, to set beside the chirp's envelope).
+
+The generated module is linearized at its initial state, which must be at rest with no
+excitation:
+dx/dt = A dx + B u, y = C dx + D u, u the amplitude of one excitation direction with
+g(t) = 1. A is the analytic Jacobian; B and D are exact differences (the rhs and the
+outputs are affine in an actuator's force); C is central differences of the outputs.
+H(f) = C (j 2 pi f - A)^-1 B + D is solved per frequency (the idle spins of the SARIB's
+bars make A defective, so no eigen-decomposition). Extrema of |H| are found on a grid and
+refined by bounded Brent search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from bgc.errors import BgcError, SimulationError
+from bgc.methods.consistent import static_loads
+
+
+@dataclass
+class Linearization:
+    A: np.ndarray
+    B: np.ndarray           # (n,)
+    C: np.ndarray           # (outputs, n)
+    D: np.ndarray           # (outputs,)
+    x: np.ndarray           # the equilibrium
+    residual: float         # max |dx/dt| there
+    output_names: tuple
+    p: np.ndarray           # the parameters there (no excitation; static loads set)
+
+    def response(self, freqs, output: str) -> np.ndarray:
+        """Complex H at the frequencies [Hz] for one output."""
+        k = list(self.output_names).index(output)
+        n = len(self.x)
+        out = np.empty(len(np.atleast_1d(freqs)), dtype=complex)
+        for i, f in enumerate(np.atleast_1d(freqs)):
+            z = np.linalg.solve(2j * np.pi * f * np.eye(n) - self.A, self.B)
+            out[i] = self.C[k] @ z + self.D[k]
+        return out
+
+
+def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
+    """Linearize about the initial state (an equilibrium with no excitation); input:
+    ``direction``'s amplitude with the constant kind (g = 1)."""
+    exc = model.excitation
+    if exc is None:
+        raise BgcError(f"{model.file} has no 'excitation' section", key="--input",
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    const = [k for k, s in exc.kinds.items() if s.kind == "constant"]
+    if not const:
+        raise BgcError("the excitation has no constant kind to linearize with", key="--input",
+                       hint="add kinds: {constant: {type: constant, value: 1.0}}")
+    names = list(module.PARAM_NAMES)
+    p0 = np.array(module.PARAMS if p is None else p, dtype=np.float64)
+    for name, value in exc.select(const[0], direction, amplitude=0.0).items():
+        p0[names.index(name)] = value
+    value = float(exc.kinds[const[0]].expr)
+    x0 = module.initial_state(p0) if x0 is None else x0
+    if getattr(module, "STATIC_LOADS", False):
+        p0 = static_loads(module, x0, p0)
+    p1 = p0.copy()
+    p1[names.index(exc.param(direction))] = 1.0
+    # The initial state must be the equilibrium: a Newton polish could not be trusted, it
+    # would shift the functional springs' integrated deflections against the poses.
+    x = np.array(x0, dtype=np.float64)
+    f0, f1 = module.rhs(0.0, x, p0), module.rhs(0.0, x, p1)
+    res = float(np.abs(f0).max(initial=0.0))
+    if res > 1e-6 * max(1.0, float(np.abs(f1).max())):
+        worst = module.STATE_NAMES[int(np.argmax(np.abs(f0)))]
+        raise SimulationError(f"the initial state is not a static equilibrium: "
+                              f"d{worst}/dt = {res:.3g}", hint="give the preloads that hold "
+                              "it (or parasitic: {loads: static}), or start from a state at rest")
+    A = module.jac(0.0, x, p0)
+    B = (f1 - f0) / value
+    D = (module.outputs(0.0, x, p1) - module.outputs(0.0, x, p0)) / value
+    n = len(x)
+    C = np.empty((len(module.OUTPUT_NAMES), n))
+    for j in range(n):
+        h = 1e-6 * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        C[:, j] = (module.outputs(0.0, xp, p0) - module.outputs(0.0, xm, p0)) / (2 * h)
+    return Linearization(A, B, C, D, x, res, tuple(module.OUTPUT_NAMES), p0)
+
+
+def sweep(lin: Linearization, output: str, f_min: float, f_max: float,
+          step: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """The frequencies of a ``step`` grid over [f_min, f_max] and H there."""
+    f = np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
+    return f, lin.response(f, output)
+
+
+def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
+            grid=None) -> tuple[list[float], list[float]]:
+    """Anti-resonances (local minima of |H|) and resonances (local maxima) in
+    [f_min, f_max] (found on ``grid`` = ``sweep(...)``, computed if not given), each
+    refined to 1e-4 Hz."""
+    f, h = grid if grid is not None else sweep(lin, output, f_min, f_max)
+    mag = np.abs(h)
+    found: dict[str, list[float]] = {"min": [], "max": []}
+    for k in range(1, len(f) - 1):
+        for kind, sign in (("min", 1.0), ("max", -1.0)):
+            if sign * mag[k] < sign * mag[k - 1] and sign * mag[k] <= sign * mag[k + 1]:
+                r = minimize_scalar(lambda x, s=sign: s * abs(lin.response([x], output)[0]),
+                                    bounds=(f[k - 1], f[k + 1]), method="bounded",
+                                    options={"xatol": 1e-4})
+                found[kind].append(float(r.x))
+    return found["min"], found["max"]

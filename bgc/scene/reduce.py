@@ -1,0 +1,436 @@
+"""Stage **reduce**: model no more than a scene needs.
+
+A scene asks for some outputs under one excitation; each pass below removes what cannot
+change those outputs and reports what it did (``PassReport``), in this order:
+
+- ``merge_relays`` (Model -> Model, before the equations are derived): a chain of bodies
+  of negligible mass that only relay forces between two bodies (two revolutes with
+  perpendicular, intersecting axes; a slider and such a pair) becomes the one joint it
+  is (``universal``, ``prismatic_universal``), its springs, dampers and actuators moved
+  onto the joint's free directions. The relays' poses and twists are no states and their
+  balance no algebraic loop. Exact for ideal joints (methods lagrange, zcp); under
+  parasitic the chain's three joints' compliance becomes one joint's, which changes
+  the model by its parasitic error, so there the pass runs only where the scene asks
+  (``merge_relays: true``).
+- ``fold_parameters``: parameters the scene does not expose become constants, and the
+  assignments they make constant are propagated (a zero damper, a zero preload vanish);
+  the parameters bgc itself sets at run time (joint loads, the excitation's selectors,
+  the constraint rank) stay parameters.
+- ``idle_dofs``: the spin of a body about its own axis when no force can act on it (every
+  joint of the body a spherical joint on that axis, the two other principal moments
+  equal, at rest about it): its momentum stays zero, so it is no state (the MGB bars).
+- ``prune``: outputs the scene does not ask for, and states that cannot reach the asked
+  ones through the equations, are removed.
+
+The passes after ``merge_relays`` work on the EquationSystem and are exact: what they
+remove is identically zero or cannot influence the outputs (``idle_dofs`` drops the
+moments of joint forces whose lever arm across the axis is round-off of the model's
+coordinates, below 1e-9 m).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import sympy as sp
+
+from bgc.codegen.emit import _cone
+from bgc.codegen.equations import EquationSystem, LinearBlock
+from bgc.mechanics import exact
+from bgc.mechanics.joints import JOINT_KINDS
+from bgc.model import symbols
+from bgc.model.load import joint_params
+from bgc.model.model import Functional, Joint, Model
+
+# parameters bgc writes at run time: never folded
+RUNTIME_PARAMS = ("_load", "excitation__", "lagrange__rank")
+# geometry and inertia closer than this (relative) are taken as equal
+TOLERANCE = 1e-9
+
+
+@dataclass
+class PassReport:
+    name: str
+    states_before: int
+    states_after: int
+    assignments_before: int
+    assignments_after: int
+    removed: list[str] = field(default_factory=list)   # what the pass took out
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        return {"pass": self.name, "states_before": self.states_before,
+                "states_after": self.states_after,
+                "assignments_before": self.assignments_before,
+                "assignments_after": self.assignments_after,
+                "removed": self.removed, "note": self.note}
+
+
+def _substitute(system: EquationSystem, mapping: dict) -> EquationSystem:
+    """``mapping`` (symbol -> constant) substituted everywhere, and every assignment that
+    becomes constant propagated forward (kept where it defines a state's rate)."""
+    rates = {st.dsym for st in system.states}
+    mapping = dict(mapping)
+    assignments = []
+    for item in system.assignments:
+        if isinstance(item, LinearBlock):
+            assignments.append(item.xreplace(mapping))
+            continue
+        v, e = item
+        e = e.xreplace(mapping)
+        if e.is_Number and v not in rates:
+            mapping[v] = e
+            continue
+        assignments.append((v, e))
+    return replace(
+        system, assignments=assignments,
+        outputs=[(n, e.xreplace(mapping)) for n, e in system.outputs],
+        states=[replace(st, initial=st.initial.xreplace(mapping)) for st in system.states],
+        guards=[(w, e.xreplace(mapping)) for w, e in system.guards],
+        constraints=[(n, None if g is None else g.xreplace(mapping), r.xreplace(mapping))
+                     for n, g, r in system.constraints])
+
+
+def _keep_states(system: EquationSystem, keep: list) -> EquationSystem:
+    """Only the states in ``keep`` (State objects, in order); algebraic indices follow."""
+    old = {id(st): i for i, st in enumerate(system.states)}
+    algebraic = {i for i in system.algebraic}
+    return replace(system, states=keep,
+                   algebraic=[k for k, st in enumerate(keep) if old[id(st)] in algebraic])
+
+
+def report(name, before: EquationSystem, after: EquationSystem, removed, note=""):
+    """The PassReport of a pass that took ``before`` to ``after``."""
+    return PassReport(name, len(before.states), len(after.states), len(before.assignments),
+                      len(after.assignments), removed, note)
+
+
+# --- passes ---------------------------------------------------------------------------
+def fold_parameters(system: EquationSystem, values: dict, expose=()) -> tuple:
+    """Parameters not in ``expose`` (nor set by bgc at run time) become constants at
+    ``values`` (name -> value; default: the model's)."""
+    keep, mapping = [], {}
+    for sym, name, default in system.params:
+        if name in expose or any(k in name for k in RUNTIME_PARAMS):
+            keep.append((sym, name, values.get(name, default)))
+        else:
+            v = float(values.get(name, default))
+            mapping[sym] = exact.rational(v)
+    out = replace(_substitute(system, mapping), params=keep)
+    folded = sorted(name for sym, name, _ in system.params if sym in mapping)
+    return out, report("fold_parameters", system, out, folded,
+                        f"{len(mapping)} of {len(system.params)} parameters folded, "
+                        f"{len(keep)} kept")
+
+
+def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
+    """Drop the momentum of each body's idle spin (see the module's docstring), unless
+    one of ``outputs`` (default: all) reads it."""
+    m = system.model
+    if system.method != "parasitic":
+        return system, report("idle_dofs", system, system, [],
+                               f"method {system.method}: the spin's rate is an unknown of "
+                               "the constraint block, left as it is")
+    by_name = {st.name: st for st in system.states}
+    zero, notes = {}, []
+    for body in m.bodies.values():
+        axis = _idle_axis(m, body)
+        if axis is None:
+            continue
+        st = by_name.get(f"{body.name}.J.p{'xyz'[axis]}")
+        if st is None or sp.sympify(st.initial).is_zero is not True:
+            continue
+        zero[st.sym] = sp.Integer(0)
+        notes.append(st.name)
+    read = [n for n, e in system.outputs if (outputs is None or n in outputs)
+            and _cone(system.assignments, [e])[1] & set(zero)]
+    if read:     # an output reads a spin: it is not idle for this scene
+        return system, report("idle_dofs", system, system, [],
+                               f"outputs {', '.join(read)} read a spin: kept")
+    out = _substitute(system, zero)
+    out = _keep_states(out, [st for st in out.states if st.sym not in zero])
+    return out, report("idle_dofs", system, out, notes,
+                        f"{len(notes)} bodies spin freely about their own axis")
+
+
+def _idle_axis(m, body) -> int | None:
+    """The body-frame axis about which nothing can turn ``body``: every joint on it is
+    spherical with its centre on that axis through G, nothing else is bonded to it, the
+    other two principal moments are equal, and it starts at rest about it."""
+    if body.mass <= 0:
+        return None
+    joints = [j for j in m.joints.values() if body.name in (j.body1, j.body2)]
+    if not joints or any(j.kind != "spherical" for j in joints):
+        return None
+    if any(end.split(".")[0] == body.name for b in m.bonds for end in (b.src, b.dst)):
+        return None
+    R = np.array(body.frame, dtype=float)            # columns: body axes in R0
+    arms = [R.T @ (np.array(j.at) - np.array(body.com)) for j in joints]
+    scale = max([1.0] + [float(np.abs(a).max()) for a in arms])
+    inertia = np.array(body.inertia, dtype=float)
+    for axis in range(3):
+        a, b = (k for k in range(3) if k != axis)
+        if abs(inertia[a] - inertia[b]) > TOLERANCE * max(inertia[a], inertia[b]):
+            continue
+        if any(abs(r[a]) > TOLERANCE * scale or abs(r[b]) > TOLERANCE * scale for r in arms):
+            continue
+        if abs(float(np.dot(np.array(body.omega), R[:, axis]))) > 0:
+            continue
+        return axis
+    return None
+
+
+def prune(system: EquationSystem, outputs) -> tuple:
+    """Only the ``outputs`` asked for, and the states they depend on through the rates."""
+    kept_outputs = [(n, e) for n, e in system.outputs if n in set(outputs)]
+    states = {st.sym: st for st in system.states}
+    seeds = [e for _, e in kept_outputs]
+    seeds += [e for _, g, r in system.constraints for e in (r, g) if e is not None]
+    need: set = set()
+    frontier = seeds
+    while frontier:
+        _, used = _cone(system.assignments, frontier)
+        new = {s for s in used if s in states} - need
+        need |= new
+        frontier = [states[s].dsym for s in new]
+    keep = [st for st in system.states if st.sym in need]
+    removed = [st.name for st in system.states if st not in keep]
+    gone = {st.sym for st in system.states if st not in keep}
+    out = _keep_states(replace(system, outputs=kept_outputs,
+                               guards=[(w, e) for w, e in system.guards
+                                       if not e.free_symbols & gone]), keep)
+    dropped = [n for n, _ in system.outputs if n not in set(outputs)]
+    return out, report("prune", system, out, removed + [f"output {n}" for n in dropped],
+                        f"{len(removed)} states and {len(dropped)} outputs cannot reach "
+                        "the outputs asked for")
+
+
+def reduce(system: EquationSystem, outputs, values: dict, expose=()) -> tuple:
+    """All passes in order; returns the reduced system and one PassReport per pass."""
+    reports = []
+    for step in (lambda s: fold_parameters(s, values, expose),
+                 lambda s: idle_dofs(s, outputs), lambda s: prune(s, outputs)):
+        system, rep = step(system)
+        reports.append(rep)
+    return system, reports
+
+
+# --- merge_relays (on the Model) --------------------------------------------------------
+AXIS_TOLERANCE = 1e-6       # perpendicular / parallel axes, as the loader checks axis2
+
+
+@dataclass
+class _Link:
+    """One joint of a relay chain, walked from end 1 to end 2 (``forward``: the joint's
+    body 1 is on end 1's side)."""
+    joint: Joint
+    forward: bool
+
+    @property
+    def axis(self) -> np.ndarray:
+        """The joint's axis, turned so that its coordinate counts from end 1 to end 2."""
+        return np.array(self.joint.frame, dtype=float)[:, 0] * (1 if self.forward else -1)
+
+    @property
+    def functional(self):
+        free = JOINT_KINDS[self.joint.kind].free[0]
+        return self.joint.functional.get(free)
+
+
+def _references(model: Model) -> dict[str, set[tuple[str, str]]]:
+    """Body or joint name -> who reads it: ``("element", E)``, ``("bond", B)``,
+    ``("joint", J)`` (its actuator), ``("output", O)``."""
+    read: dict[str, set] = {}
+
+    def scan(e, who):
+        for s in getattr(e, "free_symbols", ()):
+            if symbols.is_ref(s):
+                read.setdefault(symbols.split_ref(s)[0].split(".")[0], set()).add(who)
+    for el in model.elements.values():
+        for e in list(el.fields.values()) + [el.initial]:
+            scan(e, ("element", el.name))
+    for b in model.bonds:
+        for end in (b.src, b.dst):
+            read.setdefault(end.split(".")[0], set()).add(("bond", b.name))
+    for j in model.joints.values():
+        for f in j.functional.values():
+            scan(f.actuator, ("joint", j.name))
+    for o in model.outputs:
+        scan(o.expr, ("output", o.name))
+    return read
+
+
+def _chains(model: Model) -> list[tuple[str | None, list[str], list[_Link], str | None]]:
+    """Maximal chains end1 -joint- relay -joint- relay ... -joint- end2, where each relay
+    is a body of negligible mass with exactly two joints."""
+    touching: dict = {}
+    for j in model.joints.values():
+        for b in (j.body1, j.body2):
+            touching.setdefault(b, []).append(j)
+    relays = {n for n, b in model.bodies.items()
+              if b.mass == 0 and len(touching.get(n, ())) == 2}
+
+    def across(j, body):
+        return j.body2 if j.body1 == body else j.body1
+
+    def onward(relay, came_by):
+        return next(j for j in touching[relay] if j is not came_by)
+
+    seen, out = set(), []
+    for start in sorted(relays):
+        if start in seen:
+            continue
+        link, body = None, start          # walk to one end ...
+        while True:
+            link = onward(body, link)
+            body = across(link, body)
+            if body not in relays or body == start:
+                break
+        if body == start:                 # a ring of relays: nothing to merge into
+            seen.add(start)
+            continue
+        end1, here, bodies, links = body, body, [], []
+        while True:                       # ... and collect the chain from there
+            links.append(_Link(link, link.body1 == here))
+            here = across(link, here)
+            if here not in relays:
+                break
+            bodies.append(here)
+            link = onward(here, link)
+        seen.update(bodies)
+        out.append((end1, bodies, links, here))
+    return out
+
+
+def _universal_centre(ra: _Link, rb: _Link) -> tuple[np.ndarray | None, str]:
+    """The point where two revolute axes meet at right angles, or why they do not."""
+    a, b = ra.axis, rb.axis
+    if abs(a @ b) > AXIS_TOLERANCE:
+        return None, f"the axes of {ra.joint.name} and {rb.joint.name} are not perpendicular"
+    pa, pb = np.array(ra.joint.at), np.array(rb.joint.at)
+    qa, qb = pa + ((pb - pa) @ a) * a, pb + ((pa - pb) @ b) * b
+    scale = max(1.0, float(np.abs(pa).max()), float(np.abs(pb).max()))
+    if np.linalg.norm(qa - qb) > AXIS_TOLERANCE * scale:
+        return None, f"the axes of {ra.joint.name} and {rb.joint.name} do not meet"
+    pa, pb, a, b = (exact.vector(v) for v in (pa, pb, a, b))    # the centre, exactly
+    qa, qb = pa + (pb - pa).dot(a) * a, pb + (pa - pb).dot(b) * b
+    return (qa + qb) / 2, ""
+
+
+def _merged_joint(name, end1, end2, links: list[_Link]) -> tuple[Joint | None, str]:
+    """The one joint a chain is (or None and why not). Its axes keep the old joints'
+    senses where they can, so that most springs keep the sign of their preload."""
+    kinds = [lk.joint.kind for lk in links]
+    if kinds == ["revolute", "revolute"]:
+        slider, (ra, rb), kind = None, links, "universal"
+    elif kinds == ["prismatic", "revolute", "revolute"]:
+        slider, ra, rb = links
+        kind = "prismatic_universal"
+    else:
+        return None, "its joints (" + ", ".join(kinds) + ") are no universal joint"
+    if len({lk.joint.parasitic for lk in links}) > 1:
+        return None, "its joints have different parasitic settings"
+    centre, why = _universal_centre(ra, rb)
+    if centre is None:
+        return None, why
+    x, y = ra.axis, rb.axis
+    if slider is not None:
+        p = slider.axis
+        z = np.cross(x, y)
+        if abs(abs(z @ p) - 1) > AXIS_TOLERANCE:
+            return None, (f"{slider.joint.name} does not slide at right angles to both "
+                          f"axes of {ra.joint.name} and {rb.joint.name}")
+        if z @ p < 0:
+            y = -y
+    X = exact.vector(x)                          # the frame, exactly (``exact``)
+    Y = exact.unit(exact.vector(y) - exact.vector(y).dot(X) * X)
+    frame = sp.Matrix.hstack(X, Y, X.cross(Y))
+    x, y, z = (np.array(exact.floats(frame[:, k])) for k in range(3))
+    frame = exact.floats(frame)
+    labels = {id(ra): ("rx", x), id(rb): ("ry", y)}
+    if slider is not None:
+        labels[id(slider)] = ("tz", z)
+    functional = {}
+    for lk in links:
+        f = lk.functional
+        if f is None:
+            continue
+        label, new = labels[id(lk)]
+        s = int(np.sign(new @ lk.axis))
+        functional[label] = Functional(f.k, f.c, s * f.preload + 0.0,
+                                       None if f.actuator is None else s * f.actuator, f.loc)
+    first = links[0].joint
+    return Joint(name, first.loc, kind, end1, end2, exact.floats(centre), frame,
+                 first.parasitic, functional), ""
+
+
+def _merged_name(model: Model, joints: list[str]) -> str:
+    """The chain's joints' common prefix (attach_pumping, attach_roll -> attach), else
+    their names joined."""
+    prefix = os.path.commonprefix(joints).rstrip("_")
+    taken = set(model.joints) | set(model.bodies) | set(model.elements)
+    if prefix.isidentifier() and "__" not in prefix and prefix not in taken:
+        return prefix
+    return "_".join(joints)
+
+
+def merge_relays(model: Model, outputs=None, keep_params=()) -> tuple[Model, list, str]:
+    """The model with every mergeable relay chain replaced by its joint (see the module's
+    docstring). A chain stays when an expression, a bond or one of ``outputs`` (default
+    all; the others that read a chain are dropped) reads its bodies or joints, or when
+    it holds one of ``keep_params`` (a scene's exposed or set parameters). Returns the
+    model, what was removed, and a note that says what was merged and what was left, why."""
+    read = _references(model)
+    kept_outputs = None if outputs is None else set(outputs)
+    merged, notes, removed = [], [], []
+    for end1, relays, links, end2 in _chains(model):
+        names = [lk.joint.name for lk in links]
+        if links[-1].joint.kind == "prismatic":     # the slider sits on end 1's side
+            end1, end2 = end2, end1
+            links = [_Link(lk.joint, not lk.forward) for lk in reversed(links)]
+        readers = {f"{kind} {who}" for n in relays + names for kind, who in read.get(n, ())
+                   if kind != "output" or kept_outputs is None or who in kept_outputs}
+        held = sorted(p for p in keep_params if p.split("__")[0] in names)
+        chain = " - ".join(names)
+        if end1 == end2:
+            notes.append(f"{chain} left: it begins and ends on {end1 or 'the fixed frame'}")
+            continue
+        if readers or held:
+            notes.append(f"{chain} left: " + ", ".join(sorted(readers) + held) + " read it")
+            continue
+        joint, why = _merged_joint(_merged_name(model, names), end1, end2, links)
+        if joint is None:
+            notes.append(f"{chain} left: {why}")
+            continue
+        merged.append((joint, relays, names))
+        removed += relays + names
+        notes.append(f"{chain} -> {joint.name} ({joint.kind})")
+    if not merged:
+        return model, [], "; ".join(notes) or "no bodies of negligible mass relay forces"
+    gone_joints = {n for _, _, names in merged for n in names}
+    gone_bodies = {b for _, relays, _ in merged for b in relays}
+    joints = {n: j for n, j in model.joints.items() if n not in gone_joints}
+    params = {n: p for n, p in model.parameters.items()
+              if n.split("__")[0] not in gone_joints}
+    renamed = {}
+    for joint, _, names in merged:
+        joints[joint.name] = joint
+        joint_params(joint, params)
+        renamed.update({n: joint.name for n in names})
+    excitation = model.excitation
+    if excitation is not None:
+        excitation = replace(excitation, directions={
+            d: (renamed.get(j, j), amp) for d, (j, amp) in excitation.directions.items()})
+    gone = gone_joints | gone_bodies
+    dropped = [o.name for o in model.outputs
+               if any(("output", o.name) in read.get(n, ()) for n in gone)]
+    removed += [f"output {n}" for n in dropped]
+    digest = hashlib.sha256((model.digest + repr(notes)).encode()).hexdigest()
+    out = replace(model, digest=digest, joints=joints, parameters=params,
+                  bodies={n: b for n, b in model.bodies.items() if n not in gone_bodies},
+                  outputs=[o for o in model.outputs if o.name not in dropped],
+                  excitation=excitation)
+    return out, removed, "; ".join(notes)

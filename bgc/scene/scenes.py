@@ -1,0 +1,295 @@
+"""Scenes: the question a simulation asks of a model (YAML -> Scene -> reduced module).
+
+A scene names a model and the method, excitation, outputs, time span, tolerances and
+solver of one run; ``expose`` lists the parameters it keeps adjustable (``-p``), every
+other is folded into the equations; ``merge_relays: true`` lets the relay merge change a
+parasitic model (see ``reduce``). ``ensure_scene_module`` builds the model, runs the passes
+of ``reduce`` and writes ``<out_dir>/<model>_<method>_<scene>.py``; ``run_scene``
+simulates it.
+
+    model: ../models/sarib.yaml
+    method: parasitic
+    excitation: {kind: chirp, direction: pumping}      # amplitude, frequency: optional
+    outputs: [a_OF_z, F_A1_z, F_A2_z]
+    time: {end: 28.0, points: 28001}                   # start: 0
+    tolerances: {rtol: 1.0e-5, atol: 1.0e-5}
+    solver: native
+    expose: []
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from bgc.codegen import emit
+from bgc.errors import ModelError
+from bgc.fileio import atomic_write
+from bgc.model import limits, load
+from bgc.model.load import YMap, _Loader, _read_yaml
+from bgc.pipeline import METHODS, build
+from bgc.scene import reduce
+
+KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
+        "tolerances", "solver", "expose", "params", "merge_relays")
+
+
+@dataclass
+class Scene:
+    name: str
+    file: str
+    model: Path
+    method: str
+    excitation: dict | None       # kind, direction, amplitude?, frequency?
+    outputs: list[str]
+    t_start: float
+    t_end: float
+    points: int
+    rtol: float
+    atol: float
+    solver: str
+    expose: list[str]
+    params: dict[str, float]      # values the scene sets (folded unless exposed)
+    digest: str
+    # merge relay chains: None = where exact (ideal joints); True also under parasitic
+    merge_relays: bool | None = None
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene file; every mistake is one located line."""
+    from bgc.simulate import SOLVERS
+    path = Path(path)
+    doc = _read_yaml(load.read_source(path, "scene file", "scene"), str(path))
+    ld = _Loader(str(path))
+    if not isinstance(doc, YMap):
+        raise ModelError("a scene file is a mapping", loc=load.Loc(str(path), 1),
+                         hint="keys: " + ", ".join(KEYS))
+    ld.check_keys(doc, KEYS, "scene")
+    for key in ("model", "outputs", "time"):
+        if key not in doc:
+            ld.err(f"missing key '{key}'", doc.loc, key, "a scene needs " + ", ".join(
+                ("model", "outputs", "time")))
+
+    def at(m, key):
+        return m.val_locs.get(key, m.loc)
+
+    model_path = (path.parent / ld.string(doc["model"], at(doc, "model"), "model",
+                                          "a model file path")).resolve()
+    if not model_path.is_file():
+        ld.err(f"no such model file: {model_path}" if not model_path.exists() else
+               f"{model_path} is not a regular file", at(doc, "model"), "model",
+               "a path relative to the scene file")
+    model = load.load(model_path)
+    method = ld.string(doc.get("method", "parasitic"), at(doc, "method"), "method",
+                       "a method name")
+    if method not in METHODS:
+        ld.err(f"unknown method '{method}'", at(doc, "method"), "method",
+               "valid methods: " + ", ".join(METHODS))
+    solver = ld.string(doc.get("solver", "native"), at(doc, "solver"), "solver",
+                       "a solver name")
+    if solver not in SOLVERS:
+        ld.err(f"unknown solver '{solver}'", at(doc, "solver"), "solver",
+               "valid solvers: " + ", ".join(SOLVERS))
+    outputs = doc["outputs"]
+    names = [o.name for o in model.outputs]
+    if not isinstance(outputs, list) or not outputs:
+        ld.err("expected a non-empty list of outputs", at(doc, "outputs"), "outputs",
+               "model outputs: " + ", ".join(names))
+    ld.strings(outputs, at(doc, "outputs"), "outputs", "output names")
+    for k, o in enumerate(outputs):
+        if o not in names:
+            ld.err(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
+                   f"outputs[{k}]", "model outputs: " + ", ".join(names))
+    exc = None
+    if doc.get("excitation") is not None:
+        e = ld.mapping(doc["excitation"], at(doc, "excitation"), "excitation")
+        ld.check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
+        if model.excitation is None:
+            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation",
+                   "drop 'excitation:' or name a model that has one")
+        exc = {k: ld.string(e.get(k), at(e, k), f"excitation.{k}", f"a {k} name")
+               for k in ("kind", "direction")}
+        for k in ("amplitude", "frequency"):
+            if k in e:
+                exc[k] = ld.number(e[k], at(e, k), f"excitation.{k}", positive=True)
+        try:
+            model.excitation.select(exc["kind"], exc["direction"], exc.get("amplitude"),
+                                    exc.get("frequency"))
+        except Exception as err:          # BgcError naming the CLI option: relocate it
+            ld.err(getattr(err, "message", str(err)), e.loc, "excitation",
+                   getattr(err, "hint", None))
+    tm = ld.mapping(doc["time"], at(doc, "time"), "time")
+    ld.check_keys(tm, ("start", "end", "points"), "time")
+    t_start = ld.number(tm.get("start", 0.0), at(tm, "start"), "time.start", nonneg=True)
+    if "end" not in tm:
+        ld.err("missing key 'end'", tm.loc, "time.end")
+    t_end = ld.number(tm["end"], at(tm, "end"), "time.end", positive=True)
+    if t_end <= t_start:
+        ld.err(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
+    points = ld.points(tm.get("points", 1001), at(tm, "points"), "time.points")
+    if exc is not None and "frequency" in exc:
+        why = limits.too_fast(exc["frequency"], t_end - t_start)
+        if why:
+            ld.err(why, at(doc["excitation"], "frequency"), "excitation.frequency",
+                   "lower the frequency or shorten time.end")
+    tol = (ld.mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
+           if doc.get("tolerances") is not None else None)
+    tols = {}
+    for k in ("rtol", "atol"):
+        default = getattr(model.settings, k, None) or (1e-6 if k == "rtol" else 1e-8)
+        tols[k] = (ld.number(tol[k], at(tol, k), f"tolerances.{k}", positive=True)
+                   if tol is not None and k in tol else default)
+    if tol is not None:
+        ld.check_keys(tol, ("rtol", "atol"), "tolerances")
+    rtol, atol = tols["rtol"], tols["atol"]
+    params = {}
+    if doc.get("params") is not None:
+        pm = ld.mapping(doc["params"], at(doc, "params"), "params")
+        for k, v in pm.items():
+            ld.string(k, pm.key_locs[k], "params", "a parameter name")
+            params[k] = ld.number(v, at(pm, k), f"params.{k}")
+    expose = (ld.strings(doc["expose"], at(doc, "expose"), "expose", "parameter names")
+              if doc.get("expose") is not None else [])
+    merge = doc.get("merge_relays")
+    if merge is not None and not isinstance(merge, bool):
+        ld.err(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),
+               "merge_relays", "true: merge also under parasitic (changes the joints' "
+               "parasitic compliance); false: never; absent: where exact")
+    name = doc.get("name", path.stem)
+    if not isinstance(name, str) or not name.isidentifier():
+        ld.err(f"scene name {name!r} is not a valid module name", at(doc, "name"), "name",
+               "letters, digits and '_'")
+    digest = hashlib.sha256(json.dumps(
+        [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
+        default=str).encode()).hexdigest()[:16]
+    return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
+                 points, rtol, atol, solver, expose, params, digest, merge)
+
+
+def scene_values(scene: Scene, model) -> dict[str, float]:
+    """Parameter values the scene fixes: its excitation's and its ``params``."""
+    values = {}
+    if scene.excitation is not None:
+        e = scene.excitation
+        values.update(model.excitation.select(e["kind"], e["direction"], e.get("amplitude"),
+                                              e.get("frequency")))
+    values.update(scene.params)
+    return values
+
+
+def reduced_system(scene: Scene):
+    """(full Compiled, reduced EquationSystem, pass reports). ``merge_relays`` works on
+    the model, so its report compares the full model's build with the merged one's."""
+    c = build(scene.model, scene.method)
+    known = {name for _, name, _ in c.system.params}
+    for name in list(scene.expose) + list(scene.params):
+        if name not in known:
+            raise ModelError(f"unknown parameter '{name}' of model {c.model.name}",
+                             loc=load.Loc(scene.file, 1), key="expose/params",
+                             hint="see PARAM_NAMES of the generated module")
+    merged, removed, note = reduce.merge_relays(
+        c.model, scene.outputs, list(scene.expose) + list(scene.params))
+    merged_c = c
+    wanted = scene.method != "parasitic" if scene.merge_relays is None else scene.merge_relays
+    if removed and wanted:
+        merged_c = build(merged, scene.method)
+    elif removed:
+        why = ("the scene says merge_relays: false" if scene.merge_relays is False else
+               "under parasitic each joint's compliance is part of the model "
+               "(merge_relays: true accepts the change)")
+        removed, note = [], f"would merge {note}; left: {why}"
+    first = reduce.report("merge_relays", c.system, merged_c.system, removed, note)
+    system, reports = reduce.reduce(merged_c.system, scene.outputs,
+                                    scene_values(scene, merged_c.model), scene.expose)
+    model = replace(merged_c.model, digest=scene.digest)
+    return c, replace(system, model=model, scene=scene.name), [first] + reports
+
+
+def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
+    """The scene's reduced module, rebuilt only when the scene or its model changed.
+    Returns (module, the pass reports as dicts, kept beside it in ``.passes.json``)."""
+    from bgc.codegen.module_file import variant
+    path = emit.module_path(load.load(scene.model).name, out_dir,
+                            f"{variant(scene.method)}_{scene.name}")
+    passes = path.with_suffix(".passes.json")
+    if emit.is_stale(path, scene.digest, f"{variant(scene.method)}_{scene.name}") or \
+            not passes.exists():
+        _, system, reports = reduced_system(scene)
+        path = emit.write(system, out_dir)
+        atomic_write(passes, json.dumps([r.to_dict() for r in reports], indent=2))
+    return emit.import_module(path), json.loads(passes.read_text())
+
+
+def is_scene(path: str | Path) -> bool:
+    """A scene file names a model (``model:``); a model file has bodies or elements."""
+    try:        # the same bounded reader as the loader: a hostile file is refused there
+        doc = _read_yaml(load.read_source(path), str(path))
+    except ModelError:
+        return False
+    return isinstance(doc, dict) and "model" in doc
+
+
+def check_scene(scene: Scene) -> list[dict]:
+    """The state count before and after each reduction pass."""
+    _, _, reports = reduced_system(scene)
+    return [r.to_dict() for r in reports]
+
+
+def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generated/scenes",
+              params=None) -> dict:
+    """Simulate the scene's reduced module; write ``<out_dir>/<scene>.csv``, ``.png`` and
+    ``.json`` (the summary: states, passes, statistics, envelope minima of a chirp).
+    A failing run keeps its results up to the failure (the CSV is still written)."""
+    import time
+
+    import numpy as np
+
+    from bgc.analysis.results import plot, write_csv
+    from bgc.errors import SimulationError
+    from bgc.simulate import simulate
+    t0 = time.perf_counter()
+    module, reports = ensure_scene_module(scene, gen_dir)
+    build_s = time.perf_counter() - t0
+    model = load.load(scene.model)
+    p = np.array(module.PARAMS, dtype=np.float64)
+    names = list(module.PARAM_NAMES)
+    for name, value in {**scene_values(scene, model), **(params or {})}.items():
+        if name in names:
+            p[names.index(name)] = value
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    error = None
+    try:
+        result = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
+                          atol=scene.atol, solver=scene.solver, points=scene.points,
+                          params=p)
+    except SimulationError as exc:
+        if exc.result is None:
+            raise
+        result, error = exc.result, str(exc)
+    files = {"csv": str(write_csv(result, out_dir / f"{scene.name}.csv", states=False)),
+             "png": str(plot(result, out_dir / f"{scene.name}.png",
+                             title=f"{scene.name}: {model.name} ({scene.method}, "
+                                   f"{result.solver})"))}
+    minima = None
+    exc = scene.excitation
+    if exc and model.excitation.kinds[exc["kind"]].kind == "chirp" and error is None:
+        from bgc.analysis.envelope import analyse
+        chirp = model.excitation.kinds[exc["kind"]].numbers
+        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):
+            minima = {k: [round(f, 3) for f in c[2]]
+                      for k, c in analyse(result, chirp).items()}
+    summary = {"scene": scene.name, "file": scene.file, "model": model.name,
+               "method": scene.method, "solver": result.solver,
+               "excitation": scene.excitation, "outputs": scene.outputs,
+               "states": len(module.STATE_NAMES), "passes": reports,
+               "t_end": float(result.t[-1]) if len(result.t) else scene.t_start,
+               "build_s": build_s, "stats": result.stats.to_dict(),
+               "envelope_minima_hz": minima, "ok": error is None, "error": error,
+               "files": files}
+    path = out_dir / f"{scene.name}.json"
+    atomic_write(path, json.dumps(summary, indent=2, default=str) + "\n")
+    summary["files"]["json"] = str(path)
+    return summary

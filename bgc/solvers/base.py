@@ -1,0 +1,168 @@
+"""The integrator interface every solver implements (scipy's ``_ivp/base.py`` in spirit):
+a ``Problem`` (a generated module at parameter values, with an optional mass matrix), one
+``integrate`` call per smooth segment returning a ``Segment``, and ``Stats`` kept honestly:
+what an integrator does not report is ``None``, never a made-up 0.
+"""
+
+from __future__ import annotations
+
+import abc
+import functools
+import mmap
+import os
+import signal
+import tempfile
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# A run stops where a guard margin (e.g. |cos b| of a body's Cardan angles) falls below this.
+GUARD_TOLERANCE = 1e-3
+
+
+@dataclass
+class Stats:
+    steps: int | None = 0
+    rhs_calls: int = 0
+    jac_calls: int = 0
+    lu_decompositions: int | None = 0
+    rejected_steps: int | None = None     # scipy's solve_ivp does not report them
+    wall_time: float = 0.0                # integration only
+    max_step: float | None = None         # the step limit the input signals set
+    compile_time: float = 0.0             # JIT / cache load, scipy.integrate's import
+    # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
+    drift_position: float | None = None
+    drift_velocity: float | None = None
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Segment:
+    """What a solver returns for one smooth segment [t0, t1]."""
+    x_eval: np.ndarray            # states at the requested times reached
+    x_end: np.ndarray             # state at the last time reached
+    t_reached: float
+    ok: bool
+    message: str = ""
+    event: int | None = None      # index of the event that stopped the segment
+    interrupted: bool = False     # stopped by Ctrl-C (``Interrupt``)
+
+
+@dataclass
+class Problem:
+    """What a solver integrates: a generated module at parameter values ``p``,
+    ``mass @ dx/dt = rhs(t, x, p)`` (no mass matrix: the identity)."""
+    module: object
+    p: np.ndarray
+    step: float | None = None         # fixed-step methods: the step
+    mass: np.ndarray | None = None
+    check_stability: bool = True      # rk4: refuse a step beyond its stability limit
+    # a DAE: 1.0 where a state is algebraic of index 2 (its error scaled by the step)
+    index2: np.ndarray | None = None
+    max_steps: int = 0                # the run's step budget over all segments (0: none)
+    interrupt: "Interrupt" = field(default_factory=lambda: Interrupt())
+
+    def budget(self, stats: "Stats") -> int | None:
+        """Steps left of the run's budget (None: no budget)."""
+        return max(self.max_steps - (stats.steps or 0), 0) if self.max_steps else None
+
+    def rhs(self, t, x):
+        return self.module.rhs(t, x, self.p)
+
+    @functools.cached_property
+    def lu_plan(self):
+        """The sparse elimination plan of its Newton matrices (``sparse_lu.analyse``)."""
+        from bgc.solvers.sparse_lu import analyse
+        return analyse(len(self.module.STATE_NAMES), self.module.JAC_I, self.module.JAC_J,
+                       self.mass)
+
+    def jac(self, t, x):
+        return self.module.jac(t, x, self.p)
+
+
+class Solver(abc.ABC):
+    """One integration method. ``integrate`` covers a segment with no discontinuity."""
+    name = ""
+    description = ""
+    # the highest DAE index it integrates, M dx/dt = f with a singular M (0: ODEs only)
+    max_index = 0
+
+    @property
+    def takes_mass(self) -> bool:
+        return self.max_index > 0
+
+    def check(self, problem: Problem, t0: float, x0: np.ndarray):
+        """Refuse, before the run, what this method cannot integrate (SimulationError)."""
+
+    def warm_up(self, problem: Problem, x0: np.ndarray):
+        """Compile (or load from a cache) what the method runs, so wall time is the run's."""
+
+    @abc.abstractmethod
+    def integrate(self, problem: Problem, t0, t1, x0, t_eval, rtol, atol, stats: Stats,
+                  events=(), max_step=np.inf) -> Segment:
+        """Integrate from t0 to t1, recording the states at ``t_eval``; stop early where
+        one of ``events`` (functions of (t, x), ``terminal`` and ``direction`` as in
+        scipy) falls through zero; no step longer than ``max_step``."""
+
+
+class Interrupt:
+    """Ctrl-C (SIGINT) during a run, as a request to stop rather than an exception, so the
+    states computed so far are kept. Within ``with Interrupt() as stop:`` a SIGINT sets
+    ``stop.requested``; the native loops see it within a step: Python's C signal handler
+    writes the signal's number to the wakeup fd (``signal.set_wakeup_fd``), here a
+    one-page file mapped into ``stop.flag``, which the compiled loops read (an atomic
+    load, ``native.stopped``) without returning to Python. Outside the main thread (no
+    signal handlers there) it does nothing. A second Ctrl-C stops at once
+    (KeyboardInterrupt)."""
+
+    def __init__(self):
+        self.flag = np.zeros(0, dtype=np.uint8)   # empty: never set
+        self._hit = False
+        self._mm = self._file = None
+        self._saved = None
+
+    @property
+    def requested(self) -> bool:
+        return self._hit or bool(self.flag.size and self.flag[0])
+
+    def _handler(self, signum, frame):
+        if self._hit:
+            raise KeyboardInterrupt
+        self._hit = True
+
+    def __enter__(self):
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        if hasattr(os, "memfd_create"):
+            fd = os.memfd_create("bgc-interrupt")
+        else:                                          # pragma: no cover - not Linux
+            self._file = tempfile.TemporaryFile()
+            fd = os.dup(self._file.fileno())
+        try:
+            os.ftruncate(fd, mmap.PAGESIZE)
+            os.set_blocking(fd, False)
+            self._mm = mmap.mmap(fd, mmap.PAGESIZE)
+            self.flag = np.frombuffer(self._mm, dtype=np.uint8)
+            old_fd = signal.set_wakeup_fd(fd, warn_on_full_buffer=False)
+            self._saved = (fd, old_fd, signal.signal(signal.SIGINT, self._handler))
+        except (OSError, ValueError):                  # pragma: no cover - no mmap/memfd
+            self.flag = np.zeros(0, dtype=np.uint8)
+            os.close(fd)
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            fd, old_fd, old_handler = self._saved
+            signal.signal(signal.SIGINT, old_handler)
+            signal.set_wakeup_fd(old_fd)
+            self._hit = self.requested
+            self.flag = np.zeros(0, dtype=np.uint8)
+            self._mm.close()
+            os.close(fd)
+            if self._file is not None:
+                self._file.close()
+            self._saved = self._mm = self._file = None
+        return False

@@ -1,0 +1,561 @@
+"""Radau IIA order 5, the native stiff integrator: the whole step loop in numba.
+
+The scheme is Hairer & Wanner's RADAU5 (Solving ODEs II, IV.8), with the constants and
+step control of scipy's ``integrate/_ivp/radau.py``: three collocation stages solved by
+simplified Newton iterations in transformed variables (one real and one complex linear
+system), predictive (Gustafsson) step control, the collocation polynomial as dense output.
+It also takes a mass matrix, ``M dx/dt = f(t, x)``, so a singular ``M`` makes it a DAE
+solver (Hairer's ESTRAD error estimate with ``M``), of index 2 too with those states'
+tolerances scaled by 1/h (``_scale``).
+
+What keeps it fast: the Newton matrices ``mu/h M - J`` are LU-factored on the
+Jacobian's sparsity (``sparse_lu``: on the SARIB 4128 of 23104 entries, 3-4x faster than
+LAPACK's dense getrf, which takes over where static pivoting would not be stable) and
+the factors kept while the step size stays; the Jacobian is recomputed only when
+Newton converges slowly with the current one; the model's functions are called through
+C entry points (``bgc.solvers.native``), so nothing returns to Python per step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+from numba.np.linalg import _LAPACK, F_INT_nptype
+
+from bgc.solvers import sparse_lu
+from bgc.solvers.native import (
+    GUARD,
+    INTERRUPTED,
+    N_STATS,
+    NOT_FINITE,
+    PAUSED,
+    REACHED,
+    SINGULAR,
+    ST_JAC,
+    ST_LU,
+    ST_REJECTED,
+    ST_RHS,
+    ST_STEPS,
+    STEP_TOO_SMALL,
+    call_entry,
+    evaluate,
+    guard_min,
+    inner,
+    stopped,
+)
+
+_S6 = 6.0 ** 0.5
+_C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
+_E = np.array([-13.0 - 7.0 * _S6, -13.0 + 7.0 * _S6, -1.0]) / 3.0
+_MU_REAL = 3.0 + 3.0 ** (2.0 / 3.0) - 3.0 ** (1.0 / 3.0)
+_MU_COMPLEX = (3.0 + 0.5 * (3.0 ** (1.0 / 3.0) - 3.0 ** (2.0 / 3.0))
+               - 0.5j * (3.0 ** (5.0 / 6.0) + 3.0 ** (7.0 / 6.0)))
+_T = np.array([[0.09443876248897524, -0.14125529502095421, 0.03002919410514742],
+               [0.25021312296533332, 0.20412935229379994, -0.38294211275726192],
+               [1.0, 1.0, 0.0]])
+_TI = np.array([[4.17871859155190428, 0.32768282076106237, 0.52337644549944951],
+                [-4.17871859155190428, -0.32768282076106237, 0.47662355450055044],
+                [0.50287263494578682, -2.57192694985560522, 0.59603920482822492]])
+_P = np.array([[13.0 / 3.0 + 7.0 * _S6 / 3.0, -23.0 / 3.0 - 22.0 * _S6 / 3.0,
+                10.0 / 3.0 + 5.0 * _S6],
+               [13.0 / 3.0 - 7.0 * _S6 / 3.0, -23.0 / 3.0 + 22.0 * _S6 / 3.0,
+                10.0 / 3.0 - 5.0 * _S6],
+               [1.0 / 3.0, -8.0 / 3.0, 10.0 / 3.0]])
+NEWTON_MAXITER = 6
+NO_LU, DENSE_LU, SPARSE_LU = 0, 1, 2
+MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
+
+# LU factors with partial pivoting from LAPACK's getrf, through the binding numba itself
+# uses for np.linalg (scipy's LAPACK, resolved by symbol name, so the loop is cacheable).
+# numba offers no factor/solve pair: inverting the Newton matrices instead cost 2.3x the
+# whole run on the SARIB (n = 152), where factorizations are most of the work.
+_GETRF_REAL = _LAPACK().numba_xxgetrf(types.float64)
+_GETRF_COMPLEX = _LAPACK().numba_xxgetrf(types.complex128)
+
+
+# (one function each: the two share the symbol numba_xxgetrf with different signatures,
+# which one LLVM module cannot declare twice)
+@njit(cache=True)
+def _getrf_real(a, piv):
+    n = a.shape[0]
+    return _GETRF_REAL(100, n, n, a.ctypes, n, piv.ctypes)
+
+
+@njit(cache=True)
+def _getrf_complex(a, piv):
+    n = a.shape[0]
+    return _GETRF_COMPLEX(122, n, n, a.ctypes, n, piv.ctypes)
+
+
+@inner
+def _lu_solve(lu, piv, b):
+    """Solve with getrf's factors of A (``lu`` holds them transposed, LAPACK's column-major
+    order): row swaps, then the unit lower and the upper triangle."""
+    n = b.shape[0]
+    x = b.copy()
+    for i in range(n):
+        k = piv[i] - 1
+        if k != i:
+            x[i], x[k] = x[k], x[i]
+    for j in range(n):
+        xj = x[j]
+        if xj != 0:
+            for i in range(j + 1, n):
+                x[i] -= lu[j, i] * xj
+    for j in range(n - 1, -1, -1):
+        x[j] /= lu[j, j]
+        xj = x[j]
+        if xj != 0:
+            for i in range(j):
+                x[i] -= lu[j, i] * xj
+    return x
+
+
+@inner
+def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
+    """Factor mu_real/h M - J and mu_complex/h M - J (M empty: the identity): along the
+    sparse ``plan`` if there is one and both pass its growth check (returns SPARSE_LU),
+    else dense, stored transposed for LAPACK (DENSE_LU); NO_LU if either is exactly
+    singular."""
+    n = J.shape[0]
+    if plan[0].shape[0] > 0:
+        sparse_lu.newton_matrix(J, M, _MU_REAL / h, plan, lu_real)
+        if sparse_lu.factor(lu_real, plan):
+            sparse_lu.newton_matrix(J, M, _MU_COMPLEX / h, plan, lu_complex)
+            if sparse_lu.factor(lu_complex, plan):
+                return SPARSE_LU
+    for i in range(n):
+        for j in range(n):
+            lu_real[i, j] = -J[j, i]
+            lu_complex[i, j] = -J[j, i]
+    if M.shape[0] == 0:
+        for i in range(n):
+            lu_real[i, i] += _MU_REAL / h
+            lu_complex[i, i] += _MU_COMPLEX / h
+    else:
+        for i in range(n):
+            for j in range(n):
+                if M[j, i] != 0.0:
+                    lu_real[i, j] += _MU_REAL / h * M[j, i]
+                    lu_complex[i, j] += _MU_COMPLEX / h * M[j, i]
+    if _getrf_real(lu_real, piv_real) == 0 and _getrf_complex(lu_complex, piv_complex) == 0:
+        return DENSE_LU
+    return NO_LU
+
+
+@inner
+def _solve(lu, piv, b, plan, kind):
+    """Solve with the factors ``_newton_matrices`` made (of either kind)."""
+    if kind == SPARSE_LU:
+        return sparse_lu.solve(lu, plan, b)
+    return _lu_solve(lu, piv, b)
+
+
+# The loop below is written in scalar loops over arrays it allocates once, not numpy
+# array expressions: numba compiles each array expression, slice assignment (whose shape
+# check alone formats an error message: about 3 s on first use) and matrix product as
+# functions of their own; the loops compile in 2/3 of the time and allocate almost
+# nothing per step. Helpers called only from compiled code have no Python or C wrapper
+# (``native.inner``): less to lower and optimize.
+
+@inner
+def _times_mass(M, v, out):
+    """out = M v (M empty: v itself)."""
+    n = v.shape[0]
+    if M.shape[0] == 0:
+        for i in range(n):
+            out[i] = v[i]
+        return
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M[i, j] * v[j]
+        out[i] = s
+
+
+@inner
+def _scale(y, y_new, rtol, atol, index2, h, s):
+    """Error scale per state, into ``s``: atol + rtol max(|y|, |y_new|); divided by h for
+    algebraic states of index 2, whose local error is one order lower (Hairer & Wanner
+    II, VII.8)."""
+    for i in range(y.shape[0]):
+        s[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+    for i in range(index2.shape[0]):
+        if index2[i] != 0.0:
+            s[i] /= h
+
+
+@inner
+def _rms_ratio(v, scale):
+    """The root mean square of v / scale."""
+    s = 0.0
+    for i in range(v.shape[0]):
+        r = v[i] / scale[i]
+        s += r * r
+    return np.sqrt(s / v.shape[0])
+
+
+@inner
+def _finite(v) -> bool:
+    for i in range(v.shape[0]):
+        if not np.isfinite(v[i]):
+            return False
+    return True
+
+
+@inner
+def _dense_into(t_old, h, y_old, Q, t, out):
+    """The collocation polynomial of the step [t_old, t_old + h] at t, into ``out``."""
+    x = (t - t_old) / h
+    for i in range(y_old.shape[0]):
+        out[i] = y_old[i] + Q[i, 0] * x + Q[i, 1] * x * x + Q[i, 2] * x * x * x
+
+
+@njit(cache=True)
+def dense(t_old, h, y_old, Q, t):
+    """The collocation polynomial of the step [t_old, t_old + h] at t."""
+    out = np.empty(y_old.shape[0])
+    _dense_into(t_old, h, y_old, Q, t, out)
+    return out
+
+
+@inner
+def _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats):
+    """Hairer, Norsett & Wanner I, II.4 (error estimator of order 3), as scipy."""
+    n = y.shape[0]
+    scale = np.empty(n)
+    y1 = np.empty(n)
+    for i in range(n):
+        scale[i] = atol + abs(y[i]) * rtol
+    d0, d1 = _rms_ratio(y, scale), _rms_ratio(f, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t1 - t0)
+    for i in range(n):
+        y1[i] = y[i] + h0 * f[i]
+    f1 = evaluate(rhs, t0 + h0, y1, p, n)
+    stats[ST_RHS] += 1
+    for i in range(n):
+        f1[i] -= f[i]
+    d2 = _rms_ratio(f1, scale) / h0
+    h1 = max(1e-6, h0 * 1e-3) if (d1 <= 1e-15 and d2 <= 1e-15) else \
+        (0.01 / max(d1, d2)) ** 0.25
+    return min(100.0 * h0, h1)
+
+
+@inner
+def _record(out, k_out, t_eval, t_end, t_old, h_last, y_old, Q):
+    """Rows of ``out`` from the polynomial at the t_eval[k_out:] up to t_end; the new
+    k_out."""
+    while k_out < t_eval.shape[0] and t_eval[k_out] <= t_end:
+        _dense_into(t_old, h_last, y_old, Q, t_eval[k_out], out[k_out])
+        k_out += 1
+    return k_out
+
+
+@inner
+def _newton(rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
+            lu_complex, piv_real, piv_complex, plan, lu_kind, scale, newton_tol, stats,
+            diag):
+    """Simplified Newton iterations on the collocation system from Z0, in the
+    transformed variables W (Z = T W). Returns (converged, iterations, rate, finite);
+    not finite: the stages' rhs was not (``diag``: inf for those states)."""
+    n = y.shape[0]
+    for i in range(3):
+        for k in range(n):
+            W[i, k] = _TI[i, 0] * Z0[0, k] + _TI[i, 1] * Z0[1, k] + _TI[i, 2] * Z0[2, k]
+            Z[i, k] = Z0[i, k]
+    norm_old = -1.0
+    rate = -1.0
+    mu_real = _MU_REAL / h
+    mu_complex = _MU_COMPLEX / h
+    for it in range(NEWTON_MAXITER):
+        for i in range(3):
+            for k in range(n):
+                work[k] = y[k] + Z[i, k]
+            call_entry(rhs, t + h * _C[i], work, p, F[i])
+        stats[ST_RHS] += 3
+        finite = True
+        for k in range(n):
+            if not (np.isfinite(F[0, k]) and np.isfinite(F[1, k]) and np.isfinite(F[2, k])):
+                finite = False
+                break
+        if not finite:
+            for k in range(n):
+                ok = np.isfinite(F[0, k]) and np.isfinite(F[1, k]) and np.isfinite(F[2, k])
+                diag[k] = 0.0 if ok else np.inf
+            return False, it + 1, rate, False
+        # M W, its rows into dW (overwritten by the solves below)
+        for i in range(3):
+            _times_mass(M, W[i], dW[i])
+        for k in range(n):
+            a = F[0, k] * _TI[0, 0] + F[1, k] * _TI[0, 1] + F[2, k] * _TI[0, 2]
+            f_real[k] = a - mu_real * dW[0, k]
+            b = F[0, k] * _TI[1, 0] + F[1, k] * _TI[1, 1] + F[2, k] * _TI[1, 2]
+            c = F[0, k] * _TI[2, 0] + F[1, k] * _TI[2, 1] + F[2, k] * _TI[2, 2]
+            f_cplx[k] = complex(b, c) - mu_complex * complex(dW[1, k], dW[2, k])
+        d_real = _solve(lu_real, piv_real, f_real, plan, lu_kind)
+        d_cplx = _solve(lu_complex, piv_complex, f_cplx, plan, lu_kind)
+        s0 = s1 = s2 = 0.0       # (summed per stage, then together, as before)
+        for k in range(n):
+            r0 = d_real[k] / scale[k]
+            r1 = d_cplx[k].real / scale[k]
+            r2 = d_cplx[k].imag / scale[k]
+            s0 += r0 * r0
+            s1 += r1 * r1
+            s2 += r2 * r2
+        dnorm = np.sqrt((s0 + s1 + s2) / (3 * n))
+        if norm_old >= 0.0:
+            rate = dnorm / norm_old
+        if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - it)
+                            / (1.0 - rate) * dnorm > newton_tol):
+            return False, it + 1, rate, True
+        for k in range(n):
+            W[0, k] += d_real[k]
+            W[1, k] += d_cplx[k].real
+            W[2, k] += d_cplx[k].imag
+        for i in range(3):
+            for k in range(n):
+                Z[i, k] = _T[i, 0] * W[0, k] + _T[i, 1] * W[1, k] + _T[i, 2] * W[2, k]
+        if dnorm == 0.0 or (rate >= 0.0 and rate / (1.0 - rate) * dnorm < newton_tol):
+            return True, it + 1, rate, True
+        norm_old = dnorm
+    return False, NEWTON_MAXITER, rate, True
+
+
+@inner
+def _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p, guard_tol, kg, work):
+    """Where on the polynomial of the last step a guard margin reaches its tolerance
+    (bisection): (time, guard index)."""
+    a, b = t_old, t
+    for _ in range(60):
+        m = 0.5 * (a + b)
+        _dense_into(t_old, h_last, y_old, Q, m, work)
+        km, lm = guard_min(guards, n_guards, m, work, p, guard_tol)
+        if lm <= 0.0:
+            b, kg = m, km
+        else:
+            a = m
+    return b, kg
+
+
+@njit(cache=True)
+def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, rtol, atol,
+           max_step, h_start, guard_tol, max_steps, stats, stop, diag):
+    """Integrate ``M dx/dt = rhs(t, x, p)`` from t0 to t1 (``M`` empty: the identity);
+    ``index2`` (empty, or 1.0 where a state is an algebraic variable of index 2) scales
+    those states' error tolerances by 1/h, as RADAU5 does for index-2 DAEs; ``plan``
+    is ``sparse_lu.analyse``'s elimination plan for the Newton matrices (empty: dense);
+    ``rhs``, ``jac``, ``guards`` are C entry-point addresses. States at ``t_eval`` come
+    from the collocation polynomial. ``h_start`` > 0 is the first step (a continuation
+    keeps its step size), else it is estimated. Stops where a guard margin falls to
+    ``guard_tol`` (located by bisection on the polynomial).
+
+    Returns (states at t_eval, how many were reached, t reached, state there, status,
+    guard index, the next step size); status PAUSED after ``max_steps`` accepted steps
+    (0: no limit), so that Python can watch its events and go on from there, INTERRUPTED
+    as soon as ``stop`` (a uint8 flag, ``solver.Interrupt``; empty: none) is set. ``diag``
+    (length n) holds each state's share of the last rejected step's error (error over its
+    scale; inf where the stages were not finite), to name the states that made a step
+    size collapse (STEP_TOO_SMALL)."""
+    n = x0.shape[0]
+    out = np.empty((t_eval.shape[0], n))
+    k_out = 0
+    while k_out < t_eval.shape[0] and t_eval[k_out] <= t0:
+        for i in range(n):
+            out[k_out, i] = x0[i]
+        k_out += 1
+    t, y = t0, x0.copy()
+    if t1 <= t0:
+        return out, k_out, t, y, REACHED, -1, h_start
+    f = evaluate(rhs, t, y, p, n)
+    stats[ST_RHS] += 1
+    if not _finite(f):     # no step size follows from it (a NaN one never ends)
+        for i in range(n):
+            diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
+        return out, k_out, t, y, NOT_FINITE, -1, h_start
+    if h_start > 0.0:
+        h_abs = h_start
+    else:
+        h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
+    h_abs = min(h_abs, t1 - t0, max_step)
+    h_abs_old, err_old = -1.0, -1.0
+    newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
+    J = np.empty((n, n))
+    call_entry(jac, t, y, p, J)
+    stats[ST_JAC] += 1
+    current_jac = True
+    lu_real = np.empty((n, n))
+    lu_complex = np.empty((n, n), dtype=np.complex128)
+    piv_real = np.empty(n, dtype=F_INT_nptype)
+    piv_complex = np.empty(n, dtype=F_INT_nptype)
+    have_lu = False
+    lu_kind = NO_LU
+    Q = np.zeros((n, 3))
+    have_sol = False
+    t_old, h_last, y_old = t, 0.0, y.copy()
+    # work arrays: the stages, their predictor, the transformed variables and Newton
+    # increments, the stages' rhs, the error scale and estimate
+    Z = np.zeros((3, n))
+    Z0 = np.empty((3, n))
+    W = np.empty((3, n))
+    dW = np.empty((3, n))
+    F = np.empty((3, n))
+    work = np.empty(n)
+    ZE = np.empty(n)
+    f_real = np.empty(n)
+    f_cplx = np.empty(n, dtype=np.complex128)
+    scale = np.empty(n)
+    taken = 0
+    while t < t1:
+        if stopped(stop):
+            return out, k_out, t, y, INTERRUPTED, -1, h_abs
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        if h_abs > max_step:
+            h_abs, h_abs_old, err_old = max_step, -1.0, -1.0
+            have_lu = False
+        elif h_abs < min_step:
+            h_abs, h_abs_old, err_old = min_step, -1.0, -1.0
+            have_lu = False
+        rejected = False
+        accepted = False
+        n_iter, rate, err_norm, safety = 0, 0.0, 0.0, 0.9
+        y_new = y
+        t_new = t
+        while not accepted:
+            if h_abs < min_step:
+                return out, k_out, t, y, STEP_TOO_SMALL, -1, h_abs
+            if t + h_abs >= t1:     # landing on t1: a shorter step, new factors
+                t_new = t1
+                if t1 - t != h_abs:
+                    have_lu = False
+                h_abs = t1 - t
+            else:                   # (t + h) - t differs from h by round-off: not a new h
+                t_new = t + h_abs
+            h = h_abs
+            if have_sol:
+                for i in range(3):
+                    _dense_into(t_old, h_last, y_old, Q, t + h * _C[i], Z0[i])
+                    for k in range(n):
+                        Z0[i, k] -= y[k]
+            else:
+                for i in range(3):
+                    for k in range(n):
+                        Z0[i, k] = 0.0
+            _scale(y, y, rtol, atol, index2, h, scale)
+            converged = False
+            singular = False
+            while not converged:
+                if not have_lu:
+                    stats[ST_LU] += 2
+                    lu_kind = _newton_matrices(J, M, h, lu_real, lu_complex, piv_real,
+                                               piv_complex, plan)
+                    if lu_kind == NO_LU:
+                        singular = True
+                        break      # a smaller step shifts the spectrum
+                    have_lu = True
+                converged, n_iter, rate, finite = _newton(
+                    rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
+                    lu_complex, piv_real, piv_complex, plan, lu_kind, scale, newton_tol,
+                    stats, diag)
+                if converged or not finite or current_jac:
+                    break
+                call_entry(jac, t, y, p, J)    # slow convergence: a fresh Jacobian
+                stats[ST_JAC] += 1
+                current_jac = True
+                have_lu = False
+            if not converged:
+                h_abs *= 0.5
+                have_lu = False
+                stats[ST_REJECTED] += 1
+                if singular and h_abs < min_step:
+                    return out, k_out, t, y, SINGULAR, -1, h_abs
+                continue
+            y_new = np.empty(n)
+            for k in range(n):
+                y_new[k] = y[k] + Z[2, k]
+                work[k] = (Z[0, k] * _E[0] + Z[1, k] * _E[1] + Z[2, k] * _E[2]) / h
+            _times_mass(M, work, ZE)
+            for k in range(n):
+                work[k] = f[k] + ZE[k]
+            error = _solve(lu_real, piv_real, work, plan, lu_kind)
+            _scale(y, y_new, rtol, atol, index2, h, scale)
+            err_norm = _rms_ratio(error, scale)
+            safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
+            if rejected and err_norm > 1.0:
+                for k in range(n):
+                    work[k] = y[k] + error[k]
+                call_entry(rhs, t, work, p, F[0])
+                for k in range(n):
+                    work[k] = F[0, k] + ZE[k]
+                error = _solve(lu_real, piv_real, work, plan, lu_kind)
+                stats[ST_RHS] += 1
+                err_norm = _rms_ratio(error, scale)
+            if err_norm > 1.0:
+                for k in range(n):
+                    diag[k] = abs(error[k] / scale[k])
+                mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
+                    h_abs / h_abs_old * (err_old / err_norm) ** 0.25
+                factor = min(1.0, mult) * err_norm ** -0.25
+                h_abs *= max(MIN_FACTOR, safety * factor)
+                have_lu = False
+                rejected = True
+                stats[ST_REJECTED] += 1
+            else:
+                accepted = True
+        stats[ST_STEPS] += 1
+        recompute_jac = n_iter > 2 and rate > 1e-3
+        if err_norm == 0.0:
+            factor = MAX_FACTOR
+        else:
+            mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
+                h_abs / h_abs_old * (err_old / err_norm) ** 0.25
+            factor = min(MAX_FACTOR, safety * min(1.0, mult) * err_norm ** -0.25)
+        if not recompute_jac and factor < 1.2:
+            factor = 1.0
+        # the factors depend on h: keep them while the step stays (also when the input
+        # signals' max_step clips it back to where it was)
+        h_next = min(h_abs * factor, max_step)
+        if recompute_jac or h_next != h_abs:
+            have_lu = False
+        f_new = evaluate(rhs, t_new, y_new, p, n)
+        stats[ST_RHS] += 1
+        if not _finite(y_new):
+            return out, k_out, t, y, NOT_FINITE, -1, h_abs
+        if recompute_jac:
+            call_entry(jac, t_new, y_new, p, J)
+            stats[ST_JAC] += 1
+            current_jac = True
+        else:
+            current_jac = False
+        h_abs_old, err_old = h_abs, err_norm
+        for k in range(n):
+            for j in range(3):
+                Q[k, j] = Z[0, k] * _P[0, j] + Z[1, k] * _P[1, j] + Z[2, k] * _P[2, j]
+        have_sol = True
+        t_old, h_last, y_old = t, t_new - t, y
+        t, y, f = t_new, y_new, f_new
+        h_abs = h_next
+        # a guard margin reaching its tolerance: locate it on the polynomial (bisection)
+        if guard_tol > 0.0 and n_guards > 0:
+            kg, low = guard_min(guards, n_guards, t, y, p, guard_tol)
+            if low <= 0.0:
+                b, kg = _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p,
+                                      guard_tol, kg, work)
+                k_out = _record(out, k_out, t_eval, b, t_old, h_last, y_old, Q)
+                return (out, k_out, b, dense(t_old, h_last, y_old, Q, b), GUARD, kg,
+                        h_abs)
+        k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
+        taken += 1
+        if max_steps > 0 and taken >= max_steps and t < t1:
+            return out, k_out, t, y, PAUSED, -1, h_abs
+    return out, k_out, t, y, REACHED, -1, h_abs
+
+
+def compile_loop():
+    """Compile ``radau5`` for the argument types ``simulate.NativeSolver`` passes, into
+    numba's cache (``native.Precompile`` runs this in a separate process); it returns at
+    once (t1 = t0), calling none of the entry points."""
+    n = 1
+    radau5(0, 0, 0, 0, 0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(1), np.empty((0, 0)),
+           np.empty(0), sparse_lu.DENSE, 1e-6, 1e-6, np.inf, 0.0, 1e-3, 0,
+           np.zeros(N_STATS, dtype=np.int64), np.zeros(0, dtype=np.uint8), np.zeros(n))

@@ -1,0 +1,1 @@
+"""Reading results: frequency responses, chirp envelopes, CSV and plots."""

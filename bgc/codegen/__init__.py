@@ -1,0 +1,2 @@
+"""Stages **equations**, **Jacobian**, **emit**, **kernels**: CausalGraph -> EquationSystem
+-> the source of a generated module (Jinja template, LLVM IR kernels)."""

@@ -1,0 +1,2 @@
+"""Stages **expand** and **causality**: Model -> BondGraph (bodies and joints as multibonds)
+-> CausalGraph (SCAP)."""

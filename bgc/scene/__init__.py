@@ -1,0 +1,1 @@
+"""Scenes: the question a simulation asks of a model, and the reduction passes it allows."""

@@ -11,14 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from bgc import progress
-from bgc.codegen.module_file import (
-    import_module,
-    is_stale,
-    module_name_problem,
-    module_path,
-    variant,
-)
+from bgc import methods, progress
+from bgc.codegen.module_file import import_module, is_stale, module_name_problem, module_path
 from bgc.fileio import check_writable
 from bgc.model import document
 from bgc.model.model import Model, Settings
@@ -28,7 +22,7 @@ if TYPE_CHECKING:
     from bgc.graph.causality import CausalGraph
 
 # what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
-METHODS = ("parasitic", "lagrange", "zcp")
+METHODS = methods.NAMES
 
 
 @dataclass
@@ -47,14 +41,11 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
     ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     from bgc.codegen import equations
     from bgc.graph import causality, expand
-    from bgc.methods import zcp
     with progress.record() as timings:
         if not isinstance(model, Model):
             model = _load(model)
         with progress.stage("causality") as st:
-            graph = expand.expand(model, method)
-            if method == "zcp":
-                graph = zcp.assign(graph, open_loops)
+            graph = methods.get(method).restructure(expand.expand(model, method), open_loops)
             cg = causality.assign(graph)
             st.done(f"{progress.count(len(graph.elements), 'element')}, "
                     f"{progress.count(len(graph.bonds), 'bond')} ({method})")
@@ -139,7 +130,7 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
     beside the build). ``need_model=False``: a fresh module is found from the YAML alone
     (``_fresh``) and the Model comes back as None; the module's SETTINGS and MODEL_NAME
     are the model's."""
-    kind = variant(method, open_loops)
+    kind = methods.variant(method, open_loops)
     with progress.record() as timings:
         with progress.stage("load") as st:
             doc = document.read(model_path)

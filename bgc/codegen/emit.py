@@ -18,7 +18,7 @@ from pathlib import Path
 import jinja2
 import sympy as sp
 
-from bgc import __version__, progress
+from bgc import __version__, methods, progress
 from bgc.codegen import kernels
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.codegen.jacobian import tape
@@ -112,7 +112,7 @@ def _free(item) -> set:
     return item.free_symbols if isinstance(item, LinearBlock) else item[1].free_symbols
 
 
-def _cone(assignments, targets):
+def cone(assignments, targets):
     """The assignments that ``targets`` depend on, in their original order."""
     need = set()
     for e in targets:
@@ -173,7 +173,7 @@ def render(system: EquationSystem) -> str:
     system, hoisted = hoist_calls(system)
     m = system.model
     dx = [st.dsym for st in system.states]
-    rhs_asg, _ = _cone(system.assignments, dx)
+    rhs_asg, _ = cone(system.assignments, dx)
     with progress.stage("jacobian") as st:
         jt = tape(rhs_asg, system.states)
         st.done(f"{progress.count(len(jt.pattern), 'entry', 'entries')}, "
@@ -183,14 +183,14 @@ def render(system: EquationSystem) -> str:
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
-    jac_all, _ = _cone(system.assignments, jac_targets)
+    jac_all, _ = cone(system.assignments, jac_targets)
     out_exprs = [e for _, e in system.outputs]
-    out_asg, _ = _cone(system.assignments, out_exprs)
+    out_asg, _ = cone(system.assignments, out_exprs)
     guard_exprs = [e for _, e in system.guards]
-    guard_asg, _ = _cone(system.assignments, guard_exprs)
+    guard_asg, _ = cone(system.assignments, guard_exprs)
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
-    con_asg, _ = _cone(system.assignments, con_exprs)
+    con_asg, _ = cone(system.assignments, con_exprs)
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     # every name the code assigns or reads is written as is: each must be an identifier
     for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
@@ -241,7 +241,7 @@ def render(system: EquationSystem) -> str:
         algebraic=system.algebraic,
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
-        static_loads=bool(m.static_loads and system.method == "parasitic"),
+        static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),
     )
     return _ENV.get_template("module.py.j2").render(**ctx)
 

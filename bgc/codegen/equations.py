@@ -23,14 +23,14 @@ from dataclasses import dataclass, field
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
+from bgc import methods
 from bgc.codegen.forward_mode import directional, propagate, trivial
-from bgc.codegen.module_file import variant
 from bgc.errors import EquationError
 from bgc.graph.algorithms import is_cyclic, strongly_connected
 from bgc.graph.causality import CausalGraph
 from bgc.graph.expand import AXES, body_junction, position, rotation_matrix
 from bgc.mechanics import cardan, exact
-from bgc.methods import lagrange, zcp
+from bgc.methods.consistent import RANK_PARAM
 from bgc.model import symbols
 from bgc.model.model import Model, Table
 
@@ -144,7 +144,7 @@ class EquationSystem:
     def variant(self) -> str:
         """What the generated module is named and hashed by: the method, for zcp whether
         its loops were kept closed (``zcp_closed``), and the scene it was reduced for."""
-        v = variant(self.method, not self.loops_closed)
+        v = methods.variant(self.method, not self.loops_closed)
         return f"{v}_{self.scene}" if self.scene else v
 
     @property
@@ -259,25 +259,25 @@ class _Builder:
             getattr(self, f"_el_{ {'0': 'zero', '1': 'one'}.get(el.kind, el.kind) }")(name, el)
         self.kinematics()
 
-    def _port(self, name):
+    def port(self, name):
         b = self.g.ports[name][0]
         return b, self.g.port_sign(b, name), self.E(b), self.F(b)
 
     def _el_Se(self, name, el):
-        b, s, E, F = self._port(name)
+        b, s, E, F = self.port(name)
         self.define(E, el.fields["effort"], name, b)
 
     _el_MSe = _el_Se
 
     def _el_Sf(self, name, el):
-        b, s, E, F = self._port(name)
+        b, s, E, F = self.port(name)
         self.define(F, s * el.fields["flow"], name, b)
 
     _el_MSf = _el_Sf
 
     def _storage(self, name, el, qname):
         """C (qname 'q') and I (qname 'p'): integral or derivative causality."""
-        b, s, E, F = self._port(name)
+        b, s, E, F = self.port(name)
         if isinstance(E, sp.MatrixBase):
             return self._storage_vector(name, el, qname, b, s, E, F)
         # For C: e = law(q), dq/dt = f.  For I: f = law(p), dp/dt = e.
@@ -347,7 +347,7 @@ class _Builder:
         self._storage(name, el, "p")
 
     def _el_R(self, name, el):
-        b, s, E, F = self._port(name)
+        b, s, E, F = self.port(name)
         if isinstance(E, sp.MatrixBase):
             R = el.fields["R"]
             R = R if isinstance(R, sp.MatrixBase) else R * sp.eye(len(E))
@@ -435,7 +435,7 @@ class _Builder:
 
     def _el_EJS(self, name, el):
         """Euler's gyroscopic torque omega x (J omega), omega in the principal body frame."""
-        b, s, E, F = self._port(name)
+        b, s, E, F = self.port(name)
         w = s * F
         h = sp.Matrix([el.fields["J"][i] * w[i] for i in range(3)])
         self.define(E, w.cross(h), name, b)
@@ -470,8 +470,8 @@ class _Builder:
         and its rate A an unknown of the constraint block next to the multipliers, defined
         by the same balance ``A = A + e``: the block becomes the saddle point
         ``[J M^-1 J^T, J_U; J_U^T, 0]``, regular where the blocked directions fix U."""
-        b, s, E, F = self._port(name)
-        if self.g.method in ("lagrange", "zcp"):
+        b, s, E, F = self.port(name)
+        if methods.get(self.g.method).ideal:
             return self._massless_lagrange(name, b, s, E, F)
         U = sp.Matrix([symbols.unknown(name, k) for k in range(len(E))])
         self.define(F, s * U, name, b)
@@ -616,7 +616,7 @@ class _Builder:
                 tag = "e" if el.kind == "0" else "f"
                 out.update(self._refs(name, tag, self.E(first) if tag == "e" else self.F(first)))
             elif len(self.g.ports[name]) == 1:
-                b, s, E, F = self._port(name)
+                b, s, E, F = self.port(name)
                 out.update(self._refs(name, "e", E))
                 out.update(self._refs(name, "f", s * F))
         for st in self.states:
@@ -806,7 +806,7 @@ def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock
     K = tuple((i, col[x], d) for i, t in enumerate(tears)
               for x, d in sorted(b.kkt_rows[t].items(), key=lambda kv: kv[0].name))
     # a body of negligible mass adds its twist's rates, each one rank of the saddle point
-    rank = symbols.param(lagrange.RANK) + sum(t.name.startswith("ACC_") for t in tears)
+    rank = symbols.param(RANK_PARAM) + sum(t.name.startswith("ACC_") for t in tears)
     return LinearBlock(index, tuple(tears), (), None, tuple(b.eqs[t] for t in tears), chain,
                        tuple(pre), rank, (len(dynamic), K, B))
 
@@ -848,7 +848,7 @@ def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYM
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
                         f"({len(multipliers)} Lagrange multipliers)"]
         block = _reduced_block(b, tears, order, block_index, refuse,
-                               rank=symbols.param(lagrange.RANK))
+                               rank=symbols.param(RANK_PARAM))
         return [block] + [(v, eqs[v]) for v in order], loop
     if dependent:
         loop.kind = "imposed-flow"
@@ -908,13 +908,12 @@ def gc_paused():
 
 def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
     b = _Builder(cg)
-    method = cg.graph.method
+    method = methods.get(cg.graph.method)
     b.build()
     b.resolve_refs()
     b.resolve_derivatives()
-    if cg.graph.zcp is not None:
-        zcp.embed(b)
-    constraints = lagrange.acceleration_constraints(b)
+    method.embed(b)
+    constraints = method.constraint_equations(b)
     deps = _deps(b.eqs)
     assignments, loops, blocks = [], [], 0
     for comp in strongly_connected(list(b.eqs), deps):
@@ -929,12 +928,10 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
     outputs = [(o.name, o.expr.xreplace(b.refs).xreplace(aliases)) for o in b.m.outputs]
     params = [(symbols.param(p.name), p.name, p.value) for p in b.m.parameters.values()]
     if constraints:
-        alpha = lagrange.alpha_param(method)
-        params += [(symbols.param(alpha), alpha, lagrange.default_alpha(b.m.settings.t_end)),
-                   (symbols.param(lagrange.RANK), lagrange.RANK, float(len(constraints)))]
+        params += [(symbols.param(n), n, v) for n, v in method.parameters(b.m, constraints)]
         constraints = [(n, g if g is None else g.xreplace(aliases), r.xreplace(aliases))
                        for n, g, r in constraints]
-    system = EquationSystem(b.m, method, b.states, params, assignments, outputs, loops,
+    system = EquationSystem(b.m, method.name, b.states, params, assignments, outputs, loops,
                             {n: b.display[v] for n, v in b.dependent.items()}, b.display,
                             guards=b.guards, constraints=constraints,
                             imposed={c.name for c in cg.graph.constraints if c.imposed},

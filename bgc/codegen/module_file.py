@@ -16,7 +16,7 @@ import re
 import sys
 from pathlib import Path
 
-from bgc import __version__
+from bgc import __version__, methods
 
 _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
 
@@ -116,17 +116,12 @@ def suggest_module_name(name) -> str:
     return "bgc_model"
 
 
-def variant(method: str, open_loops: bool = True) -> str:
-    """``method``, or ``zcp_closed`` for method zcp with its loops kept closed."""
-    return "zcp_closed" if method == "zcp" and not open_loops else method
-
-
 def module_path(name: str, out_dir: str | Path = "generated",
-                method: str = "parasitic") -> Path:
+                method: str = methods.DEFAULT) -> Path:
     """``<name>.py`` for the default method, ``<name>_<method>.py`` for the others (so
     the methods of one model live side by side; ``method`` may be a variant,
-    ``variant``: ``zcp_closed``)."""
-    return Path(out_dir) / (f"{name}.py" if method == "parasitic" else f"{name}_{method}.py")
+    ``methods.variant``: ``zcp_closed``)."""
+    return Path(out_dir) / (f"{name}.py" if method == methods.DEFAULT else f"{name}_{method}.py")
 
 
 def stored_hash(path: Path) -> str | None:

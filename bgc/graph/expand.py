@@ -28,10 +28,12 @@ import functools
 import numpy as np
 import sympy as sp
 
+from bgc import methods
 from bgc.errors import ModelError
-from bgc.graph.bondgraph import BondGraph, Constraint
+from bgc.graph.bondgraph import BondGraph
 from bgc.mechanics import exact
 from bgc.mechanics import joints as jmodels
+from bgc.methods.base import ConstraintMethod
 from bgc.model import symbols
 from bgc.model.model import KINDS, TWO_PORTS, Body, Bond, Element, Joint, Model
 
@@ -72,9 +74,9 @@ def joint_param(joint: str, role: str) -> str:
 
 
 class _Expander:
-    def __init__(self, model: Model, method: str):
+    def __init__(self, model: Model, method: ConstraintMethod):
         self.m, self.method = model, method
-        self.constraints: list[Constraint] = []
+        self.constraints: list = []         # bondgraph.Constraint, added by the method
         self.elements: dict[str, Element] = dict(model.elements)
         self.bonds: list[Bond] = list(model.bonds)
 
@@ -166,23 +168,10 @@ class _Expander:
                 mtf = self.add(f"{j.name}__{d.label}__{key}", "MTF", j.loc, ratio=row.T)
                 self.bond(src, mtf, j.loc)
                 self.bond(mtf, zero, j.loc, dim=1)
-            parts = []
-            if d.blocked and self.method in ("lagrange", "zcp"):
-                L = self.add(f"{zero}__L", "MSe", j.loc,
-                             effort=symbols.multiplier(j.name, d.label))
-                self.constraints.append(Constraint(j.name, d.label, L, d.g, d.rotational))
-                parts.append(L)
-            elif d.blocked:
-                kind = "rot_" if d.rotational else ""
-                k = symbols.param(joint_param(j.name, kind + "stiffness"))
-                c = symbols.param(joint_param(j.name, kind + "damping"))
-                if d.g is not None:     # load: the static joint load it starts with
-                    load = symbols.param(joint_param(j.name, f"{d.label}_load"))
-                    parts.append(self.add(f"{zero}__L", "MSe", j.loc, effort=k * d.g - load))
-                else:
-                    parts.append(self.add(f"{zero}__L", "C", j.loc, k=k, initial=sp.S.Zero))
-                parts.append(self.add(f"{zero}__Lc", "R", j.loc, R=c))
+            if d.blocked:       # the constraint element L: what the method makes of it
+                parts = self.method.constraint_element(self, j, d, zero)
             else:
+                parts = []
                 def p(role, d=d):
                     return symbols.param(joint_param(j.name, f"{d.label}_{role}"))
                 if fun.k != 0:
@@ -208,7 +197,7 @@ class _Expander:
         return dirs
 
 
-def _initial_pose(model: Model) -> dict:
+def initial_pose(model: Model) -> dict:
     """Body positions and rotation-matrix entries at the initial pose."""
     subs = {}
     for n, b in model.bodies.items():
@@ -219,7 +208,7 @@ def _initial_pose(model: Model) -> dict:
     return subs
 
 
-def _twist_row(model: Model, j, d, col: dict, subs: dict, width: int) -> np.ndarray:
+def twist_row(model: Model, j, d, col: dict, subs: dict, width: int) -> np.ndarray:
     """Direction ``d`` of joint ``j`` as a row acting on the twists (v_G in R0, omega in
     the body frame) of the bodies in ``col`` (body -> first column), at the initial pose."""
     row = np.zeros(width)
@@ -250,7 +239,7 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
         col = {n: 6 * i for i, n in enumerate(sorted(n for n in pair if n is not None))}
         width = 6 * len(col)
         for name, j, dirs in joints:
-            blocked = [(other, _twist_row(model, oj, d, col, subs, width))
+            blocked = [(other, twist_row(model, oj, d, col, subs, width))
                        for other, oj, odirs in joints if other != name
                        for d in odirs if d.blocked]
             if not blocked:
@@ -261,7 +250,7 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
                 fun = j.functional.get(d.label)
                 if d.blocked or fun is None or fun.empty:
                     continue
-                f = _twist_row(model, j, d, col, subs, width)
+                f = twist_row(model, j, d, col, subs, width)
                 if np.linalg.matrix_rank(np.vstack([B, f]), tol=1e-9) == rank:
                     others = sorted({o for o, _ in blocked})
                     raise ModelError(
@@ -273,7 +262,7 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
                              "to a direction that is free in both")
 
 
-def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: str):
+def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: ConstraintMethod):
     """A body of negligible mass must have its twist fixed by its joints (blocked or damped
     directions), or the balance of forces on it cannot be solved. Under lagrange (and zcp)
     its twist is a state whose rate the constraint block solves: only blocked
@@ -286,13 +275,13 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: str):
     for name, (j, dirs) in joint_dirs.items():
         for d in dirs:
             fun = j.functional.get(d.label)
-            damped = fun is not None and fun.c != 0 and method == "parasitic"
+            damped = fun is not None and fun.c != 0 and not method.ideal
             if not (d.blocked or damped):
                 continue
             for n in (j.body1, j.body2):
                 if n in col and name not in touching[n]:
                     touching[n].append(name)
-            rows.append(_twist_row(model, j, d, col, subs, 6 * len(massless)))
+            rows.append(twist_row(model, j, d, col, subs, 6 * len(massless)))
     A = np.array(rows) if rows else np.zeros((0, 6 * len(massless)))
     for n in massless:
         sub = A[:, col[n]:col[n] + 6]
@@ -306,9 +295,9 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: str):
                              key=f"bodies.{n}.mass",
                              hint="give it a mass, join it, or put a damper on the free "
                                   "direction of one of its joints" + (
-                                      " with --method parasitic (under lagrange and zcp "
+                                      f" with --method {methods.DEFAULT} (under {method.name} "
                                       "only blocked directions fix it)"
-                                      if method != "parasitic" else ""))
+                                      if method.ideal else ""))
     if np.linalg.matrix_rank(A, tol=1e-9) < A.shape[1]:
         names = ", ".join(massless)
         raise ModelError(f"the bodies of negligible mass ({names}) can move together without "
@@ -317,18 +306,19 @@ def _check_massless(model: Model, joint_dirs: dict, subs: dict, method: str):
                          hint="give one of them a mass or block the chain's free direction")
 
 
-def expand(model: Model, method: str = "parasitic") -> BondGraph:
-    """``method`` decides what the constraint element L of a blocked joint direction is:
-    ``parasitic`` a stiff spring || damper, ``lagrange`` an effort source (the multiplier);
-    ``zcp`` starts from the latter and ``zcp.assign`` turns the tree joints' L into flow
-    sources."""
-    ex = _Expander(model, method)
+def expand(model: Model, method: str = methods.DEFAULT) -> BondGraph:
+    """``method`` (a name in ``bgc.methods``) decides what the constraint element L of a
+    blocked joint direction is (``ConstraintMethod.constraint_element``): under
+    ``parasitic`` a stiff spring || damper, under ``lagrange`` an effort source (the
+    multiplier); ``zcp`` starts from the latter and its ``restructure`` pass turns the
+    tree joints' L into flow sources."""
+    ex = _Expander(model, methods.get(method))
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
-    pose = _initial_pose(model)
+    pose = initial_pose(model)
     _check_functional_not_blocked(model, joint_dirs, pose)
-    _check_massless(model, joint_dirs, pose, method)
+    _check_massless(model, joint_dirs, pose, ex.method)
     elements, bonds = ex.elements, ex.bonds
     ports: dict[str, list[int]] = {name: [] for name in elements}
     for i, b in enumerate(bonds):

@@ -36,20 +36,17 @@ from __future__ import annotations
 
 import sympy as sp
 
+from bgc import methods
 from bgc.codegen.forward_mode import directional, propagate
 from bgc.errors import EquationError
 from bgc.graph.algorithms import is_cyclic, strongly_connected
-from bgc.methods import zcp
+from bgc.graph.bondgraph import Constraint
+from bgc.methods.base import ConstraintMethod
 from bgc.methods.consistent import RANK_PARAM
 from bgc.model import symbols
 
 ALPHA = "lagrange__alpha"
 RANK = RANK_PARAM            # set by the simulator from the rank at the start
-
-
-def alpha_param(method: str) -> str:
-    """The stabilisation rate's parameter: ``lagrange__alpha`` or ``zcp__alpha``."""
-    return zcp.ALPHA if method == "zcp" else ALPHA
 
 
 def default_alpha(t_end: float | None) -> float:
@@ -67,11 +64,12 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     cons = b.g.constraints
     if not cons:
         return []
-    alpha = symbols.param(alpha_param(b.g.method))
+    method = methods.get(b.g.method)
+    alpha = symbols.param(method.stabilisation)
     leaves = {s for s, _, _ in b.zcp_dependent}
     rates = {}
     for c in cons:
-        bond, s, E, F = b._port(c.element)
+        bond, s, E, F = b.port(c.element)
         rates[c] = -s * F          # the flow into the 0-junction's direction: dg/dt
     cone = _cone(b, list(rates.values()) + [c.g for c in cons if c.g is not None], leaves)
     bad = [v for v in cone if v.name.startswith(("DX_", "LAM_", "W_"))]
@@ -122,8 +120,7 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
         else:
             b.eqs[lam] = lam + rdot + 2 * alpha * r + alpha ** 2 * g
         b.origin[lam] = (c.element, None)
-        role = "lambda" if b.g.method == "lagrange" else "e" if c.imposed else "break"
-        b.display[lam] = f"{c.name}.{role}"
+        b.display[lam] = f"{c.name}.{method.role(c)}"
         out.append((c.name, c.g, r))
     return out
 
@@ -138,3 +135,34 @@ def _cone(b, exprs, leaves=frozenset()) -> set:
         seen.add(v)
         stack.extend(b.eqs[v].free_symbols)
     return seen
+
+
+class Lagrange(ConstraintMethod):
+    """L is an effort source whose effort is the multiplier (paper 11.2.5.3): each blocked
+    direction a constraint ``g = 0`` held at the acceleration level with Baumgarte
+    stabilisation (``acceleration_constraints``); the multipliers are unknowns of the
+    constraint block, solved with the accelerations."""
+
+    name = "lagrange"
+    ideal = True
+
+    def constraint_element(self, ex, joint, d, zero):
+        L = ex.add(f"{zero}__L", "MSe", joint.loc, effort=symbols.multiplier(joint.name, d.label))
+        ex.constraints.append(Constraint(joint.name, d.label, L, d.g, d.rotational))
+        return [L]
+
+    def constraint_equations(self, b) -> list:
+        return acceleration_constraints(b)
+
+    def parameters(self, model, constraints) -> list[tuple[str, float]]:
+        """The stabilisation rate and the constraint block's rank (set again by the
+        simulator from the rank at the start)."""
+        return [(self.stabilisation, default_alpha(model.settings.t_end)),
+                (RANK, float(len(constraints)))]
+
+    def report(self, compiled):
+        s = compiled.system
+        if not s.constraints:
+            return {}, []
+        return {}, [f"constraints (method {self.name}): {len(s.constraints)} multipliers, "
+                    "solved at the acceleration level with Baumgarte stabilisation"]

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bgc.errors import SimulationError
+from bgc.methods.base import ConstraintMethod
 
 SEPARATION = 100.0       # parasitic frequencies >= this x the highest functional one
 DAMPING_RATIO = 1.0      # of the slowest blocked direction of each joint
@@ -76,10 +77,10 @@ def _functional_rate(module, x, p, stiff: list[int], damp: list[int]) -> float:
 def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarray, Choice]:
     """Parameters ``p`` with every joint's parasitic stiffness and damping chosen, and
     the Choice made (reported by ``bgc simulate --parasitic auto``)."""
-    from bgc.graph.expand import _initial_pose, _twist_row, expand, joint_param
+    from bgc.graph.expand import expand, initial_pose, joint_param, twist_row
     names = list(module.PARAM_NAMES)
     graph = expand(model)
-    pose = _initial_pose(model)
+    pose = initial_pose(model)
     massive = [n for n, b in model.bodies.items() if b.mass > 0]
     col = {n: 6 * i for i, n in enumerate(massive)}
     minv = np.concatenate([[1 / model.bodies[n].mass] * 3
@@ -91,7 +92,7 @@ def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarra
             meff = []
             for d in dirs:
                 if d.blocked and d.rotational == rot:
-                    row = _twist_row(model, j, d, col, pose, 6 * len(massive))
+                    row = twist_row(model, j, d, col, pose, 6 * len(massive))
                     w = float(row @ (minv * row))
                     if w > 0:
                         meff.append(1 / w)
@@ -141,3 +142,27 @@ def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarra
             ratios.append(min(chosen) / max(functional))
     choice.stiffness_ratio = min(ratios) if ratios else None
     return out, choice
+
+
+class Parasitic(ConstraintMethod):
+    """L is a stiff spring in parallel with a damper (paper 11.2.5.2): the joint is
+    compliant, its stiffness and damping parameters of the module (``auto`` chooses them),
+    and a direction whose gap ``g`` is known starts deflected under its static load."""
+
+    name = "parasitic"
+    ideal = False
+
+    def constraint_element(self, ex, joint, d, zero):
+        import sympy as sp
+
+        from bgc.graph.expand import joint_param
+        from bgc.model import symbols
+        kind = "rot_" if d.rotational else ""
+        k = symbols.param(joint_param(joint.name, kind + "stiffness"))
+        c = symbols.param(joint_param(joint.name, kind + "damping"))
+        if d.g is not None:     # load: the static joint load it starts with
+            load = symbols.param(joint_param(joint.name, f"{d.label}_load"))
+            spring = ex.add(f"{zero}__L", "MSe", joint.loc, effort=k * d.g - load)
+        else:
+            spring = ex.add(f"{zero}__L", "C", joint.loc, k=k, initial=sp.S.Zero)
+        return [spring, ex.add(f"{zero}__Lc", "R", joint.loc, R=c)]

@@ -43,7 +43,8 @@ import sympy as sp
 
 from bgc.errors import EquationError
 from bgc.graph.bondgraph import BondGraph
-from bgc.graph.expand import AXES, _initial_pose, _twist_row
+from bgc.graph.expand import AXES, initial_pose, twist_row
+from bgc.methods.lagrange import Lagrange
 from bgc.model import symbols
 
 ALPHA = "zcp__alpha"
@@ -225,10 +226,10 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
             loc=j.loc, key=f"joints.{j.name}",
             hint="let zcp open it with break variables (the default), or use --method "
                  "lagrange or parasitic")
-    pose = _initial_pose(model)
+    pose = initial_pose(model)
     for name, par, child in tree:
         j = model.joints[name]
-        rows = np.array([_twist_row(model, j, d, {child: 0}, pose, 6)
+        rows = np.array([twist_row(model, j, d, {child: 0}, pose, 6)
                          for d in graph.joints[name] if d.blocked])
         weights = np.array([1.0] * 3 + [_ROTATION_WEIGHT] * 3)
         cols = _pivot_columns(rows * weights, len(rows))
@@ -275,7 +276,7 @@ def embed(b) -> set:
         by_joint.setdefault(c.joint, []).append(c)
     sources = [c for tj in g.zcp.tree for c in by_joint[tj.joint]]   # as plan.dependent
     for c, (el, _), (p, _, label) in zip(sources, g.zcp.dependent, dep):
-        bond, s, E, F = b._port(c.element)
+        bond, s, E, F = b.port(c.element)
         gap = c.g if c.g is not None else sp.S.Zero
         b.eqs[p] = p - s * F + alpha * gap         # -s F: the direction's rate dg/dt
         b.origin[p] = (el, None)
@@ -382,3 +383,38 @@ def _components(nodes: set, edges) -> int:
     for a, c in edges:
         parent[find(a)] = find(c)
     return len({find(n) for n in nodes})
+
+
+class Zcp(Lagrange):
+    """Zero-order causal paths (paper 11.2.5.1): starts from lagrange's effort sources and
+    turns the blocked directions of a spanning tree's joints into flow sources
+    (``assign``), whose imposed flows make the children's momenta dependent (``embed``);
+    the joints that close kinematic loops keep multipliers (break variables), or stay
+    closed as an index-2 DAE with ``open_loops`` False."""
+
+    name = "zcp"
+
+    def restructure(self, graph, open_loops=True):
+        return assign(graph, open_loops)
+
+    def embed(self, builder):
+        embed(builder)
+
+    def role(self, constraint) -> str:
+        return "e" if constraint.imposed else "break"
+
+    def hides_loop(self, loop) -> bool:
+        return loop.kind in ("imposed-flow", "constraint")
+
+    def storage(self, graph, name):
+        return graph.zcp.storage(name) if graph.zcp is not None else None
+
+    def report(self, compiled):
+        s = compiled.system
+        found = paths(compiled.causal.graph, s)
+        n_imp = len(s.imposed)
+        lines = [f"zero-order causal paths: {len(found) or 'none'} ({n_imp} flow sources, "
+                 f"{len(s.constraints) - n_imp} break variables)"]
+        for z in found:
+            lines += [f"  class {z.cls}: {z.what}", f"    {z.summary()}"]
+        return {"zcp_paths": [z.to_dict() for z in found]}, lines

@@ -37,7 +37,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import sympy as sp
 
-from bgc.codegen.emit import _cone
+from bgc import methods
+from bgc.codegen.emit import cone
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.mechanics import exact
 from bgc.mechanics.joints import JOINT_KINDS
@@ -130,7 +131,7 @@ def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
     """Drop the momentum of each body's idle spin (see the module's docstring), unless
     one of ``outputs`` (default: all) reads it."""
     m = system.model
-    if system.method != "parasitic":
+    if methods.get(system.method).ideal:
         return system, report("idle_dofs", system, system, [],
                                f"method {system.method}: the spin's rate is an unknown of "
                                "the constraint block, left as it is")
@@ -146,7 +147,7 @@ def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
         zero[st.sym] = sp.Integer(0)
         notes.append(st.name)
     read = [n for n, e in system.outputs if (outputs is None or n in outputs)
-            and _cone(system.assignments, [e])[1] & set(zero)]
+            and cone(system.assignments, [e])[1] & set(zero)]
     if read:     # an output reads a spin: it is not idle for this scene
         return system, report("idle_dofs", system, system, [],
                                f"outputs {', '.join(read)} read a spin: kept")
@@ -192,7 +193,7 @@ def prune(system: EquationSystem, outputs) -> tuple:
     need: set = set()
     frontier = seeds
     while frontier:
-        _, used = _cone(system.assignments, frontier)
+        _, used = cone(system.assignments, frontier)
         new = {s for s in used if s in states} - need
         need |= new
         frontier = [states[s].dsym for s in new]

@@ -210,7 +210,7 @@ def reduced_system(scene: Scene):
 def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
     """The scene's reduced module, rebuilt only when the scene or its model changed.
     Returns (module, the pass reports as dicts, kept beside it in ``.passes.json``)."""
-    from bgc.codegen.module_file import variant
+    from bgc.methods import variant
     path = emit.module_path(load.load(scene.model).name, out_dir,
                             f"{variant(scene.method)}_{scene.name}")
     passes = path.with_suffix(".passes.json")

@@ -59,7 +59,7 @@ def test_references_resolve_to_the_same_expressions_as_a_full_map(tmp_path):
     from bgc.model import load
     model = load.load("models/double_pendulum.yaml")
     cg = causality.assign(expand.expand(model, "parasitic"))
-    b = equations._Builder(cg)
+    b = equations.Builder(cg)
     b.build()
     b.resolve_refs()
     full = b.ref_map()

@@ -177,7 +177,14 @@ class Dt(sp.Function):
     nargs = 1
 
 
-class _Builder:
+class Builder:
+    """The causal equations of a CausalGraph, built element by element (``build``), before
+    they are sorted and solved. A constraint method extends them through this surface
+    only (``ConstraintMethod.embed`` and ``constraint_equations``): ``define``, ``port``,
+    ``algebraic_state``, and the tables ``eqs``, ``origin``, ``display``, ``states``,
+    ``kkt_rows`` (lagrange's rows of the constraint block) and ``zcp_dependent`` (zcp's
+    momenta no longer integrated)."""
+
     def __init__(self, cg: CausalGraph):
         self.cg, self.g, self.m = cg, cg.graph, cg.graph.model
         self.eqs: dict[sp.Symbol, sp.Expr] = {}
@@ -260,6 +267,7 @@ class _Builder:
         self.kinematics()
 
     def port(self, name):
+        """A one-port element's bond, the sign of its power, its effort and flow."""
         b = self.g.ports[name][0]
         return b, self.g.port_sign(b, name), self.E(b), self.F(b)
 
@@ -729,7 +737,7 @@ def _tear(comp: list, deps: dict, first=()) -> list:
         rest.remove(best)
 
 
-def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
+def _numeric_block(b: Builder, comp: list, index: int, refuse) -> LinearBlock:
     """The whole loop as one linear system in all its variables (simple coefficients,
     nothing substituted), to be factorized numerically in the generated code."""
     residuals = [v - b.eqs[v] for v in comp]
@@ -746,7 +754,7 @@ def _numeric_block(b: _Builder, comp: list, index: int, refuse) -> LinearBlock:
                        tuple(b.eqs[v] for v in comp))
 
 
-def _substituted(b: _Builder, order: list) -> dict:
+def _substituted(b: Builder, order: list) -> dict:
     """The loop variables ``order`` (causal order) as expressions of the tearing variables
     and what lies outside the loop (only where a substituted residual is wanted: they
     swell along long loops)."""
@@ -756,7 +764,7 @@ def _substituted(b: _Builder, order: list) -> dict:
     return subs
 
 
-def _reduced_block(b: _Builder, tears: list, order: list, index: int,
+def _reduced_block(b: Builder, tears: list, order: list, index: int,
                    refuse, rank=None, numeric_rhs=False) -> LinearBlock:
     """A linear loop solved numerically in its tearing variables only. ``A = I - d
     tear_eqs/du`` comes from forward-mode sensitivities to the tears carried through the
@@ -785,7 +793,7 @@ def _reduced_block(b: _Builder, tears: list, order: list, index: int,
                        tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
 
 
-def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock:
+def _kkt_block(b: Builder, tears: list, order: list, index: int) -> LinearBlock:
     """The constraint block of method lagrange: the acceleration-level equations are
     linear in the multipliers u, ``resid = K (dp/dt) + ...`` with ``dp/dt = dp/dt|u=0 +
     B u``; K (the rates' rows on the dynamic states, from ``lagrange``) and B (the
@@ -811,7 +819,7 @@ def _kkt_block(b: _Builder, tears: list, order: list, index: int) -> LinearBlock
                        tuple(pre), rank, (len(dynamic), K, B))
 
 
-def _solve_loop(b: _Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
+def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
     multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
@@ -907,7 +915,7 @@ def gc_paused():
 
 
 def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
-    b = _Builder(cg)
+    b = Builder(cg)
     method = methods.get(cg.graph.method)
     b.build()
     b.resolve_refs()

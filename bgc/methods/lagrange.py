@@ -17,7 +17,7 @@ on the momenta's rates, ``equations._kkt_block``) and solves it by SVD, keeping 
 found at the initial state, so redundant constraints (hyperstatic mechanisms) share their
 load by least squares. A body of negligible mass has no momentum: its twist is a state
 and its rate an unknown of the same block, defined by the balance of the forces on it
-(``equations._Builder._massless_lagrange``), which makes the block the saddle point
+(``equations.Builder._massless_lagrange``), which makes the block the saddle point
 ``[J M^-1 J^T, J_U; J_U^T, 0]`` (rank: the constraints' plus 6 per such body).
 
 Method zcp with its kinematic loops kept closed (``zcp.Plan.closed``): the break

@@ -679,7 +679,7 @@ class Builder:
         subs = {}
         for s in expr.free_symbols:
             if s in self.eqs:
-                if s.name.startswith("DX_"):
+                if symbols.kind(s) == "rate":
                     raise self._dt_error(path + (var,), "depends on a state derivative")
                 subs[s] = self.explicit(s, memo, path + (var,))
         memo[var] = expr.xreplace(subs)
@@ -814,7 +814,7 @@ def _kkt_block(b: Builder, tears: list, order: list, index: int) -> LinearBlock:
     K = tuple((i, col[x], d) for i, t in enumerate(tears)
               for x, d in sorted(b.kkt_rows[t].items(), key=lambda kv: kv[0].name))
     # a body of negligible mass adds its twist's rates, each one rank of the saddle point
-    rank = symbols.param(RANK_PARAM) + sum(t.name.startswith("ACC_") for t in tears)
+    rank = symbols.param(RANK_PARAM) + sum(symbols.kind(t) == "acceleration" for t in tears)
     return LinearBlock(index, tuple(tears), (), None, tuple(b.eqs[t] for t in tears), chain,
                        tuple(pre), rank, (len(dynamic), K, B))
 
@@ -822,7 +822,7 @@ def _kkt_block(b: Builder, tears: list, order: list, index: int) -> LinearBlock:
 def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
                 block_index: int = 0) -> tuple[list, Loop]:
     eqs = b.eqs
-    multipliers = [v for v in comp if v.name.startswith(("LAM_", "ACC_"))]
+    multipliers = [v for v in comp if symbols.kind(v) in ("multiplier", "acceleration")]
     zcp_dependent = {x for x, _, _ in b.zcp_dependent}
     dependent = [v for v in comp if v in zcp_dependent]
     tears = _tear(comp, deps, multipliers + dependent)
@@ -833,7 +833,7 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
     order = [c[0] for c in strongly_connected(rest, sub_deps)]
     elements = sorted({b.origin[v][0] for v in comp if b.origin[v][0]})
     bonds = sorted({b.origin[v][1] for v in comp if b.origin[v][1]})
-    kind = "derivative" if any(v.name.startswith("DX_") for v in comp) else "algebraic"
+    kind = "derivative" if any(symbols.kind(v) == "rate" for v in comp) else "algebraic"
     loop = Loop(kind, [b.display.get(v, v.name) for v in comp], bonds, elements,
                 [b.display.get(v, v.name) for v in tears])
     where = b.g.elements[elements[0]] if elements else None
@@ -846,7 +846,7 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
 
     if multipliers and set(tears) == set(multipliers):
         loop.kind = "constraint"
-        n_acc = sum(v.name.startswith("ACC_") for v in tears)
+        n_acc = sum(symbols.kind(v) == "acceleration" for v in tears)
         loop.tearing = [f"numeric SVD of the {len(tears) - n_acc} Lagrange multipliers"
                         + (f" and {n_acc} twist rates of bodies of negligible mass"
                            if n_acc else "")]
@@ -864,7 +864,7 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
                         "ZCP: velocities imposed by the flow sources)"]
         block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
-    if any(v.name.startswith("W_") for v in comp):
+    if any(symbols.kind(v) == "unknown" for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
         block = _reduced_block(b, tears, order, block_index, refuse)
@@ -968,7 +968,7 @@ def _drop_aliases(assignments):
             continue
         v, e = item
         e = e.xreplace(aliases)
-        if trivial(e) and not v.name.startswith("DX_"):
+        if trivial(e) and symbols.kind(v) != "rate":
             aliases[v] = e
         else:
             kept.append((v, e))

@@ -72,7 +72,7 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
         bond, s, E, F = b.port(c.element)
         rates[c] = -s * F          # the flow into the 0-junction's direction: dg/dt
     cone = _cone(b, list(rates.values()) + [c.g for c in cons if c.g is not None], leaves)
-    bad = [v for v in cone if v.name.startswith(("DX_", "LAM_", "W_"))]
+    bad = [v for v in cone if symbols.kind(v) in ("rate", "multiplier", "unknown")]
     if bad:
         c = cons[0]
         j = b.m.joints[c.joint]

@@ -87,8 +87,23 @@ def output(name: str) -> sp.Symbol:
     return _sym(f"Y_{name}")
 
 
+# What a symbol stands for, from the prefix this module gave it: the one inverse of the
+# naming above, so that no other stage reads meaning into a symbol's name.
+_KINDS = {"DX_": "rate", "X_": "state", "LAM_": "multiplier", "ACC_": "acceleration",
+          "W_": "unknown", "P_": "parameter", "U_": "signal", "REF_": "reference",
+          "E_": "effort", "F_": "flow", "V_": "algebraic", "Y_": "output", "ROT_": "rotation"}
+
+
+def kind(s: sp.Symbol) -> str | None:
+    """``rate`` (a state's derivative), ``multiplier``, ``acceleration`` (a massless
+    body's twist rate under an ideal method), ``unknown`` (a massless body's twist),
+    ``state``, ``parameter``, ... or None for a symbol not named here."""
+    prefix = s.name.split("_", 1)[0] + "_"
+    return _KINDS.get(prefix)
+
+
 def is_ref(s: sp.Symbol) -> bool:
-    return s.name.startswith("REF_")
+    return kind(s) == "reference"
 
 
 def split_ref(s: sp.Symbol) -> tuple[str, str]:

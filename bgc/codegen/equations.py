@@ -24,6 +24,8 @@ import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
 from bgc import methods
+from bgc.codegen import elements
+from bgc.codegen.elements import Dt, State, matmul
 from bgc.codegen.forward_mode import directional, propagate, trivial
 from bgc.errors import EquationError
 from bgc.graph.algorithms import is_cyclic, strongly_connected
@@ -36,15 +38,6 @@ from bgc.model.model import Model, Table
 
 # Largest loop solved symbolically (tearing variables); larger loops become numeric blocks.
 MAX_SYMBOLIC_LOOP = 6
-
-
-@dataclass
-class State:
-    name: str            # display name, e.g. "spring.q"
-    sym: sp.Symbol
-    dsym: sp.Symbol
-    initial: sp.Expr     # in terms of parameters
-    element: str
 
 
 @dataclass
@@ -156,27 +149,6 @@ class EquationSystem:
         return sorted({bp for s in self.model.signals.values() for bp in s.breakpoints})
 
 
-def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
-    """``A * B``, the same entries as sympy forms them (each the sum of the products of
-    the non-zero entries, in order), without sympy's conversions to and from its
-    DomainMatrix, which cost more than the products on the small matrices here."""
-    m, k, o = A.rows, A.cols, B.cols
-    if B.rows != k:
-        raise ValueError(f"matmul: {A.shape} x {B.shape}")
-    a, b = A.flat(), B.flat()
-    out = []
-    for i in range(m):
-        row = a[i * k:(i + 1) * k]
-        for j in range(o):
-            out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
-    return sp.Matrix(m, o, out)
-
-
-class Dt(sp.Function):
-    """Placeholder for the time derivative of a dependent storage variable."""
-    nargs = 1
-
-
 class Builder:
     """The causal equations of a CausalGraph, built element by element (``build``), before
     they are sorted and solved. A constraint method extends them through this surface
@@ -263,246 +235,13 @@ class Builder:
                     for k, v in enumerate(var):
                         self.display[v] = f"{bond.name}.{tag}{AXES[k]}"
         for name, el in self.g.elements.items():
-            getattr(self, f"_el_{ {'0': 'zero', '1': 'one'}.get(el.kind, el.kind) }")(name, el)
+            elements.RULES[el.kind](self, name, el)
         self.kinematics()
 
     def port(self, name):
         """A one-port element's bond, the sign of its power, its effort and flow."""
         b = self.g.ports[name][0]
         return b, self.g.port_sign(b, name), self.E(b), self.F(b)
-
-    def _el_Se(self, name, el):
-        b, s, E, F = self.port(name)
-        self.define(E, el.fields["effort"], name, b)
-
-    _el_MSe = _el_Se
-
-    def _el_Sf(self, name, el):
-        b, s, E, F = self.port(name)
-        self.define(F, s * el.fields["flow"], name, b)
-
-    _el_MSf = _el_Sf
-
-    def _storage(self, name, el, qname):
-        """C (qname 'q') and I (qname 'p'): integral or derivative causality."""
-        b, s, E, F = self.port(name)
-        if isinstance(E, sp.MatrixBase):
-            return self._storage_vector(name, el, qname, b, s, E, F)
-        # For C: e = law(q), dq/dt = f.  For I: f = law(p), dp/dt = e.
-        out_var, in_var = (E, s * F) if el.kind == "C" else (s * F, E)
-        if self.cg.storage[name] == "integral":
-            x, dx = symbols.state(name, qname), symbols.dstate(name, qname)
-            if el.law == el.kind:                   # linear: e = q/C, f = p/I
-                value = x / el.fields[el.kind]
-            elif el.law == "k":
-                value = el.fields["k"] * x
-            else:
-                value = self.law(el, el.law, **{qname: x})
-            self.define(E if el.kind == "C" else F, value if el.kind == "C" else s * value,
-                        name, b)
-            self.define(dx, in_var, name, b)
-            label = f"{name}.{qname}".replace("__", ".")   # box__mx -> box.mx.p
-            self.states.append(State(label, x, dx, el.initial, name))
-            self.display[x], self.display[dx] = label, f"d({label})/dt"
-        else:
-            v = symbols.algebraic(name, qname)
-            if el.law == el.kind:
-                value = el.fields[el.kind] * out_var
-            elif el.law == "k":
-                value = out_var / el.fields["k"]
-            else:
-                value = self.invert(el, el.law, out_var, qname)
-            self.define(v, value, name, b)
-            self.display[v] = f"{name}.{qname}"
-            self.dependent[name] = v
-            # the storage's other port variable is the time derivative of v
-            self.define(F if el.kind == "C" else E, (s if el.kind == "C" else 1) * Dt(v),
-                        name, b)
-
-    def _storage_vector(self, name, el, qname, b, s, E, F):
-        """A multiport C or I with a matrix law (mass matrix, inertia tensor, stiffness):
-        integral causality only, the law inverted numerically once (it is constant)."""
-        if self.cg.storage[name] != "integral":
-            raise EquationError(f"multiport {el.kind} '{name}' would need derivative "
-                                "causality, which is only supported on scalar bonds",
-                                loc=el.loc, key=f"elements.{name}",
-                                hint="let it integrate (e.g. a stiff C between it and the "
-                                     "element that imposes its flow)")
-        d = len(E)
-        x = sp.Matrix([symbols.state(name, f"{qname}{AXES[k]}") for k in range(d)])
-        dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
-        law = el.fields.get(el.law)
-        M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-        value = matmul(M, x) if el.law == "k" else matmul(M.inv(), x)
-        if el.kind == "C":
-            self.define(E, value, name, b)
-            self.define(dx, s * F, name, b)
-        else:
-            self.define(F, s * value, name, b)
-            self.define(dx, E, name, b)
-        label = name.replace("__", ".")
-        initial = (el.initial if isinstance(el.initial, sp.MatrixBase)
-                   else sp.Matrix([el.initial or 0] * d))
-        for k in range(d):
-            lab = f"{label}.{qname}{AXES[k]}"
-            self.states.append(State(lab, x[k], dx[k], initial[k], name))
-            self.display[x[k]], self.display[dx[k]] = lab, f"d({lab})/dt"
-
-    def _el_C(self, name, el):
-        self._storage(name, el, "q")
-
-    def _el_I(self, name, el):
-        self._storage(name, el, "p")
-
-    def _el_R(self, name, el):
-        b, s, E, F = self.port(name)
-        if isinstance(E, sp.MatrixBase):
-            R = el.fields["R"]
-            R = R if isinstance(R, sp.MatrixBase) else R * sp.eye(len(E))
-            if self.cg.r_form[name] == "resistance":
-                self.define(E, R * (s * F), name, b)
-            else:
-                self.define(F, s * R.inv() * E, name, b)
-            return
-        f = s * F
-        if self.cg.r_form[name] == "resistance":
-            if el.law == "R":
-                value = el.fields["R"] * f
-            elif el.law == "effort":
-                value = self.law(el, "effort", f=f)
-            else:
-                value = self.invert(el, "flow", f, "e")
-            self.define(E, value, name, b)
-        else:
-            if el.law == "R":
-                R = el.fields["R"]
-                if R == 0:
-                    raise EquationError(f"R '{name}' is 0 but its causality needs its "
-                                        "conductance 1/R", loc=el.field_locs["R"],
-                                        key=f"elements.{name}.R",
-                                        hint="use a small positive R or remove the element")
-                value = E / R
-            elif el.law == "flow":
-                value = self.law(el, "flow", e=E)
-            else:
-                value = self.invert(el, "effort", E, "f")
-            self.define(F, s * value, name, b)
-
-    def _el_zero(self, name, el):
-        self._junction(name, effort_common=True)
-
-    def _el_one(self, name, el):
-        self._junction(name, effort_common=False)
-
-    def _junction(self, name, effort_common):
-        bonds = self.g.ports[name]
-        sign = {b: (1 if self.g.points_into(b, name) else -1) for b in bonds}
-        # 0: the strong bond brings the effort in; 1: the strong bond brings the flow in.
-        strong = [b for b in bonds if self.cg.receives_effort(b, name) == effort_common][0]
-        common, summed = (self.E, self.F) if effort_common else (self.F, self.E)
-        for b in bonds:
-            if b != strong:
-                self.define(common(b), common(strong), name, b)
-        rest = [sign[b] * summed(b) for b in bonds if b != strong]
-        total = sum(rest[1:], rest[0]) if rest else 0 * summed(strong)
-        self.define(summed(strong), -sign[strong] * total, name, strong)
-
-    def _el_TF(self, name, el):
-        a, c = self.g.two_port(name)       # e_a = n e_c, f_c = n f_a
-        n = el.fields["ratio"]
-        if isinstance(n, sp.MatrixBase):   # f_c = M f_a, e_a = M^T e_c
-            n = self.hoist(name, n)
-            if not self.cg.receives_effort(a, name):
-                self.define(self.F(c), matmul(n, sp.Matrix([self.F(a)])), name, c)
-                self.define(self.E(a), matmul(n.T, sp.Matrix([self.E(c)])), name, a)
-            else:                          # a rotation, or a constant invertible matrix
-                inv = n.T if el.orthogonal else n.inv()
-                self.define(self.F(a), matmul(inv, self.F(c)), name, a)
-                self.define(self.E(c), matmul(inv.T, self.E(a)), name, c)
-            return
-        if self.cg.receives_effort(a, name):
-            self.define(self.E(c), self.E(a) / n, name, c)
-            self.define(self.F(a), self.F(c) / n, name, a)
-        else:
-            self.define(self.E(a), n * self.E(c), name, a)
-            self.define(self.F(c), n * self.F(a), name, c)
-
-    _el_MTF = _el_TF
-
-    def _el_GY(self, name, el):
-        a, c = self.g.two_port(name)       # e_a = r f_c, e_c = r f_a
-        r = el.fields["r"]
-        if self.cg.receives_effort(a, name):
-            self.define(self.F(c), self.E(a) / r, name, c)
-            self.define(self.F(a), self.E(c) / r, name, a)
-        else:
-            self.define(self.E(a), r * self.F(c), name, a)
-            self.define(self.E(c), r * self.F(a), name, c)
-
-    _el_MGY = _el_GY
-
-    def _el_EJS(self, name, el):
-        """Euler's gyroscopic torque omega x (J omega), omega in the principal body frame."""
-        b, s, E, F = self.port(name)
-        w = s * F
-        h = sp.Matrix([el.fields["J"][i] * w[i] for i in range(3)])
-        self.define(E, w.cross(h), name, b)
-
-    def hoist(self, name, M: sp.Matrix) -> sp.Matrix:
-        """Give each non-constant entry of a matrix modulus its own assignment, so that
-        whatever is built on the modulus (loops, Jacobians) refers to it by name instead
-        of copying the expression."""
-        def entry(i, j):
-            e = M[i, j]
-            if e.is_Number or e.is_Symbol:
-                return e
-            v = sp.Symbol(f"M_{name}__{i}{j}", real=True)
-            self.define(v, e, name)
-            self.display[v] = f"{name.replace('__', '.')}.M{i}{j}"
-            return v
-        return sp.Matrix(M.rows, M.cols, entry)
-
-    def _el_XTF(self, name, el):
-        """Cross-product TF (rule C2): f_out = f_in x r, e_in = r x e_out."""
-        a, c = self.g.two_port(name)
-        r = el.fields["r"]
-        self.define(self.F(c), self.F(a).cross(r), name, c)
-        self.define(self.E(a), r.cross(self.E(c)), name, a)
-
-    def _el_M0(self, name, el):
-        """A body of negligible mass: its velocity is an unknown U of the algebraic loop
-        closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``).
-
-        Methods lagrange and zcp (whose tree leaves such bodies out, ``zcp._spanning_tree``):
-        the constraints fix U only at the velocity level, so U is a state
-        and its rate A an unknown of the constraint block next to the multipliers, defined
-        by the same balance ``A = A + e``: the block becomes the saddle point
-        ``[J M^-1 J^T, J_U; J_U^T, 0]``, regular where the blocked directions fix U."""
-        b, s, E, F = self.port(name)
-        if methods.get(self.g.method).ideal:
-            return self._massless_lagrange(name, b, s, E, F)
-        U = sp.Matrix([symbols.unknown(name, k) for k in range(len(E))])
-        self.define(F, s * U, name, b)
-        self.define(U, U + s * E, name, b)
-        for k, u in enumerate(U):
-            self.display[u] = f"{name.replace('__', '.')}.{AXES[k]}"
-
-    def _massless_lagrange(self, name, b, s, E, F):
-        for k in range(len(E)):
-            u, du = symbols.state(name, f"u{AXES[k]}"), symbols.dstate(name, f"u{AXES[k]}")
-            acc = symbols.acceleration(name, k)
-            self.define(F[k], s * u, name, b)
-            self.define(du, acc, name, b)
-            self.define(acc, acc + s * E[k], name, b)
-            label = f"{name.replace('__', '.')}.{AXES[k]}"
-            self.states.append(State(label, u, du, sp.S.Zero, name))
-            self.display[u], self.display[du] = label, f"d({label})/dt"
-            self.display[acc] = f"{label}.balance"
-            # the block's row of A: e, the net force on the body, as the rate of a virtual
-            # momentum (column ``net``) that must stay zero
-            net = symbols.state(name, f"net{AXES[k]}")
-            self.kkt_rows[acc] = {net: sp.Integer(s)}
-            self.kkt_rates[E[k]] = net
 
     def algebraic_state(self, label: str, sym, dsym, residual, element: str):
         """A state with no derivative in the equations (a zero row of the mass matrix):

@@ -323,7 +323,7 @@ class Run:
         write_rows(self.out / "compile_cost.csv", rows)
         charts.compile_cost(rows, self.out / "compile_cost.png",
                             "cold time to first result against model size")
-        num = compile_cost._num
+        num = compile_cost.as_number
         self.summary.append("## Compile cost: time to first result against model size\n")
         self.summary.append(
             f"`bgc simulate MODEL --method M --t-end {compile_cost.T_END:g} --json` timed "

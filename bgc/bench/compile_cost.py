@@ -98,7 +98,7 @@ print(json.dumps(out))
 """ % (FUNCTIONS,)
 
 
-def _subprocess(mode: str, path: Path, cache: Path) -> dict:
+def timed_subprocess(mode: str, path: Path, cache: Path) -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), BGC_LAUNCH=repr(time.time()))
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", WORKER, mode, str(path)],
@@ -243,7 +243,7 @@ def sweep(cases, methods, work: Path, log=print, timeout: float = TIMEOUT) -> li
 # --- what the rows say ----------------------------------------------------------------
 
 
-def _num(v) -> float:
+def as_number(v) -> float:
     """A CSV cell (or a row's value) as a float, NaN for none."""
     try:
         return float(v)
@@ -264,7 +264,7 @@ def growth_ratios(rows, a: str = "10", b: str = "40") -> dict[str, float]:
     """Cold time of chain N=b over chain N=a, per method (NaN where either is missing)."""
     out = {}
     for method in dict.fromkeys(r["method"] for r in rows):
-        t = {str(r["N"]): _num(r["cold_s"]) for r in rows if r["method"] == method}
+        t = {str(r["N"]): as_number(r["cold_s"]) for r in rows if r["method"] == method}
         out[method] = t.get(b, math.nan) / t.get(a, math.nan) if a in t and b in t \
             else math.nan
     return out
@@ -280,13 +280,13 @@ def targets(rows) -> list[dict]:
         sar, c10, c40 = (by.get((n, m), {}) for n in ("sarib", "10", "40"))
         for name, what, value, runs in (
                 ("sarib_cold_s", "SARIB cold time to first result [s]",
-                 _num(sar.get("cold_s")), (sar,)),
+                 as_number(sar.get("cold_s")), (sar,)),
                 ("chain40_cold_s", "chain N=40 cold time to first result [s]",
-                 _num(c40.get("cold_s")), (c40,)),
+                 as_number(c40.get("cold_s")), (c40,)),
                 ("growth_10_40", "cold time N=40 / N=10", ratio.get(m, math.nan),
                  (c10, c40)),
                 ("warm_s", "SARIB warm start to first result [s]",
-                 _num(sar.get("warm_s")), (sar,))):
+                 as_number(sar.get("warm_s")), (sar,))):
             limit = TARGETS[name]
             out.append({"target": what, "method": m, "measured": value, "limit": limit,
                         "verdict": _verdict(value, limit, *runs), "key": name})

@@ -40,8 +40,8 @@ def row(scn: Scenario, method: str, integrator: str, setting: float, error: floa
     return out
 
 
-def _series(bench: Bench, scn: Scenario, method: str, integrator: str, settings, budget,
-            ref, overrides=None, **extra) -> list[dict]:
+def work_precision_series(bench: Bench, scn: Scenario, method: str, integrator: str,
+                          settings, budget, ref, overrides=None, **extra) -> list[dict]:
     """Runs over ``settings`` (tolerances, or rk4 steps) from loose to tight; the rest
     of a series is skipped once a run takes longer than ``budget`` seconds."""
     rows = []
@@ -87,7 +87,7 @@ def work_precision(bench: Bench, scn: Scenario, methods, integrators=INTEGRATORS
         for integrator in integrators:
             settings = (rk4_steps(bench, scn, method, rk4_fractions) if integrator == "rk4"
                         else tolerances)
-            rows += _series(bench, scn, method, integrator, settings, budget, ref)
+            rows += work_precision_series(bench, scn, method, integrator, settings, budget, ref)
     return rows
 
 
@@ -112,7 +112,7 @@ def stiffness_sweep(bench: Bench, scn: Scenario, factors=STIFFNESS_FACTORS,
     rows = []
     nominal = max(v for n, v in zip(mod.PARAM_NAMES, mod.PARAMS) if n.endswith("__stiffness"))
     for f in factors:
-        rows += _series(bench, scn, "parasitic", "native", tolerances, budget, ref,
+        rows += work_precision_series(bench, scn, "parasitic", "native", tolerances, budget, ref,
                         overrides=stiffness_overrides(mod, f), stiffness=nominal * f)
     return rows
 

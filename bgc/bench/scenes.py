@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bgc.bench.compile_cost import FUNCTIONS, _subprocess
+from bgc.bench.compile_cost import FUNCTIONS, timed_subprocess
 from bgc.codegen import emit
 from bgc.model import load
 from bgc.pipeline import compile_model
@@ -28,7 +28,7 @@ from bgc.simulate import simulate
 def _cold(path: Path) -> float:
     """Cold numba compile of a module's functions, in a fresh interpreter."""
     with tempfile.TemporaryDirectory() as cache:
-        cold = _subprocess("cold", path, Path(cache))
+        cold = timed_subprocess("cold", path, Path(cache))
     return sum(cold.get(f"{f}_s", 0.0) for f in FUNCTIONS) + cold["entry_points_s"]
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from bgc.bench.cases import MODELS, Bench, Scenario
-from bgc.bench.precision import _series
+from bgc.bench.precision import work_precision_series
 
 ONE_LEG = MODELS / "sarib_one_leg.yaml"
 # the outputs the one-leg model has (leg 1 stands for every leg)
@@ -36,6 +36,6 @@ def symmetry(bench: Bench, full: Scenario, tolerances, budget: float) -> list[di
         # the reference's columns in this model's output order (every one-leg output is
         # one of the rig's)
         scn_ref = ref[:, [full_names.index(k) for k in names]]
-        rows += _series(bench, scn, "parasitic", "native", tolerances, budget, scn_ref,
-                        model=scn.model.stem)
+        rows += work_precision_series(bench, scn, "parasitic", "native", tolerances, budget,
+                                      scn_ref, model=scn.model.stem)
     return rows

@@ -79,7 +79,7 @@ def test_summary_tables_growth_and_targets_from_rows(tmp_path):
     rows[-1]["status"] = "timeout after 900 s"
     run = Run(tmp_path, quick=False, repeats=1, budget=1.0, log=lambda m: None,
               build=tmp_path / "build")
-    run.compile_report(rows)
+    compile_cost.report(run, rows)
     text = "\n".join(run.summary)
     # the CSV: one row per model x method, the stage columns kept
     back = _rows(tmp_path / "compile_cost.csv")
@@ -104,7 +104,7 @@ def test_summary_tables_growth_and_targets_from_rows(tmp_path):
                                                                       "not measured"}
     quick = Run(tmp_path / "quick", quick=True, repeats=1, budget=1.0, log=lambda m: None,
                 build=tmp_path / "build")
-    quick.compile_report([_synthetic("5", "parasitic", 2.0), _synthetic("10", "parasitic",
+    compile_cost.report(quick, [_synthetic("5", "parasitic", 2.0), _synthetic("10", "parasitic",
                                                                         5.0)])
     text = "\n".join(quick.summary)
     assert "N = 5 to N = 10" in text and "parasitic 2.5x" in text

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bgc import methods as constraint_methods
 from bgc.bench import charts, compile_cost, precision, scenes, stability, symmetry
 from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
 from bgc.bench.peers import at_equal_error, peers
@@ -39,7 +40,7 @@ from bgc.fileio import atomic_write
 
 PARTS = ("peers", "precision", "stiffness", "stability", "compile", "symmetry", "scenes")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-METHODS = ("parasitic", "lagrange", "zcp")
+METHODS = constraint_methods.NAMES
 
 FOUR_BAR = Scenario("four_bar", "spatial RSSR four-bar, 1 s", MODELS / "four_bar.yaml", 1.0,
                     ("crank_angle", "rocker_angle"), points=101)
@@ -250,65 +251,7 @@ class Run:
         self.data["stiffness"] = rows
 
     def stability(self):
-        self.summary.append("## Stability maps: where each method fails\n")
-        # RK4 on the parasitic model
-        if self.quick:
-            scn, factors, fracs = SLIDER, (0.1, 1.0, 10.0), (0.8, 1.25, 2.0)
-        else:
-            scn, factors, fracs = (sarib("sarib_sine"), precision.STIFFNESS_FACTORS,
-                                   stability.RK4_STEP_FRACTIONS)
-        self.log(f"stability: rk4 on {scn.title}")
-        rk = stability.rk4_map(self.bench, scn, factors, fracs)
-        write_rows(self.out / "stability_rk4.csv", rk)
-        charts.rk4_map(rk, self.out / "stability_rk4.png", f"RK4 on the parasitic "
-                                                           f"model: {scn.title}")
-        wrong = [r for r in rk if r["stable"] != (r["fraction"] <= 1.0)]
-        silent = [r for r in rk if not r["stable"] and r["bgc"] == "ran"]
-        self.summary.append(
-            f"**RK4, parasitic** (`stability_rk4.png`): {len(rk)} runs over "
-            f"{len(factors)} stiffnesses; the predicted limit (every h lambda in |R| <= 1) "
-            f"classified {len(rk) - len(wrong)} of {len(rk)} runs right; bgc refused "
-            f"{sum(r['bgc'] == 'refused' for r in rk)} and let no unstable run through "
-            f"({len(silent)} silent).\n")
-        # lagrange without stabilisation
-        t_drift = 5.0 if self.quick else 10.0
-        dscn = replace(SLIDER, t_end=t_drift, points=201,
-                       title=f"slider-crank falling from rest, {t_drift:g} s")
-        self.log(f"stability: drift on {dscn.title}")
-        alphas = (0.0, 1.0, 10.0) if self.quick else stability.ALPHAS
-        hist = stability.drift_history(self.bench, dscn, "lagrange", alphas)
-        grid = stability.drift_map(self.bench, dscn, "lagrange", alphas,
-                                   (1e-4, 1e-7) if self.quick else stability.DRIFT_TOLERANCES)
-        write_rows(self.out / "stability_drift_history.csv", hist)
-        write_rows(self.out / "stability_drift.csv", grid)
-        charts.drift(hist, grid, self.out / "stability_drift.png",
-                     f"lagrange without stabilisation: slider-crank, {dscn.t_end:g} s")
-        self.summary.append(f"**lagrange, Baumgarte rate alpha** (`stability_drift.png`), "
-                            f"slider-crank over {dscn.t_end:g} s:\n")
-        self.table(grid, ["alpha", "rtol", "drift", "limit", "bgc"])
-        # redundant constraints
-        rscn = replace(BRICARD, t_end=0.5) if self.quick else BRICARD
-        self.log(f"stability: redundancy on {rscn.title}")
-        red = stability.redundancy_map(self.bench, rscn, (1e-6,) if self.quick else
-                                       stability.DRIFT_TOLERANCES)
-        write_rows(self.out / "stability_redundancy.csv", red)
-        self.summary.append("**Redundant constraints** (Bricard, 1 redundant of 30):\n")
-        self.table(red, ["rtol", "redundancy_handling", "bgc", "error_vs_parasitic",
-                         "rhs_finite_unchecked", "message"],
-                   {"message": lambda v: v[:110]})
-        # zcp, a kinematic loop kept closed
-        zscn = replace(FOUR_BAR, t_end=0.5) if self.quick else FOUR_BAR
-        self.log(f"stability: zcp with the loop kept closed, {zscn.title}")
-        zc = stability.zcp_map(self.bench, zscn, (1e-4, 1e-7) if self.quick else
-                               (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8))
-        write_rows(self.out / "stability_zcp.csv", zc)
-        charts.zcp_map(zc, self.out / "stability_zcp.png",
-                       f"zcp, loop kept closed (index-2 DAE): {zscn.title}")
-        self.summary.append("**zcp with the kinematic loop kept closed** (`stability_zcp.png`,"
-                            " an index-2 DAE; error against the opened loops):\n")
-        self.table(zc, ["rtol", "integrator", "status", "reached", "error", "steps", "bgc",
-                        "message"], {"message": lambda v: v[:90]})
-        self.data["stability"] = {"rk4": rk, "drift": grid, "redundancy": red, "zcp": zc}
+        stability.report(self)
 
     def compile(self):
         """Cold and warm time to first result against model size: chains of N links
@@ -316,62 +259,7 @@ class Run:
         cases = compile_cost.models(self.quick, self.bench.build, MODELS / "sarib.yaml")
         rows = compile_cost.sweep(cases, METHODS, self.bench.build / "compile_cost",
                                   self.log, self.compile_timeout)
-        self.compile_report(rows)
-
-    def compile_report(self, rows) -> None:
-        """compile_cost.csv, its chart and its summary (tables and targets) from rows."""
-        write_rows(self.out / "compile_cost.csv", rows)
-        charts.compile_cost(rows, self.out / "compile_cost.png",
-                            "cold time to first result against model size")
-        num = compile_cost.as_number
-        self.summary.append("## Compile cost: time to first result against model size\n")
-        self.summary.append(
-            f"`bgc simulate MODEL --method M --t-end {compile_cost.T_END:g} --json` timed "
-            "around a fresh interpreter (`compile_cost.csv`, `compile_cost.png`): **cold** "
-            "with an empty cache (`NUMBA_CACHE_DIR`) and a fresh output directory, so it "
-            "holds load, sympy, emit, machine-code compile and the integrator loop; "
-            "**warm**: the same command again, module and cache present. Models: chains "
-            "of N spatial links (`bgc.bench.chain`) and the SARIB; states and assignments "
-            "of the derived equations, operations counted in the generated `rhs` and "
-            f"`jac`. A run longer than {self.compile_timeout:g} s is stopped and recorded "
-            "as such. Stage columns are the cold run's report's own seconds (NaN: the "
-            "report does not give that stage).\n")
-        stage_cols = [c for c in dict.fromkeys(k for r in rows for k in r)
-                      if c.endswith("_s") and c not in ("cold_s", "warm_s", "cold_jit_s",
-                                                        "warm_jit_s")
-                      and any(np.isfinite(num(r.get(c))) for r in rows)]
-        if not stage_cols:
-            self.summary.append("The reports gave no per-stage timings; `cold_jit_s` is "
-                                "the run's own JIT/cache-load time (solver statistics).\n")
-        self.table(rows, ["N", "method", "states", "assignments", "ops_rhs", "ops_jac",
-                          "cold_s", "warm_s", "cold_jit_s", *stage_cols, "status"],
-                   {"status": lambda v: str(v)[:60]})
-        # the issue's pair, N = 10 to 40; else (quick) the smallest and largest chain run
-        ns = sorted({int(r["N"]) for r in rows if str(r["N"]) != "sarib"})
-        a, b = ("10", "40") if {10, 40} <= set(ns) or len(ns) < 2 else (str(ns[0]),
-                                                                        str(ns[-1]))
-        ratios = compile_cost.growth_ratios(rows, a, b)
-        self.summary.append(f"Growth of the cold time from N = {a} to N = {b} "
-                            f"({int(b) / int(a):g}x the links; linear: at most "
-                            f"{int(b) / int(a):g}x): " + ", ".join(
-                                f"{m} {v:.3g}x" if np.isfinite(v) else f"{m} not measured"
-                                for m, v in ratios.items()) + ".\n")
-        tg = [t for t in compile_cost.targets(rows) if t["verdict"] != "not measured"]
-        if tg:
-            self.summary.append("Targets (issue 24):\n")
-            self.table(tg, ["target", "method", "measured", "limit", "verdict"])
-        else:
-            self.summary.append("The targets (issue 24: the SARIB, chains of 10 and 40 "
-                                "links) need the full run.\n")
-        if not self.quick:
-            for key in dict.fromkeys(t["key"] for t in tg):
-                ts = [t for t in tg if t["key"] == key]
-                self.targets.append(
-                    f"{ts[0]['target']} (target <= {ts[0]['limit']:g}): " + ", ".join(
-                        f"{t['method']} {t['measured']:.3g} {t['verdict']}"
-                        if np.isfinite(t["measured"]) else f"{t['method']} {t['verdict']}"
-                        for t in ts))
-        self.data["compile"] = rows
+        compile_cost.report(self, rows)
 
     def symmetry(self):
         """The one-leg SARIB (issue 7): what the symmetry shortcut costs in accuracy, next

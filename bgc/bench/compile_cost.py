@@ -291,3 +291,63 @@ def targets(rows) -> list[dict]:
             out.append({"target": what, "method": m, "measured": value, "limit": limit,
                         "verdict": _verdict(value, limit, *runs), "key": name})
     return out
+
+
+def report(run, rows) -> None:
+    """compile_cost.csv, its chart and its summary (tables and targets) from ``rows``, for
+    ``bgc bench`` (``run``: its ``bench.Run``)."""
+    import numpy as np
+
+    from bgc.bench import charts, write_rows
+    write_rows(run.out / "compile_cost.csv", rows)
+    charts.compile_cost(rows, run.out / "compile_cost.png",
+                        "cold time to first result against model size")
+    num = as_number
+    run.summary.append("## Compile cost: time to first result against model size\n")
+    run.summary.append(
+        f"`bgc simulate MODEL --method M --t-end {T_END:g} --json` timed "
+        "around a fresh interpreter (`compile_cost.csv`, `compile_cost.png`): **cold** "
+        "with an empty cache (`NUMBA_CACHE_DIR`) and a fresh output directory, so it "
+        "holds load, sympy, emit, machine-code compile and the integrator loop; "
+        "**warm**: the same command again, module and cache present. Models: chains "
+        "of N spatial links (`bgc.bench.chain`) and the SARIB; states and assignments "
+        "of the derived equations, operations counted in the generated `rhs` and "
+        f"`jac`. A run longer than {run.compile_timeout:g} s is stopped and recorded "
+        "as such. Stage columns are the cold run's report's own seconds (NaN: the "
+        "report does not give that stage).\n")
+    stage_cols = [c for c in dict.fromkeys(k for r in rows for k in r)
+                  if c.endswith("_s") and c not in ("cold_s", "warm_s", "cold_jit_s",
+                                                    "warm_jit_s")
+                  and any(np.isfinite(num(r.get(c))) for r in rows)]
+    if not stage_cols:
+        run.summary.append("The reports gave no per-stage timings; `cold_jit_s` is "
+                            "the run's own JIT/cache-load time (solver statistics).\n")
+    run.table(rows, ["N", "method", "states", "assignments", "ops_rhs", "ops_jac",
+                      "cold_s", "warm_s", "cold_jit_s", *stage_cols, "status"],
+               {"status": lambda v: str(v)[:60]})
+    # the issue's pair, N = 10 to 40; else (quick) the smallest and largest chain run
+    ns = sorted({int(r["N"]) for r in rows if str(r["N"]) != "sarib"})
+    a, b = ("10", "40") if {10, 40} <= set(ns) or len(ns) < 2 else (str(ns[0]),
+                                                                    str(ns[-1]))
+    ratios = growth_ratios(rows, a, b)
+    run.summary.append(f"Growth of the cold time from N = {a} to N = {b} "
+                        f"({int(b) / int(a):g}x the links; linear: at most "
+                        f"{int(b) / int(a):g}x): " + ", ".join(
+                            f"{m} {v:.3g}x" if np.isfinite(v) else f"{m} not measured"
+                            for m, v in ratios.items()) + ".\n")
+    tg = [t for t in targets(rows) if t["verdict"] != "not measured"]
+    if tg:
+        run.summary.append("Targets (issue 24):\n")
+        run.table(tg, ["target", "method", "measured", "limit", "verdict"])
+    else:
+        run.summary.append("The targets (issue 24: the SARIB, chains of 10 and 40 "
+                            "links) need the full run.\n")
+    if not run.quick:
+        for key in dict.fromkeys(t["key"] for t in tg):
+            ts = [t for t in tg if t["key"] == key]
+            run.targets.append(
+                f"{ts[0]['target']} (target <= {ts[0]['limit']:g}): " + ", ".join(
+                    f"{t['method']} {t['measured']:.3g} {t['verdict']}"
+                    if np.isfinite(t["measured"]) else f"{t['method']} {t['verdict']}"
+                    for t in ts))
+    run.data["compile"] = rows

@@ -184,3 +184,76 @@ def zcp_map(bench: Bench, scn: Scenario, tolerances=(1e-3, 1e-4, 1e-5, 1e-6, 1e-
             bench.log(f"    zcp closed, {label}, rtol = {tol:g}: {status} to t = "
                       f"{reached:g}, error {rows[-1]['error']:.3g}; bgc {bgc}")
     return rows
+
+
+def report(run) -> None:
+    """The stability part of ``bgc bench`` (``run``: its ``bench.Run``): the maps, their CSV
+    and charts, and their section of the summary."""
+    from bgc.bench import (
+        BRICARD,
+        FOUR_BAR,
+        SLIDER,
+        charts,
+        precision,
+        sarib,
+        write_rows,
+    )
+    run.summary.append("## Stability maps: where each method fails\n")
+    # RK4 on the parasitic model
+    if run.quick:
+        scn, factors, fracs = SLIDER, (0.1, 1.0, 10.0), (0.8, 1.25, 2.0)
+    else:
+        scn, factors, fracs = (sarib("sarib_sine"), precision.STIFFNESS_FACTORS,
+                               RK4_STEP_FRACTIONS)
+    run.log(f"stability: rk4 on {scn.title}")
+    rk = rk4_map(run.bench, scn, factors, fracs)
+    write_rows(run.out / "stability_rk4.csv", rk)
+    charts.rk4_map(rk, run.out / "stability_rk4.png", f"RK4 on the parasitic "
+                                                       f"model: {scn.title}")
+    wrong = [r for r in rk if r["stable"] != (r["fraction"] <= 1.0)]
+    silent = [r for r in rk if not r["stable"] and r["bgc"] == "ran"]
+    run.summary.append(
+        f"**RK4, parasitic** (`stability_rk4.png`): {len(rk)} runs over "
+        f"{len(factors)} stiffnesses; the predicted limit (every h lambda in |R| <= 1) "
+        f"classified {len(rk) - len(wrong)} of {len(rk)} runs right; bgc refused "
+        f"{sum(r['bgc'] == 'refused' for r in rk)} and let no unstable run through "
+        f"({len(silent)} silent).\n")
+    # lagrange without stabilisation
+    t_drift = 5.0 if run.quick else 10.0
+    dscn = replace(SLIDER, t_end=t_drift, points=201,
+                   title=f"slider-crank falling from rest, {t_drift:g} s")
+    run.log(f"stability: drift on {dscn.title}")
+    alphas = (0.0, 1.0, 10.0) if run.quick else ALPHAS
+    hist = drift_history(run.bench, dscn, "lagrange", alphas)
+    grid = drift_map(run.bench, dscn, "lagrange", alphas,
+                               (1e-4, 1e-7) if run.quick else DRIFT_TOLERANCES)
+    write_rows(run.out / "stability_drift_history.csv", hist)
+    write_rows(run.out / "stability_drift.csv", grid)
+    charts.drift(hist, grid, run.out / "stability_drift.png",
+                 f"lagrange without stabilisation: slider-crank, {dscn.t_end:g} s")
+    run.summary.append(f"**lagrange, Baumgarte rate alpha** (`stability_drift.png`), "
+                        f"slider-crank over {dscn.t_end:g} s:\n")
+    run.table(grid, ["alpha", "rtol", "drift", "limit", "bgc"])
+    # redundant constraints
+    rscn = replace(BRICARD, t_end=0.5) if run.quick else BRICARD
+    run.log(f"stability: redundancy on {rscn.title}")
+    red = redundancy_map(run.bench, rscn, (1e-6,) if run.quick else
+                                   DRIFT_TOLERANCES)
+    write_rows(run.out / "stability_redundancy.csv", red)
+    run.summary.append("**Redundant constraints** (Bricard, 1 redundant of 30):\n")
+    run.table(red, ["rtol", "redundancy_handling", "bgc", "error_vs_parasitic",
+                     "rhs_finite_unchecked", "message"],
+               {"message": lambda v: v[:110]})
+    # zcp, a kinematic loop kept closed
+    zscn = replace(FOUR_BAR, t_end=0.5) if run.quick else FOUR_BAR
+    run.log(f"stability: zcp with the loop kept closed, {zscn.title}")
+    zc = zcp_map(run.bench, zscn, (1e-4, 1e-7) if run.quick else
+                           (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8))
+    write_rows(run.out / "stability_zcp.csv", zc)
+    charts.zcp_map(zc, run.out / "stability_zcp.png",
+                   f"zcp, loop kept closed (index-2 DAE): {zscn.title}")
+    run.summary.append("**zcp with the kinematic loop kept closed** (`stability_zcp.png`,"
+                        " an index-2 DAE; error against the opened loops):\n")
+    run.table(zc, ["rtol", "integrator", "status", "reached", "error", "steps", "bgc",
+                    "message"], {"message": lambda v: v[:90]})
+    run.data["stability"] = {"rk4": rk, "drift": grid, "redundancy": red, "zcp": zc}

@@ -285,90 +285,119 @@ def embed(b) -> set:
 
 
 def paths(graph: BondGraph, system) -> list[Path]:
-    """Every zero-order causal path of the compiled model, classified 1-4."""
-    els = graph.elements
-    out: list[Path] = []
-
-    def bonds_among(names: set) -> list[str]:
-        return [bd.name for bd in graph.bonds if bd.src in names and bd.dst in names]
-
-    def lines(names) -> list[int]:
-        return sorted({els[n].loc.line for n in names if n in els and els[n].loc})
-
+    """Every zero-order causal path of the compiled model, classified 1-4: flow sources of
+    tree joints and dependent storage (1), algebraic loops (2-4), and what the plan
+    opened or kept closed (4)."""
     plan = getattr(graph, "zcp", None)
+    out = _tree_paths(graph, plan) if plan is not None else []
+    out += _dependent_paths(graph, system) + _algebraic_paths(graph, system)
     if plan is not None:
-        for tj in plan.tree:
-            srcs = [c.element for c in graph.constraints if c.joint == tj.joint]
-            zeros = {f"{tj.joint}__{c.label}" for c in graph.constraints
-                     if c.joint == tj.joint}
-            proj = {n for n in els if any(n.startswith(z + "__") for z in zeros)
-                    and els[n].kind == "MTF"}
-            child = tj.child
-            body = {n for n in els if n.startswith(f"{child}__") and els[n].kind != "Se"}
-            names = set(srcs) | zeros | proj | body
-            parts = {}
-            for el, k in tj.dependent:
-                parts.setdefault(el.replace("__", "."), []).append(AXES[k])
-            fixed = ", ".join(f"{n} ({''.join(a)})" for n, a in parts.items())
-            free = [f"{child}.{part}.p{a}" for part, el in (("m", f"{child}__m"),
-                                                             ("J", f"{child}__J"))
-                    for k, a in enumerate(AXES) if (el, k) not in tj.dependent]
-            labels = ", ".join(c.label for c in graph.constraints if c.joint == tj.joint)
-            what = (f"joint '{tj.joint}': flow sources on {labels} "
-                    f"impose the velocity of {fixed}: derivative causality, the dependent "
-                    "momenta follow the integral ones" + (f" ({', '.join(free)}" if free
-                                                          else " (of the parent bodies")
-                    + (f" and of '{tj.parent}')" if tj.parent and free else ")"))
-            key = srcs + sorted({el for el, _ in tj.dependent})
-            out.append(Path(1, what, sorted(names), bonds_among(names), lines(names), key))
+        out += _plan_loop_paths(graph, plan)
+    return out
+
+
+def _bonds_among(graph: BondGraph, names: set) -> list[str]:
+    return [bd.name for bd in graph.bonds if bd.src in names and bd.dst in names]
+
+
+def _lines(graph: BondGraph, names) -> list[int]:
+    els = graph.elements
+    return sorted({els[n].loc.line for n in names if n in els and els[n].loc})
+
+
+def _tree_paths(graph: BondGraph, plan: Plan) -> list[Path]:
+    """Class 1: each tree joint's flow sources imposing its child's velocity."""
+    els, out = graph.elements, []
+    for tj in plan.tree:
+        srcs = [c.element for c in graph.constraints if c.joint == tj.joint]
+        zeros = {f"{tj.joint}__{c.label}" for c in graph.constraints if c.joint == tj.joint}
+        proj = {n for n in els if any(n.startswith(z + "__") for z in zeros)
+                and els[n].kind == "MTF"}
+        child = tj.child
+        body = {n for n in els if n.startswith(f"{child}__") and els[n].kind != "Se"}
+        names = set(srcs) | zeros | proj | body
+        parts = {}
+        for el, k in tj.dependent:
+            parts.setdefault(el.replace("__", "."), []).append(AXES[k])
+        fixed = ", ".join(f"{n} ({''.join(a)})" for n, a in parts.items())
+        free = [f"{child}.{part}.p{a}" for part, el in (("m", f"{child}__m"),
+                                                         ("J", f"{child}__J"))
+                for k, a in enumerate(AXES) if (el, k) not in tj.dependent]
+        labels = ", ".join(c.label for c in graph.constraints if c.joint == tj.joint)
+        what = (f"joint '{tj.joint}': flow sources on {labels} "
+                f"impose the velocity of {fixed}: derivative causality, the dependent "
+                "momenta follow the integral ones" + (f" ({', '.join(free)}" if free
+                                                      else " (of the parent bodies")
+                + (f" and of '{tj.parent}')" if tj.parent and free else ")"))
+        key = srcs + sorted({el for el, _ in tj.dependent})
+        out.append(Path(1, what, sorted(names), _bonds_among(graph, names),
+                        _lines(graph, names), key))
+    return out
+
+
+def _dependent_paths(graph: BondGraph, system) -> list[Path]:
+    """Class 1: storage elements in derivative causality."""
+    out = []
     for name, dep in system.dependent.items():
         lp = next((lp for lp in system.loops if name in lp.elements), None)
         names = set(lp.elements) if lp else {name}
-        out.append(Path(1, f"{els[name].kind} '{name}' in derivative causality (dependent "
-                           f"state {dep})", sorted(names),
-                        lp.bonds if lp else [], lines(names)))
+        out.append(Path(1, f"{graph.elements[name].kind} '{name}' in derivative causality "
+                           f"(dependent state {dep})", sorted(names),
+                        lp.bonds if lp else [], _lines(graph, names)))
+    return out
+
+
+def _algebraic_paths(graph: BondGraph, system) -> list[Path]:
+    """Classes 2-4: algebraic loops, by what closes them."""
+    out = []
     for lp in system.loops:
         if lp.kind != "algebraic":
             continue
         ends = [(bd.src, bd.dst) for bd in graph.bonds if bd.name in lp.bonds]
         nodes = {n for e in ends for n in e}
         closed = bool(ends) and len(ends) > len(nodes) - _components(nodes, ends)
-        if any(els[n].kind == "R" for n in lp.elements):
+        if any(graph.elements[n].kind == "R" for n in lp.elements):
             cls, what = 2, "algebraic loop between resistors"
         elif closed:
             cls, what = 4, "causal cycle around a closed junction-structure loop"
         else:
             cls, what = 3, "causal cycle back to its own port (topologically open)"
         out.append(Path(cls, f"{what}: {lp.describe()}", lp.elements, lp.bonds,
-                        lines(lp.elements)))
-    if plan is not None:
-        for name in plan.relays:
-            j = graph.model.joints[name]
-            light = [n for n in (j.body1, j.body2) if n and graph.model.bodies[n].mass == 0]
-            cut = [c for c in graph.constraints if c.joint == name]
-            names = {c.element for c in cut}
-            names |= {n for n in els if any(n.startswith(f"{b}__M0") for b in light)}
-            what = (f"joint '{name}' of the bod{'ies' if len(light) > 1 else 'y'} of "
-                    f"negligible mass {', '.join(light)}: flow sources would meet at a "
-                    f"junction with no inertia; opened with {len(cut)} break variable(s) "
-                    f"({', '.join(c.name + '.break' for c in cut)}) solved with the "
-                    "body's twist rates")
-            out.append(Path(4, what, sorted(names), bonds_among(names),
-                            sorted(set(lines(names)) | {j.loc.line}),
-                            [c.element for c in cut]))
-        for kl in plan.loops:
-            names = {c.element for c in graph.constraints if c.joint in kl.joints}
-            names |= {n for n in els if any(n.startswith(f"{b}__") for b in kl.bodies if b)}
-            cut = [c for c in graph.constraints if c.joint == kl.cut]
-            what = (f"{kl.describe()}: kept closed, an index-2 DAE: {len(cut)} algebraic "
-                    f"state(s) ({', '.join(c.name + '.lambda' for c in cut)}) with "
-                    "0 = dg/dt + alpha g" if plan.closed else
-                    f"{kl.describe()}: opened with {len(cut)} break variable(s) "
-                    f"({', '.join(c.name + '.break' for c in cut)})")
-            joints = [graph.model.joints[j] for j in kl.joints]
-            out.append(Path(4, what, sorted(names), bonds_among(names),
-                            sorted(set(lines(names)) | {j.loc.line for j in joints}),
-                            [c.element for c in cut]))
+                        _lines(graph, lp.elements)))
+    return out
+
+
+def _plan_loop_paths(graph: BondGraph, plan: Plan) -> list[Path]:
+    """Class 4: the joints of massless bodies and the kinematic loops, opened with break
+    variables or kept closed."""
+    els, out = graph.elements, []
+    for name in plan.relays:
+        j = graph.model.joints[name]
+        light = [n for n in (j.body1, j.body2) if n and graph.model.bodies[n].mass == 0]
+        cut = [c for c in graph.constraints if c.joint == name]
+        names = {c.element for c in cut}
+        names |= {n for n in els if any(n.startswith(f"{b}__M0") for b in light)}
+        what = (f"joint '{name}' of the bod{'ies' if len(light) > 1 else 'y'} of "
+                f"negligible mass {', '.join(light)}: flow sources would meet at a "
+                f"junction with no inertia; opened with {len(cut)} break variable(s) "
+                f"({', '.join(c.name + '.break' for c in cut)}) solved with the "
+                "body's twist rates")
+        out.append(Path(4, what, sorted(names), _bonds_among(graph, names),
+                        sorted(set(_lines(graph, names)) | {j.loc.line}),
+                        [c.element for c in cut]))
+    for kl in plan.loops:
+        names = {c.element for c in graph.constraints if c.joint in kl.joints}
+        names |= {n for n in els if any(n.startswith(f"{b}__") for b in kl.bodies if b)}
+        cut = [c for c in graph.constraints if c.joint == kl.cut]
+        what = (f"{kl.describe()}: kept closed, an index-2 DAE: {len(cut)} algebraic "
+                f"state(s) ({', '.join(c.name + '.lambda' for c in cut)}) with "
+                "0 = dg/dt + alpha g" if plan.closed else
+                f"{kl.describe()}: opened with {len(cut)} break variable(s) "
+                f"({', '.join(c.name + '.break' for c in cut)})")
+        joints = [graph.model.joints[j] for j in kl.joints]
+        out.append(Path(4, what, sorted(names), _bonds_among(graph, names),
+                        sorted(set(_lines(graph, names)) | {j.loc.line for j in joints}),
+                        [c.element for c in cut]))
     return out
 
 

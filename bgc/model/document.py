@@ -142,7 +142,9 @@ class _Composer(yaml.SafeLoader):
         return node
 
 
-def _read_yaml(text: str, file: str):
+def from_text(text: str, file: str):
+    """The located YAML document of a model or scene text (``file`` names it in errors):
+    a tree of ``YMap``, ``YList`` and plain scalars, composed within the limits above."""
     try:
         loader = _Composer(text, file)
         try:
@@ -228,9 +230,10 @@ def _read_yaml(text: str, file: str):
     return build(node)
 
 
-def read(path: str | Path):
-    """A model file's located YAML document (``read_source``, then ``_read_yaml``)."""
-    return _read_yaml(read_source(path), str(path))
+def read(path: str | Path, what: str = "model file", key: str = "model"):
+    """A model (or scene: ``what``, ``key`` as in ``read_source``) file's located YAML
+    document: ``read_source``, then ``from_text``."""
+    return from_text(read_source(path, what, key), str(path))
 
 
 def _section_at(text: str, line: int) -> str | None:
@@ -243,24 +246,24 @@ def _section_at(text: str, line: int) -> str | None:
     return section
 
 
-def _plain(v):
+def plain(v):
     """The located value as plain JSON data (for hashing)."""
     if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
+        return {str(k): plain(x) for k, x in v.items()}
     if isinstance(v, list):
-        return [_plain(x) for x in v]
+        return [plain(x) for x in v]
     return v
 
 
 def digest(doc) -> str:
     """The model's digest: sha256 of its values as JSON (not of its text: comments and
     layout do not change it), which the generated module's MODEL_HASH is made from."""
-    return hashlib.sha256(json.dumps(_plain(doc), sort_keys=True, default=str)
+    return hashlib.sha256(json.dumps(plain(doc), sort_keys=True, default=str)
                           .encode()).hexdigest()
 
 
 def plain_json(v) -> bool:
-    """Whether ``_plain`` loses nothing of ``v``: every key a string, every scalar a JSON
+    """Whether ``plain`` loses nothing of ``v``: every key a string, every scalar a JSON
     one (str, int, float, bool, None). Else two documents the loader tells apart may share
     a digest (``1:`` and ``"1":``, a date and its text), so a fresh module does not prove
     the document is the one that loaded: ``pipeline`` then loads it in full."""

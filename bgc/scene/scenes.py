@@ -274,13 +274,9 @@ def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generate
                              title=f"{scene.name}: {model.name} ({scene.method}, "
                                    f"{result.solver})"))}
     minima = None
-    exc = scene.excitation
-    if exc and model.excitation.kinds[exc["kind"]].kind == "chirp" and error is None:
-        from bgc.analysis.envelope import analyse
-        chirp = model.excitation.kinds[exc["kind"]].numbers
-        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):
-            minima = {k: [round(f, 3) for f in c[2]]
-                      for k, c in analyse(result, chirp).items()}
+    if error is None:
+        from bgc.analysis.envelope import chirp_sweep, minima_hz
+        minima = minima_hz(chirp_sweep(model.excitation, scene.excitation, result), 3)
     summary = {"scene": scene.name, "file": scene.file, "model": model.name,
                "method": scene.method, "solver": result.solver,
                "excitation": scene.excitation, "outputs": scene.outputs,

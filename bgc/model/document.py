@@ -145,6 +145,12 @@ class _Composer(yaml.SafeLoader):
 def from_text(text: str, file: str):
     """The located YAML document of a model or scene text (``file`` names it in errors):
     a tree of ``YMap``, ``YList`` and plain scalars, composed within the limits above."""
+    return _build(_compose(text, file), text, file)
+
+
+def _compose(text: str, file: str) -> yaml.Node:
+    """The text's YAML node graph (``_Composer``); PyYAML's errors become located
+    ModelErrors."""
     try:
         loader = _Composer(text, file)
         try:
@@ -175,6 +181,12 @@ def from_text(text: str, file: str):
     if node is None:
         raise ModelError("the model file is empty", loc=Loc(file, 1),
                          hint="a model needs at least 'elements:' and 'bonds:'")
+    return node
+
+
+def _build(node: yaml.Node, text: str, file: str):
+    """YAML nodes -> located values; a tag other than plain YAML's (``_SCALAR_TAGS``), a
+    merge key, a key that is not a scalar and a duplicate key are refused."""
     scalar_loader = yaml.SafeLoader("")
 
     def refuse_tag(n, what):

@@ -69,103 +69,135 @@ def load_scene(path: str | Path) -> Scene:
     check_keys(doc, KEYS, "scene")
     for key in ("model", "outputs", "time"):
         if key not in doc:
-            fail(f"missing key '{key}'", doc.loc, key, "a scene needs " + ", ".join(
-              ("model", "outputs", "time")))
-
-    def at(m, key):
-        return m.val_locs.get(key, m.loc)
-
-    model_path = (path.parent / string(doc["model"], at(doc, "model"), "model",
+            fail(f"missing key '{key}'", doc.loc, key,
+                 "a scene needs " + ", ".join(("model", "outputs", "time")))
+    model_path = (path.parent / string(doc["model"], _at(doc, "model"), "model",
                                        "a model file path")).resolve()
     if not model_path.is_file():
         fail(f"no such model file: {model_path}" if not model_path.exists() else
-             f"{model_path} is not a regular file", at(doc, "model"), "model",
+             f"{model_path} is not a regular file", _at(doc, "model"), "model",
              "a path relative to the scene file")
     model = load.load(model_path)
-    method = string(doc.get("method", "parasitic"), at(doc, "method"), "method",
+    method = string(doc.get("method", "parasitic"), _at(doc, "method"), "method",
                     "a method name")
     if method not in METHODS:
-        fail(f"unknown method '{method}'", at(doc, "method"), "method",
+        fail(f"unknown method '{method}'", _at(doc, "method"), "method",
              "valid methods: " + ", ".join(METHODS))
-    solver = string(doc.get("solver", "native"), at(doc, "solver"), "solver",
+    solver = string(doc.get("solver", "native"), _at(doc, "solver"), "solver",
                     "a solver name")
     if solver not in SOLVERS:
-        fail(f"unknown solver '{solver}'", at(doc, "solver"), "solver",
+        fail(f"unknown solver '{solver}'", _at(doc, "solver"), "solver",
              "valid solvers: " + ", ".join(SOLVERS))
-    outputs = doc["outputs"]
-    names = [o.name for o in model.outputs]
-    if not isinstance(outputs, list) or not outputs:
-        fail("expected a non-empty list of outputs", at(doc, "outputs"), "outputs",
-             "model outputs: " + ", ".join(names))
-    strings(outputs, at(doc, "outputs"), "outputs", "output names")
-    for k, o in enumerate(outputs):
-        if o not in names:
-            fail(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
-                 f"outputs[{k}]", "model outputs: " + ", ".join(names))
-    exc = None
-    if doc.get("excitation") is not None:
-        e = mapping(doc["excitation"], at(doc, "excitation"), "excitation")
-        check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
-        if model.excitation is None:
-            fail(f"model {model.name} has no excitation section", e.loc, "excitation",
-                 "drop 'excitation:' or name a model that has one")
-        exc = {k: string(e.get(k), at(e, k), f"excitation.{k}", f"a {k} name")
-               for k in ("kind", "direction")}
-        for k in ("amplitude", "frequency"):
-            if k in e:
-                exc[k] = number(e[k], at(e, k), f"excitation.{k}", positive=True)
-        try:
-            model.excitation.select(exc["kind"], exc["direction"], exc.get("amplitude"),
-                                    exc.get("frequency"))
-        except Exception as err:          # BgcError naming the CLI option: relocate it
-            fail(getattr(err, "message", str(err)), e.loc, "excitation",
-                 getattr(err, "hint", None))
-    tm = mapping(doc["time"], at(doc, "time"), "time")
-    check_keys(tm, ("start", "end", "points"), "time")
-    t_start = number(tm.get("start", 0.0), at(tm, "start"), "time.start", nonneg=True)
-    if "end" not in tm:
-        fail("missing key 'end'", tm.loc, "time.end")
-    t_end = number(tm["end"], at(tm, "end"), "time.end", positive=True)
-    if t_end <= t_start:
-        fail(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
-    n_points = points(tm.get("points", 1001), at(tm, "points"), "time.points")
-    if exc is not None and "frequency" in exc:
-        why = limits.too_fast(exc["frequency"], t_end - t_start)
-        if why:
-            fail(why, at(doc["excitation"], "frequency"), "excitation.frequency",
-                 "lower the frequency or shorten time.end")
-    tol = (mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
-           if doc.get("tolerances") is not None else None)
-    tols = {}
-    for k in ("rtol", "atol"):
-        default = getattr(model.settings, k, None) or (1e-6 if k == "rtol" else 1e-8)
-        tols[k] = (number(tol[k], at(tol, k), f"tolerances.{k}", positive=True)
-                   if tol is not None and k in tol else default)
-    if tol is not None:
-        check_keys(tol, ("rtol", "atol"), "tolerances")
-    rtol, atol = tols["rtol"], tols["atol"]
-    params = {}
-    if doc.get("params") is not None:
-        pm = mapping(doc["params"], at(doc, "params"), "params")
-        for k, v in pm.items():
-            string(k, pm.key_locs[k], "params", "a parameter name")
-            params[k] = number(v, at(pm, k), f"params.{k}")
-    expose = (strings(doc["expose"], at(doc, "expose"), "expose", "parameter names")
+    outputs = _outputs(doc, model)
+    exc = _excitation(doc, model)
+    t_start, t_end, n_points = _time(doc, exc)
+    rtol, atol = _tolerances(doc, model)
+    params = _params(doc)
+    expose = (strings(doc["expose"], _at(doc, "expose"), "expose", "parameter names")
               if doc.get("expose") is not None else [])
     merge = doc.get("merge_relays")
     if merge is not None and not isinstance(merge, bool):
-        fail(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),
+        fail(f"merge_relays is true or false, got {merge!r}", _at(doc, "merge_relays"),
              "merge_relays", "true: merge also under parasitic (changes the joints' "
              "parasitic compliance); false: never; absent: where exact")
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name.isidentifier():
-        fail(f"scene name {name!r} is not a valid module name", at(doc, "name"), "name",
+        fail(f"scene name {name!r} is not a valid module name", _at(doc, "name"), "name",
              "letters, digits and '_'")
     digest = hashlib.sha256(json.dumps(
         [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
         default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
                  n_points, rtol, atol, solver, expose, params, digest, merge)
+
+
+def _at(m: YMap, key):
+    """Where ``key`` of ``m`` stands (where ``m`` does, if it is missing)."""
+    return m.val_locs.get(key, m.loc)
+
+
+def _outputs(doc: YMap, model):
+    """``outputs:``, a non-empty list of the model's output names."""
+    outputs = doc["outputs"]
+    names = [o.name for o in model.outputs]
+    if not isinstance(outputs, list) or not outputs:
+        fail("expected a non-empty list of outputs", _at(doc, "outputs"), "outputs",
+             "model outputs: " + ", ".join(names))
+    strings(outputs, _at(doc, "outputs"), "outputs", "output names")
+    for k, o in enumerate(outputs):
+        if o not in names:
+            fail(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
+                 f"outputs[{k}]", "model outputs: " + ", ".join(names))
+    return outputs
+
+
+def _excitation(doc: YMap, model) -> dict | None:
+    """``excitation:`` {kind, direction, amplitude?, frequency?}, one the model's
+    ``Excitation.select`` accepts; None without it."""
+    if doc.get("excitation") is None:
+        return None
+    e = mapping(doc["excitation"], _at(doc, "excitation"), "excitation")
+    check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
+    if model.excitation is None:
+        fail(f"model {model.name} has no excitation section", e.loc, "excitation",
+             "drop 'excitation:' or name a model that has one")
+    exc = {k: string(e.get(k), _at(e, k), f"excitation.{k}", f"a {k} name")
+           for k in ("kind", "direction")}
+    for k in ("amplitude", "frequency"):
+        if k in e:
+            exc[k] = number(e[k], _at(e, k), f"excitation.{k}", positive=True)
+    try:
+        model.excitation.select(exc["kind"], exc["direction"], exc.get("amplitude"),
+                                exc.get("frequency"))
+    except Exception as err:          # BgcError naming the CLI option: relocate it
+        fail(getattr(err, "message", str(err)), e.loc, "excitation",
+             getattr(err, "hint", None))
+    return exc
+
+
+def _time(doc: YMap, exc: dict | None) -> tuple[float, float, int]:
+    """``time:`` {start?, end, points?} -> (start, end, points); a sine's frequency must
+    be slow enough for the span (``limits.too_fast``)."""
+    tm = mapping(doc["time"], _at(doc, "time"), "time")
+    check_keys(tm, ("start", "end", "points"), "time")
+    t_start = number(tm.get("start", 0.0), _at(tm, "start"), "time.start", nonneg=True)
+    if "end" not in tm:
+        fail("missing key 'end'", tm.loc, "time.end")
+    t_end = number(tm["end"], _at(tm, "end"), "time.end", positive=True)
+    if t_end <= t_start:
+        fail(f"end {t_end:g} must be after start {t_start:g}", _at(tm, "end"), "time.end")
+    n_points = points(tm.get("points", 1001), _at(tm, "points"), "time.points")
+    if exc is not None and "frequency" in exc:
+        why = limits.too_fast(exc["frequency"], t_end - t_start)
+        if why:
+            fail(why, _at(doc["excitation"], "frequency"), "excitation.frequency",
+                 "lower the frequency or shorten time.end")
+    return t_start, t_end, n_points
+
+
+def _tolerances(doc: YMap, model) -> tuple[float, float]:
+    """``tolerances:`` {rtol?, atol?} -> (rtol, atol), each the model's if not given."""
+    tol = (mapping(doc["tolerances"], _at(doc, "tolerances"), "tolerances")
+           if doc.get("tolerances") is not None else None)
+    tols = {}
+    for k in ("rtol", "atol"):
+        default = getattr(model.settings, k, None) or (1e-6 if k == "rtol" else 1e-8)
+        tols[k] = (number(tol[k], _at(tol, k), f"tolerances.{k}", positive=True)
+                   if tol is not None and k in tol else default)
+    if tol is not None:
+        check_keys(tol, ("rtol", "atol"), "tolerances")
+    return tols["rtol"], tols["atol"]
+
+
+def _params(doc: YMap) -> dict[str, float]:
+    """``params:`` {name: value}, the values the scene sets."""
+    params = {}
+    if doc.get("params") is not None:
+        pm = mapping(doc["params"], _at(doc, "params"), "params")
+        for k, v in pm.items():
+            string(k, pm.key_locs[k], "params", "a parameter name")
+            params[k] = number(v, _at(pm, k), f"params.{k}")
+    return params
 
 
 def scene_values(scene: Scene, model) -> dict[str, float]:

@@ -108,7 +108,7 @@ def element_fields(cx: Context, headers, params, signals, bonds) -> dict[str, El
         for k in given:
             kloc, kk = v.val_locs[k], f"{key}.{k}"
             resolve = resolver(kk, kloc) if spec.modulated else None
-            el.fields[k] = _law(cx, el, k, v[k], kloc, kk, params, signals, resolve)
+            el.fields[k] = _law(cx, el, v, k, params, signals, resolve)
             el.field_locs[k] = kloc
         if spec.initial:
             el.initial = _initial(cx, v, spec.initial, key, params)
@@ -116,10 +116,12 @@ def element_fields(cx: Context, headers, params, signals, bonds) -> dict[str, El
     return out
 
 
-def _law(cx: Context, el: Element, k, value, kloc, kk, params, signals, resolve):
-    """The law ``k`` of element ``el``: what its expression may name (a C's, I's or R's
-    own variable; a TF's or GY's ratio only parameters), checked physical."""
+def _law(cx: Context, el: Element, v: YMap, k, params, signals, resolve):
+    """The law ``k`` of element ``el`` (``v``: its mapping): what its expression may name
+    (a C's, I's or R's own variable; a TF's or GY's ratio only parameters), checked
+    physical."""
     kind, spec = el.kind, KINDS[el.kind]
+    value, kloc, kk = v[k], v.val_locs[k], f"elements.{el.name}.{k}"
     pvals = {symbols.param(p.name): p.value for p in params.values()}
     names = cx.expr_names(params, signals)
     law_is_local = k in ("effort", "flow") and kind in ("C", "I", "R")

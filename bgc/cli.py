@@ -461,16 +461,14 @@ def simulate(model, t_end, rtol, atol, solver, step, points, max_steps, params, 
     if plot:
         files["png"] = str(plot_png(result, plot, title=title))
     minima = None
-    if exc and m.excitation.kinds[exc["kind"]].kind == "chirp":
-        from bgc.analysis.envelope import analyse
+    if exc:         # the Model is loaded (need_model)
+        from bgc.analysis.envelope import chirp_sweep, minima_hz
         from bgc.analysis.results import plot_envelopes
-        chirp = m.excitation.kinds[exc["kind"]].numbers
-        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
-            curves = analyse(result, chirp)
-            minima = {k: [round(f, 2) for f in c[2]] for k, c in curves.items()}
-            if plot:
-                path = Path(plot).with_name(Path(plot).stem + "_envelope.png")
-                files["envelope_png"] = str(plot_envelopes(curves, path, title))
+        curves = chirp_sweep(m.excitation, exc, result)
+        minima = minima_hz(curves, 2)
+        if curves is not None and plot:
+            path = Path(plot).with_name(Path(plot).stem + "_envelope.png")
+            files["envelope_png"] = str(plot_envelopes(curves, path, title))
     if zoom and plot:
         t0, t1 = zoom
         path = Path(plot).with_name(Path(plot).stem + "_zoom.png")

@@ -25,6 +25,7 @@ from conftest import MODELS
 from bgc.codegen import emit
 from bgc.mechanics import exact
 from bgc.model import load
+from bgc.model.sections import bodies
 from bgc.pipeline import build
 
 # the shipped models with bodies and joints whose numbers are decimals of at most 15
@@ -51,11 +52,11 @@ def _nudged_inputs(monkeypatch, seed: int):
     inertias, velocities) each one ulp off as a float: what the inputs of a numerical
     computation look like after another machine's rounding."""
     rng = random.Random(seed)
-    vector = load._Loader.vector
+    vector = bodies.vector      # every 3-vector of the geometry is read by it
 
-    def nudged(self, v, loc, key):
-        return tuple(_nudge(float(x), rng) for x in vector(self, v, loc, key))
-    monkeypatch.setattr(load._Loader, "vector", nudged)
+    def nudged(v, loc, key):
+        return tuple(_nudge(float(x), rng) for x in vector(v, loc, key))
+    monkeypatch.setattr(bodies, "vector", nudged)
 
 
 def _source(model) -> str:

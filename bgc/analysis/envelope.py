@@ -56,3 +56,27 @@ def analyse(result, chirp: dict, skip=("g",)) -> dict:
         f, a = envelope(result.t, result.column(name), chirp)
         out[name] = (f, a, minima(f, a))
     return out
+
+
+def chirp_sweep(excitation, selected: dict | None, result) -> dict | None:
+    """``analyse`` of a run whose selected excitation (``selected``: {kind, direction,
+    ...}, a kind of the model's ``excitation``) is a chirp, once the run has covered a
+    tenth of the sweep [t2, t3]; None for any other run. What ``bgc simulate`` and a
+    scene's run report."""
+    if not selected:
+        return None
+    signal = excitation.kinds[selected["kind"]]
+    if signal.kind != "chirp":
+        return None
+    chirp = signal.numbers
+    if not result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
+        return None
+    return analyse(result, chirp)
+
+
+def minima_hz(curves: dict | None, digits: int) -> dict | None:
+    """The envelope minima of ``chirp_sweep``'s curves, rounded to ``digits``: name ->
+    [Hz, ...], deepest first (None for None)."""
+    if curves is None:
+        return None
+    return {name: [round(f, digits) for f in c[2]] for name, c in curves.items()}

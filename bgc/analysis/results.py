@@ -35,7 +35,7 @@ def read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
     return names, np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
 
 
-def _panels(n: int, height: float, sharex: bool = True):
+def panels(n: int, height: float, sharex: bool = True):
     """A figure of ``n`` stacked panels, sharing x unless told (matplotlib without a
     display)."""
     import matplotlib
@@ -57,7 +57,9 @@ def plot_format(path: str | Path, key: str | None = None) -> str:
     return fmt
 
 
-def _save(fig, path: str | Path, title: str) -> Path:
+def save_figure(fig, path: str | Path, title: str) -> Path:
+    """Write ``fig`` (of ``panels``) to ``path`` atomically, in the format its suffix
+    names, with ``title`` above; the figure is closed."""
     import matplotlib.pyplot as plt
     try:
         fmt = plot_format(path)     # the temporary file's suffix is .tmp
@@ -83,7 +85,7 @@ def plot(result: Result, path: str | Path, title: str = "", window=None,
     sel = np.ones(len(result.t), dtype=bool)
     if window is not None:
         sel = (result.t >= window[0]) & (result.t <= window[1])
-    fig, axes = _panels(len(groups), 1.9)
+    fig, axes = panels(len(groups), 1.9)
     for ax, (label, members) in zip(axes[:, 0], groups.items()):
         for name in members:
             ax.plot(result.t[sel], result.column(name)[sel], lw=1.2, label=name)
@@ -92,13 +94,13 @@ def plot(result: Result, path: str | Path, title: str = "", window=None,
             ax.legend(fontsize=8, loc="upper right")
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("t [s]")
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
     """One panel per output: its envelope over a chirp against the instantaneous
     frequency, the minima marked (``curves``: name -> (freq, amplitude, minima))."""
-    fig, axes = _panels(len(curves), 2.2)
+    fig, axes = panels(len(curves), 2.2)
     for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
         ax.semilogy(f, a, lw=1.2)
         for k, fm in enumerate(mins[:2]):
@@ -108,4 +110,4 @@ def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
         ax.set_ylabel(f"|{name}|")
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel("instantaneous excitation frequency [Hz]")
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bgc.analysis.results import _panels, _save
+from bgc.analysis.results import panels, save_figure
 
 _MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^"}
 _LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, (5, 1)),
@@ -15,7 +15,7 @@ _LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, 
 
 def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
     """Wall time against error, log-log, one series per method x integrator."""
-    fig, axes = _panels(1, 5.2)
+    fig, axes = panels(1, 5.2)
     ax = axes[0, 0]
     series = {}
     for r in rows:
@@ -37,13 +37,13 @@ def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
     ax.legend(fontsize=7, ncol=3, loc="upper left")
     if note:
         ax.set_title(note, fontsize=7)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def stiffness(rows, path: Path, title: str) -> Path:
     """Parasitic stiffness sweep: error against time, one series per stiffness, each
     point labelled with its tolerance."""
-    fig, axes = _panels(1, 5.0)
+    fig, axes = panels(1, 5.0)
     ax = axes[0, 0]
     by_k = {}
     for r in rows:
@@ -63,12 +63,12 @@ def stiffness(rows, path: Path, title: str) -> Path:
     ax.legend(fontsize=8)
     ax.set_title("each series levels off at its modelling error (falls as 1/k); the "
                  "tolerance is written by each point", fontsize=8)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def rk4_map(rows, path: Path, title: str) -> Path:
     """Stable and unstable RK4 runs over (stiffness, step), with the predicted limits."""
-    fig, axes = _panels(1, 4.8)
+    fig, axes = panels(1, 4.8)
     ax = axes[0, 0]
     k = np.array([r["stiffness"] for r in rows])
     h = np.array([r["step"] for r in rows])
@@ -85,13 +85,13 @@ def rk4_map(rows, path: Path, title: str) -> Path:
     ax.set_ylabel("RK4 step [s]")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def drift(history, grid, path: Path, title: str) -> Path:
     """Two panels: |g| against time for each Baumgarte rate (the drift limit, where bgc
     stops); the largest |g| over (alpha, rtol) against the limit."""
-    fig, axes = _panels(2, 3.6, sharex=False)
+    fig, axes = panels(2, 3.6, sharex=False)
     ax = axes[0, 0]
     for i, a in enumerate(sorted({r["alpha"] for r in history})):
         rs = [r for r in history if r["alpha"] == a]
@@ -117,12 +117,12 @@ def drift(history, grid, path: Path, title: str) -> Path:
     ax.set_ylabel("max |g| / drift limit")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def growth(rows, path: Path, title: str) -> Path:
     """Operation counts of rhs and jac against the SARIB's legs, per method."""
-    fig, axes = _panels(1, 4.0)
+    fig, axes = panels(1, 4.0)
     ax = axes[0, 0]
     for i, method in enumerate(sorted({r["method"] for r in rows})):
         rs = sorted((r for r in rows if r["method"] == method), key=lambda r: r["legs"])
@@ -136,13 +136,13 @@ def growth(rows, path: Path, title: str) -> Path:
     ax.set_xticks([1, 2, 3, 4])
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def zcp_map(rows, path: Path, title: str) -> Path:
     """Two panels against the tolerance: how far each integrator got into the run, and
     the error of those that finished."""
-    fig, axes = _panels(2, 3.2)
+    fig, axes = panels(2, 3.2)
     for i, name in enumerate(dict.fromkeys(r["integrator"] for r in rows)):
         rs = [r for r in rows if r["integrator"] == name]
         tol = [r["rtol"] for r in rs]
@@ -160,7 +160,7 @@ def zcp_map(rows, path: Path, title: str) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     axes[1, 0].invert_xaxis()
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)
 
 
 def compile_cost(rows, path: Path, title: str) -> Path:
@@ -176,7 +176,7 @@ def compile_cost(rows, path: Path, title: str) -> Path:
             return float("nan")
 
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    fig, axes = _panels(1 + len(methods), 3.4, sharex=False)
+    fig, axes = panels(1 + len(methods), 3.4, sharex=False)
     ax = axes[0, 0]
     for i, m in enumerate(methods):
         rs = [r for r in rows if r["method"] == m]
@@ -246,4 +246,4 @@ def compile_cost(rows, path: Path, title: str) -> Path:
         ax.set_ylabel(f"{m}: cold [s]")
         ax.grid(True, axis="y", alpha=0.3)
         ax.legend(fontsize=6, ncol=4)
-    return _save(fig, path, title)
+    return save_figure(fig, path, title)

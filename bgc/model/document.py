@@ -142,7 +142,15 @@ class _Composer(yaml.SafeLoader):
         return node
 
 
-def _read_yaml(text: str, file: str):
+def from_text(text: str, file: str):
+    """The located YAML document of a model or scene text (``file`` names it in errors):
+    a tree of ``YMap``, ``YList`` and plain scalars, composed within the limits above."""
+    return _build(_compose(text, file), text, file)
+
+
+def _compose(text: str, file: str) -> yaml.Node:
+    """The text's YAML node graph (``_Composer``); PyYAML's errors become located
+    ModelErrors."""
     try:
         loader = _Composer(text, file)
         try:
@@ -173,6 +181,12 @@ def _read_yaml(text: str, file: str):
     if node is None:
         raise ModelError("the model file is empty", loc=Loc(file, 1),
                          hint="a model needs at least 'elements:' and 'bonds:'")
+    return node
+
+
+def _build(node: yaml.Node, text: str, file: str):
+    """YAML nodes -> located values; a tag other than plain YAML's (``_SCALAR_TAGS``), a
+    merge key, a key that is not a scalar and a duplicate key are refused."""
     scalar_loader = yaml.SafeLoader("")
 
     def refuse_tag(n, what):
@@ -228,9 +242,10 @@ def _read_yaml(text: str, file: str):
     return build(node)
 
 
-def read(path: str | Path):
-    """A model file's located YAML document (``read_source``, then ``_read_yaml``)."""
-    return _read_yaml(read_source(path), str(path))
+def read(path: str | Path, what: str = "model file", key: str = "model"):
+    """A model (or scene: ``what``, ``key`` as in ``read_source``) file's located YAML
+    document: ``read_source``, then ``from_text``."""
+    return from_text(read_source(path, what, key), str(path))
 
 
 def _section_at(text: str, line: int) -> str | None:
@@ -243,24 +258,24 @@ def _section_at(text: str, line: int) -> str | None:
     return section
 
 
-def _plain(v):
+def plain(v):
     """The located value as plain JSON data (for hashing)."""
     if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
+        return {str(k): plain(x) for k, x in v.items()}
     if isinstance(v, list):
-        return [_plain(x) for x in v]
+        return [plain(x) for x in v]
     return v
 
 
 def digest(doc) -> str:
     """The model's digest: sha256 of its values as JSON (not of its text: comments and
     layout do not change it), which the generated module's MODEL_HASH is made from."""
-    return hashlib.sha256(json.dumps(_plain(doc), sort_keys=True, default=str)
+    return hashlib.sha256(json.dumps(plain(doc), sort_keys=True, default=str)
                           .encode()).hexdigest()
 
 
 def plain_json(v) -> bool:
-    """Whether ``_plain`` loses nothing of ``v``: every key a string, every scalar a JSON
+    """Whether ``plain`` loses nothing of ``v``: every key a string, every scalar a JSON
     one (str, int, float, bool, None). Else two documents the loader tells apart may share
     a digest (``1:`` and ``"1":``, a date and its text), so a fresh module does not prove
     the document is the one that loaded: ``pipeline`` then loads it in full."""

@@ -163,94 +163,123 @@ def parse(text, *, loc: Loc, key: str, names: dict[str, sp.Expr],
     if tree is None or _depth(tree) > MAX_DEPTH:
         raise ModelError(f"expression {shown!r} nests operators or calls more than "
                          f"{MAX_DEPTH} deep", loc=loc, key=key, hint=hint_split)
-
-    def fail(msg: str, hint: str | None = None):
-        raise ModelError(f"{msg} in expression {shown!r}", loc=loc, key=key, hint=hint)
-
-    def power(a, b):
-        if b.is_Number and abs(b) > MAX_EXPONENT:
-            fail(f"exponent {float(b):.6g} is larger than {MAX_EXPONENT}",
-                 hint="a power this large is no float; rescale the quantity")
-        if a.is_Number and b.is_Number and a != 0 and (
-                float(abs(b)) * _log10(abs(a)) > 308.25):
-            fail("a power beyond the float range (+-1.8e308)",
-                 hint="rescale the quantity")
-        return a ** b
-
-    def conv(node):
-        if isinstance(node, ast.Expression):
-            return conv(node.body)
-        if isinstance(node, ast.Constant):
-            if isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
-                try:
-                    return number(node.value)
-                except ValueError as exc:
-                    fail(f"the constant {exc}", hint="write a finite number such as 1.5 or 2e-3")
-            fail(f"constant {node.value!r} is not a number")
-        if isinstance(node, ast.Name):
-            if node.id in names:
-                return names[node.id]
-            if node.id in CONSTANTS:
-                return CONSTANTS[node.id]
-            valid = sorted(set(names) | set(CONSTANTS))
-            fail(f"unknown name '{node.id}'", hint="valid names here: " + ", ".join(valid))
-        if isinstance(node, ast.Attribute):
-            target = node.value       # name.attr, or body.point.attr
-            if (isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name)):
-                target_name = f"{target.value.id}.{target.attr}"
-            elif isinstance(target, ast.Name):
-                target_name = target.id
-            else:
-                target_name = None
-            if target_name is None or resolve_ref is None:
-                fail("references 'name.attr' are not allowed here")
-            return resolve_ref(target_name, node.attr)
-        if isinstance(node, ast.BinOp):
-            if isinstance(node.op, ast.BitXor):
-                fail("'^' is not a power", hint="write x**3 for a power")
-            op = power if isinstance(node.op, ast.Pow) else _BINOPS.get(type(node.op))
-            if op is None:
-                fail(f"operator {type(node.op).__name__} is not allowed")
-            return op(conv(node.left), conv(node.right))
-        if isinstance(node, ast.UnaryOp):
-            if isinstance(node.op, ast.USub):
-                return -conv(node.operand)
-            if isinstance(node.op, ast.UAdd):
-                return conv(node.operand)
-            fail(f"operator {type(node.op).__name__} is not allowed")
-        if isinstance(node, ast.Call):
-            if not isinstance(node.func, ast.Name) or node.keywords:
-                fail("only plain function calls like sin(x) are allowed")
-            fname = node.func.id
-            if fname == "ifelse":
-                if len(node.args) != 3:
-                    fail("ifelse takes 3 arguments", hint="ifelse(x > 0, a, b)")
-                cond = conv_cond(node.args[0])
-                return sp.Piecewise((conv(node.args[1]), cond), (conv(node.args[2]), True))
-            if fname not in FUNCTIONS:
-                fail(f"unknown function '{fname}'",
-                     hint="valid functions: " + ", ".join(sorted(FUNCTIONS) + ["ifelse"]))
-            try:
-                return FUNCTIONS[fname](*[conv(a) for a in node.args])
-            except TypeError:
-                fail(f"wrong number of arguments to {fname}")
-        if isinstance(node, ast.Compare):
-            fail("a comparison is only allowed as the first argument of ifelse",
-                 hint="ifelse(x > 0, a, b)")
-        fail(f"{type(node).__name__} is not allowed")
-
-    def conv_cond(node):
-        if (isinstance(node, ast.Compare) and len(node.ops) == 1
-                and type(node.ops[0]) in _CMPS):
-            return _CMPS[type(node.ops[0])](conv(node.left), conv(node.comparators[0]))
-        fail("the condition of ifelse must be one comparison with < <= > >=")
-
-    e = sp.sympify(conv(tree))
+    conv = _Converter(shown, loc, key, names, resolve_ref)
+    e = sp.sympify(conv.expr(tree))
     found = check_finite(e, values or {})
     if found:
         part, why = found
         shown_names = {s: sp.Symbol(n) for n, s in names.items() if isinstance(s, sp.Symbol)}
-        fail(f"'{part.xreplace(shown_names)}' {why}" if part != e else f"the value {why}",
-             hint="every constant must be a finite real number: check divisors, "
-                  "log/sqrt/acos arguments and the parameters' values")
+        conv.fail(f"'{part.xreplace(shown_names)}' {why}" if part != e
+                  else f"the value {why}",
+                  hint="every constant must be a finite real number: check divisors, "
+                       "log/sqrt/acos arguments and the parameters' values")
     return e
+
+
+class _Converter:
+    """One expression's Python syntax tree -> sympy, over the whitelist: numbers, the
+    given ``names``, ``CONSTANTS``, references (``resolve_ref``), the operators of
+    ``_BINOPS``, ``FUNCTIONS`` and ``ifelse``. Errors quote the expression (``shown``)."""
+
+    def __init__(self, shown: str, loc: Loc, key: str, names: dict[str, sp.Expr],
+                 resolve_ref: Callable[[str, str], sp.Expr] | None):
+        self.shown, self.loc, self.key = shown, loc, key
+        self.names, self.resolve_ref = names, resolve_ref
+
+    def fail(self, msg: str, hint: str | None = None):
+        raise ModelError(f"{msg} in expression {self.shown!r}", loc=self.loc, key=self.key,
+                         hint=hint)
+
+    def power(self, a, b):
+        if b.is_Number and abs(b) > MAX_EXPONENT:
+            self.fail(f"exponent {float(b):.6g} is larger than {MAX_EXPONENT}",
+                      hint="a power this large is no float; rescale the quantity")
+        if a.is_Number and b.is_Number and a != 0 and (
+                float(abs(b)) * _log10(abs(a)) > 308.25):
+            self.fail("a power beyond the float range (+-1.8e308)",
+                      hint="rescale the quantity")
+        return a ** b
+
+    def expr(self, node):
+        """The sympy value of ``node``, or a located ModelError."""
+        if isinstance(node, ast.Expression):
+            return self.expr(node.body)
+        if isinstance(node, ast.Constant):
+            return self.constant(node)
+        if isinstance(node, ast.Name):
+            return self.name(node)
+        if isinstance(node, ast.Attribute):
+            return self.reference(node)
+        if isinstance(node, ast.BinOp):
+            if isinstance(node.op, ast.BitXor):
+                self.fail("'^' is not a power", hint="write x**3 for a power")
+            op = self.power if isinstance(node.op, ast.Pow) else _BINOPS.get(type(node.op))
+            if op is None:
+                self.fail(f"operator {type(node.op).__name__} is not allowed")
+            return op(self.expr(node.left), self.expr(node.right))
+        if isinstance(node, ast.UnaryOp):
+            if isinstance(node.op, ast.USub):
+                return -self.expr(node.operand)
+            if isinstance(node.op, ast.UAdd):
+                return self.expr(node.operand)
+            self.fail(f"operator {type(node.op).__name__} is not allowed")
+        if isinstance(node, ast.Call):
+            return self.call(node)
+        if isinstance(node, ast.Compare):
+            self.fail("a comparison is only allowed as the first argument of ifelse",
+                      hint="ifelse(x > 0, a, b)")
+        self.fail(f"{type(node).__name__} is not allowed")
+
+    def constant(self, node: ast.Constant):
+        if isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            try:
+                return number(node.value)
+            except ValueError as exc:
+                self.fail(f"the constant {exc}",
+                          hint="write a finite number such as 1.5 or 2e-3")
+        self.fail(f"constant {node.value!r} is not a number")
+
+    def name(self, node: ast.Name):
+        if node.id in self.names:
+            return self.names[node.id]
+        if node.id in CONSTANTS:
+            return CONSTANTS[node.id]
+        valid = sorted(set(self.names) | set(CONSTANTS))
+        self.fail(f"unknown name '{node.id}'", hint="valid names here: " + ", ".join(valid))
+
+    def reference(self, node: ast.Attribute):
+        target = node.value       # name.attr, or body.point.attr
+        if (isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name)):
+            target_name = f"{target.value.id}.{target.attr}"
+        elif isinstance(target, ast.Name):
+            target_name = target.id
+        else:
+            target_name = None
+        if target_name is None or self.resolve_ref is None:
+            self.fail("references 'name.attr' are not allowed here")
+        return self.resolve_ref(target_name, node.attr)
+
+    def call(self, node: ast.Call):
+        if not isinstance(node.func, ast.Name) or node.keywords:
+            self.fail("only plain function calls like sin(x) are allowed")
+        fname = node.func.id
+        if fname == "ifelse":
+            if len(node.args) != 3:
+                self.fail("ifelse takes 3 arguments", hint="ifelse(x > 0, a, b)")
+            cond = self.condition(node.args[0])
+            return sp.Piecewise((self.expr(node.args[1]), cond),
+                                (self.expr(node.args[2]), True))
+        if fname not in FUNCTIONS:
+            self.fail(f"unknown function '{fname}'",
+                      hint="valid functions: " + ", ".join(sorted(FUNCTIONS) + ["ifelse"]))
+        try:
+            return FUNCTIONS[fname](*[self.expr(a) for a in node.args])
+        except TypeError:
+            self.fail(f"wrong number of arguments to {fname}")
+
+    def condition(self, node):
+        if (isinstance(node, ast.Compare) and len(node.ops) == 1
+                and type(node.ops[0]) in _CMPS):
+            return _CMPS[type(node.ops[0])](self.expr(node.left),
+                                            self.expr(node.comparators[0]))
+        self.fail("the condition of ifelse must be one comparison with < <= > >=")

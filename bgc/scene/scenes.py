@@ -25,10 +25,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bgc.codegen import emit
-from bgc.errors import ModelError
+from bgc.errors import Loc, ModelError
 from bgc.fileio import atomic_write
-from bgc.model import limits, load
-from bgc.model.load import YMap, _Loader, _read_yaml
+from bgc.model import document, limits, load
+from bgc.model.document import YMap
+from bgc.model.values import check_keys, fail, mapping, number, points, string, strings
 from bgc.pipeline import METHODS, build
 from bgc.scene import reduce
 
@@ -61,111 +62,142 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every mistake is one located line."""
     from bgc.simulate import SOLVERS
     path = Path(path)
-    doc = _read_yaml(load.read_source(path, "scene file", "scene"), str(path))
-    ld = _Loader(str(path))
+    doc = document.read(path, "scene file", "scene")
     if not isinstance(doc, YMap):
-        raise ModelError("a scene file is a mapping", loc=load.Loc(str(path), 1),
+        raise ModelError("a scene file is a mapping", loc=Loc(str(path), 1),
                          hint="keys: " + ", ".join(KEYS))
-    ld.check_keys(doc, KEYS, "scene")
+    check_keys(doc, KEYS, "scene")
     for key in ("model", "outputs", "time"):
         if key not in doc:
-            ld.err(f"missing key '{key}'", doc.loc, key, "a scene needs " + ", ".join(
-                ("model", "outputs", "time")))
-
-    def at(m, key):
-        return m.val_locs.get(key, m.loc)
-
-    model_path = (path.parent / ld.string(doc["model"], at(doc, "model"), "model",
-                                          "a model file path")).resolve()
+            fail(f"missing key '{key}'", doc.loc, key,
+                 "a scene needs " + ", ".join(("model", "outputs", "time")))
+    model_path = (path.parent / string(doc["model"], _at(doc, "model"), "model",
+                                       "a model file path")).resolve()
     if not model_path.is_file():
-        ld.err(f"no such model file: {model_path}" if not model_path.exists() else
-               f"{model_path} is not a regular file", at(doc, "model"), "model",
-               "a path relative to the scene file")
+        fail(f"no such model file: {model_path}" if not model_path.exists() else
+             f"{model_path} is not a regular file", _at(doc, "model"), "model",
+             "a path relative to the scene file")
     model = load.load(model_path)
-    method = ld.string(doc.get("method", "parasitic"), at(doc, "method"), "method",
-                       "a method name")
+    method = string(doc.get("method", "parasitic"), _at(doc, "method"), "method",
+                    "a method name")
     if method not in METHODS:
-        ld.err(f"unknown method '{method}'", at(doc, "method"), "method",
-               "valid methods: " + ", ".join(METHODS))
-    solver = ld.string(doc.get("solver", "native"), at(doc, "solver"), "solver",
-                       "a solver name")
+        fail(f"unknown method '{method}'", _at(doc, "method"), "method",
+             "valid methods: " + ", ".join(METHODS))
+    solver = string(doc.get("solver", "native"), _at(doc, "solver"), "solver",
+                    "a solver name")
     if solver not in SOLVERS:
-        ld.err(f"unknown solver '{solver}'", at(doc, "solver"), "solver",
-               "valid solvers: " + ", ".join(SOLVERS))
-    outputs = doc["outputs"]
-    names = [o.name for o in model.outputs]
-    if not isinstance(outputs, list) or not outputs:
-        ld.err("expected a non-empty list of outputs", at(doc, "outputs"), "outputs",
-               "model outputs: " + ", ".join(names))
-    ld.strings(outputs, at(doc, "outputs"), "outputs", "output names")
-    for k, o in enumerate(outputs):
-        if o not in names:
-            ld.err(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
-                   f"outputs[{k}]", "model outputs: " + ", ".join(names))
-    exc = None
-    if doc.get("excitation") is not None:
-        e = ld.mapping(doc["excitation"], at(doc, "excitation"), "excitation")
-        ld.check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
-        if model.excitation is None:
-            ld.err(f"model {model.name} has no excitation section", e.loc, "excitation",
-                   "drop 'excitation:' or name a model that has one")
-        exc = {k: ld.string(e.get(k), at(e, k), f"excitation.{k}", f"a {k} name")
-               for k in ("kind", "direction")}
-        for k in ("amplitude", "frequency"):
-            if k in e:
-                exc[k] = ld.number(e[k], at(e, k), f"excitation.{k}", positive=True)
-        try:
-            model.excitation.select(exc["kind"], exc["direction"], exc.get("amplitude"),
-                                    exc.get("frequency"))
-        except Exception as err:          # BgcError naming the CLI option: relocate it
-            ld.err(getattr(err, "message", str(err)), e.loc, "excitation",
-                   getattr(err, "hint", None))
-    tm = ld.mapping(doc["time"], at(doc, "time"), "time")
-    ld.check_keys(tm, ("start", "end", "points"), "time")
-    t_start = ld.number(tm.get("start", 0.0), at(tm, "start"), "time.start", nonneg=True)
-    if "end" not in tm:
-        ld.err("missing key 'end'", tm.loc, "time.end")
-    t_end = ld.number(tm["end"], at(tm, "end"), "time.end", positive=True)
-    if t_end <= t_start:
-        ld.err(f"end {t_end:g} must be after start {t_start:g}", at(tm, "end"), "time.end")
-    points = ld.points(tm.get("points", 1001), at(tm, "points"), "time.points")
-    if exc is not None and "frequency" in exc:
-        why = limits.too_fast(exc["frequency"], t_end - t_start)
-        if why:
-            ld.err(why, at(doc["excitation"], "frequency"), "excitation.frequency",
-                   "lower the frequency or shorten time.end")
-    tol = (ld.mapping(doc["tolerances"], at(doc, "tolerances"), "tolerances")
-           if doc.get("tolerances") is not None else None)
-    tols = {}
-    for k in ("rtol", "atol"):
-        default = getattr(model.settings, k, None) or (1e-6 if k == "rtol" else 1e-8)
-        tols[k] = (ld.number(tol[k], at(tol, k), f"tolerances.{k}", positive=True)
-                   if tol is not None and k in tol else default)
-    if tol is not None:
-        ld.check_keys(tol, ("rtol", "atol"), "tolerances")
-    rtol, atol = tols["rtol"], tols["atol"]
-    params = {}
-    if doc.get("params") is not None:
-        pm = ld.mapping(doc["params"], at(doc, "params"), "params")
-        for k, v in pm.items():
-            ld.string(k, pm.key_locs[k], "params", "a parameter name")
-            params[k] = ld.number(v, at(pm, k), f"params.{k}")
-    expose = (ld.strings(doc["expose"], at(doc, "expose"), "expose", "parameter names")
+        fail(f"unknown solver '{solver}'", _at(doc, "solver"), "solver",
+             "valid solvers: " + ", ".join(SOLVERS))
+    outputs = _outputs(doc, model)
+    exc = _excitation(doc, model)
+    t_start, t_end, n_points = _time(doc, exc)
+    rtol, atol = _tolerances(doc, model)
+    params = _params(doc)
+    expose = (strings(doc["expose"], _at(doc, "expose"), "expose", "parameter names")
               if doc.get("expose") is not None else [])
     merge = doc.get("merge_relays")
     if merge is not None and not isinstance(merge, bool):
-        ld.err(f"merge_relays is true or false, got {merge!r}", at(doc, "merge_relays"),
-               "merge_relays", "true: merge also under parasitic (changes the joints' "
-               "parasitic compliance); false: never; absent: where exact")
+        fail(f"merge_relays is true or false, got {merge!r}", _at(doc, "merge_relays"),
+             "merge_relays", "true: merge also under parasitic (changes the joints' "
+             "parasitic compliance); false: never; absent: where exact")
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name.isidentifier():
-        ld.err(f"scene name {name!r} is not a valid module name", at(doc, "name"), "name",
-               "letters, digits and '_'")
+        fail(f"scene name {name!r} is not a valid module name", _at(doc, "name"), "name",
+             "letters, digits and '_'")
     digest = hashlib.sha256(json.dumps(
         [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
         default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
-                 points, rtol, atol, solver, expose, params, digest, merge)
+                 n_points, rtol, atol, solver, expose, params, digest, merge)
+
+
+def _at(m: YMap, key):
+    """Where ``key`` of ``m`` stands (where ``m`` does, if it is missing)."""
+    return m.val_locs.get(key, m.loc)
+
+
+def _outputs(doc: YMap, model):
+    """``outputs:``, a non-empty list of the model's output names."""
+    outputs = doc["outputs"]
+    names = [o.name for o in model.outputs]
+    if not isinstance(outputs, list) or not outputs:
+        fail("expected a non-empty list of outputs", _at(doc, "outputs"), "outputs",
+             "model outputs: " + ", ".join(names))
+    strings(outputs, _at(doc, "outputs"), "outputs", "output names")
+    for k, o in enumerate(outputs):
+        if o not in names:
+            fail(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
+                 f"outputs[{k}]", "model outputs: " + ", ".join(names))
+    return outputs
+
+
+def _excitation(doc: YMap, model) -> dict | None:
+    """``excitation:`` {kind, direction, amplitude?, frequency?}, one the model's
+    ``Excitation.select`` accepts; None without it."""
+    if doc.get("excitation") is None:
+        return None
+    e = mapping(doc["excitation"], _at(doc, "excitation"), "excitation")
+    check_keys(e, ("kind", "direction", "amplitude", "frequency"), "excitation")
+    if model.excitation is None:
+        fail(f"model {model.name} has no excitation section", e.loc, "excitation",
+             "drop 'excitation:' or name a model that has one")
+    exc = {k: string(e.get(k), _at(e, k), f"excitation.{k}", f"a {k} name")
+           for k in ("kind", "direction")}
+    for k in ("amplitude", "frequency"):
+        if k in e:
+            exc[k] = number(e[k], _at(e, k), f"excitation.{k}", positive=True)
+    try:
+        model.excitation.select(exc["kind"], exc["direction"], exc.get("amplitude"),
+                                exc.get("frequency"))
+    except Exception as err:          # BgcError naming the CLI option: relocate it
+        fail(getattr(err, "message", str(err)), e.loc, "excitation",
+             getattr(err, "hint", None))
+    return exc
+
+
+def _time(doc: YMap, exc: dict | None) -> tuple[float, float, int]:
+    """``time:`` {start?, end, points?} -> (start, end, points); a sine's frequency must
+    be slow enough for the span (``limits.too_fast``)."""
+    tm = mapping(doc["time"], _at(doc, "time"), "time")
+    check_keys(tm, ("start", "end", "points"), "time")
+    t_start = number(tm.get("start", 0.0), _at(tm, "start"), "time.start", nonneg=True)
+    if "end" not in tm:
+        fail("missing key 'end'", tm.loc, "time.end")
+    t_end = number(tm["end"], _at(tm, "end"), "time.end", positive=True)
+    if t_end <= t_start:
+        fail(f"end {t_end:g} must be after start {t_start:g}", _at(tm, "end"), "time.end")
+    n_points = points(tm.get("points", 1001), _at(tm, "points"), "time.points")
+    if exc is not None and "frequency" in exc:
+        why = limits.too_fast(exc["frequency"], t_end - t_start)
+        if why:
+            fail(why, _at(doc["excitation"], "frequency"), "excitation.frequency",
+                 "lower the frequency or shorten time.end")
+    return t_start, t_end, n_points
+
+
+def _tolerances(doc: YMap, model) -> tuple[float, float]:
+    """``tolerances:`` {rtol?, atol?} -> (rtol, atol), each the model's if not given."""
+    tol = (mapping(doc["tolerances"], _at(doc, "tolerances"), "tolerances")
+           if doc.get("tolerances") is not None else None)
+    tols = {}
+    for k in ("rtol", "atol"):
+        default = getattr(model.settings, k, None) or (1e-6 if k == "rtol" else 1e-8)
+        tols[k] = (number(tol[k], _at(tol, k), f"tolerances.{k}", positive=True)
+                   if tol is not None and k in tol else default)
+    if tol is not None:
+        check_keys(tol, ("rtol", "atol"), "tolerances")
+    return tols["rtol"], tols["atol"]
+
+
+def _params(doc: YMap) -> dict[str, float]:
+    """``params:`` {name: value}, the values the scene sets."""
+    params = {}
+    if doc.get("params") is not None:
+        pm = mapping(doc["params"], _at(doc, "params"), "params")
+        for k, v in pm.items():
+            string(k, pm.key_locs[k], "params", "a parameter name")
+            params[k] = number(v, _at(pm, k), f"params.{k}")
+    return params
 
 
 def scene_values(scene: Scene, model) -> dict[str, float]:
@@ -187,7 +219,7 @@ def reduced_system(scene: Scene):
     for name in list(scene.expose) + list(scene.params):
         if name not in known:
             raise ModelError(f"unknown parameter '{name}' of model {c.model.name}",
-                             loc=load.Loc(scene.file, 1), key="expose/params",
+                             loc=Loc(scene.file, 1), key="expose/params",
                              hint="see PARAM_NAMES of the generated module")
     merged, removed, note = reduce.merge_relays(
         c.model, scene.outputs, list(scene.expose) + list(scene.params))
@@ -225,7 +257,7 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
 def is_scene(path: str | Path) -> bool:
     """A scene file names a model (``model:``); a model file has bodies or elements."""
     try:        # the same bounded reader as the loader: a hostile file is refused there
-        doc = _read_yaml(load.read_source(path), str(path))
+        doc = document.read(path)
     except ModelError:
         return False
     return isinstance(doc, dict) and "model" in doc
@@ -274,13 +306,9 @@ def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generate
                              title=f"{scene.name}: {model.name} ({scene.method}, "
                                    f"{result.solver})"))}
     minima = None
-    exc = scene.excitation
-    if exc and model.excitation.kinds[exc["kind"]].kind == "chirp" and error is None:
-        from bgc.analysis.envelope import analyse
-        chirp = model.excitation.kinds[exc["kind"]].numbers
-        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):
-            minima = {k: [round(f, 3) for f in c[2]]
-                      for k, c in analyse(result, chirp).items()}
+    if error is None:
+        from bgc.analysis.envelope import chirp_sweep, minima_hz
+        minima = minima_hz(chirp_sweep(model.excitation, scene.excitation, result), 3)
     summary = {"scene": scene.name, "file": scene.file, "model": model.name,
                "method": scene.method, "solver": result.solver,
                "excitation": scene.excitation, "outputs": scene.outputs,

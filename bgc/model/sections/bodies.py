@@ -1,0 +1,152 @@
+"""The ``gravity:`` and ``bodies:`` sections, and the geometry joints are given in: frames,
+axes and points (R0). Geometry is kept exact (``bgc.mechanics.exact``) from the decimals
+written, so no floating-point noise reaches the equations; every 3-vector is read by
+``vector`` here."""
+
+from __future__ import annotations
+
+import sys
+
+import sympy as sp
+
+from bgc.mechanics import exact
+from bgc.model.document import YList, YMap
+from bgc.model.model import Body
+from bgc.model.sections.context import Context
+from bgc.model.values import IDENT, check_keys, fail, kind_of, mapping, number, vector
+
+BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
+
+
+def gravity(doc: YMap) -> tuple[float, float, float]:
+    """``gravity:``: a vector [x, y, z], or g >= 0 pointing down z; none by default."""
+    if "gravity" not in doc:
+        return (0.0, 0.0, 0.0)
+    v, loc = doc["gravity"], doc.val_locs["gravity"]
+    if isinstance(v, YList):
+        return vector(v, loc, "gravity")
+    return (0.0, 0.0, -number(v, loc, "gravity", nonneg=True))
+
+
+def bodies(cx: Context, sec: YMap) -> dict[str, Body]:
+    """Each body: mass, centre of mass, inertia (principal moments and axes), points and
+    initial velocities; the bodies and their points are known to ``cx`` from here on."""
+    out = {}
+    for name, v in sec.items():
+        key = f"bodies.{name}"
+        cx.declare(name, f"body '{name}'", sec.key_locs[name], key)
+        v = mapping(v, sec.val_locs[name], key, "a mapping with mass, com, inertia")
+        check_keys(v, BODY_KEYS, key)
+        for k in ("mass", "com"):
+            if k not in v:
+                fail(f"missing '{k}'", v.loc, key, "a body needs mass, com and inertia")
+
+        def at(k, v=v, key=key):
+            return v.val_locs[k], f"{key}.{k}"
+        mass = number(v["mass"], *at("mass"), nonneg=True, divisor=True)
+        com = exact.vector(vector(v["com"], *at("com")))
+        if "inertia" not in v and mass > 0:
+            fail("missing 'inertia'", v.loc, key,
+                 "a body needs mass, com and inertia (mass: 0 for a body of "
+                 "negligible mass)")
+        frame_ = frame(v["frame"], *at("frame")) if "frame" in v else sp.eye(3)
+        moments, frame_ = _inertia(v, key, mass, frame_)
+        points = {}
+        if "points" in v:
+            pts = mapping(v["points"], *at("points"))
+            for pn, pv in pts.items():
+                if not isinstance(pn, str) or not IDENT.match(pn):
+                    fail(f"'{pn}' is not a valid point name", pts.key_locs[pn],
+                         f"{key}.points")
+                pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
+                points[pn] = exact.floats(frame_.T * (pos - com))
+                cx.point_r0[(name, pn)] = pos
+        vel = vector(v["velocity"], *at("velocity")) if "velocity" in v else (0, 0, 0)
+        omg = vector(v["omega"], *at("omega")) if "omega" in v else (0, 0, 0)
+        out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
+                         exact.floats(frame_), exact.floats(com), points,
+                         tuple(float(x) for x in vel), tuple(float(x) for x in omg))
+    cx.bodies = out
+    return out
+
+
+def _inertia(v: YMap, key, mass, frame_) -> tuple:
+    """A body's principal moments and its principal frame: ``inertia`` as principal
+    moments [Ixx, Iyy, Izz] in ``frame`` or as a symmetric matrix (in ``frame`` if
+    given); none for a body of negligible mass (mass: 0)."""
+    import numpy as np
+    inertia = v.get("inertia", [0, 0, 0])     # negligible mass: no inertia either
+    loc, kk = ((v.val_locs["inertia"], f"{key}.inertia") if "inertia" in v
+               else (v.val_locs["mass"], f"{key}.mass"))
+    if "inertia" not in v:
+        moments = sp.zeros(3, 1)
+    elif isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
+        if len(inertia) != 3:
+            fail("an inertia matrix has 3 rows", loc, kk)
+        M = exact.matrix([vector(r, inertia.item_locs[i], f"{kk}[{i}]")
+                          for i, r in enumerate(inertia)])
+        Mf = np.array(exact.floats(M))
+        if np.abs(Mf - Mf.T).max() > 1e-9 * max(np.abs(Mf).max(), 1e-30):
+            fail("the inertia matrix is not symmetric", loc, kk)
+        moments, frame_ = exact.principal_axes(
+            frame_ * M * frame_.T if "frame" in v else M)
+    else:
+        moments = exact.vector(vector(inertia, loc, kk))
+    moments = np.array(exact.floats(moments))
+    if mass == 0:
+        if np.abs(moments).max() > 0:
+            fail("a body of negligible mass (mass: 0) has no inertia either",
+                 loc, kk, "leave 'inertia' out or give the body its mass")
+    elif moments.min() < sys.float_info.min:     # zero, negative or subnormal
+        fail(f"the inertia tensor must be positive definite (principal moments "
+             f"{', '.join(f'{m:g}' for m in moments)})", loc, kk,
+             "principal moments > 0 (and not subnormal: they divide in the "
+             "equations)")
+    a, b, c = sorted(moments)
+    if mass > 0 and a + b < c * (1 - 1e-9):
+        fail(f"principal moments {a:g}, {b:g}, {c:g} break the triangle "
+             "inequality (no rigid mass distribution has them)", loc, kk)
+    return moments, frame_
+
+
+def frame(v, loc, key) -> sp.Matrix:
+    """``{x: [..], y: [..], z: [..]}`` (R0) -> exact 3x3 matrix whose columns are the
+    unit axes (``exact``: no floating-point noise reaches the equations); they must be
+    orthogonal and right-handed."""
+    import numpy as np
+    fr = mapping(v, loc, key, "a mapping {x: [..], y: [..], z: [..]}")
+    check_keys(fr, ("x", "y", "z"), key)
+    if set(fr) != {"x", "y", "z"}:
+        fail("a frame needs its three axes x, y, z", fr.loc, key)
+    F = sp.Matrix.hstack(*[exact.unit(exact.vector(
+        vector(fr[a], fr.val_locs[a], f"{key}.{a}"))) for a in "xyz"])
+    Ff = np.array(exact.floats(F))
+    if np.abs(Ff.T @ Ff - np.eye(3)).max() > 1e-6 or np.linalg.det(Ff) < 0:
+        fail("the frame axes must be orthogonal and right-handed (x cross y = z)",
+             fr.loc, key, "give unit axes such as x: [1, 0, 0] ...")
+    return F
+
+
+def unit_vector(v, loc, key) -> sp.Matrix:
+    """An axis, scaled to unit length exactly."""
+    u = exact.vector(vector(v, loc, key))
+    if exact.to_float(exact.norm(u)) < 1e-12:
+        fail("an axis of zero length", loc, key, "give a direction such as [0, 0, 1]")
+    return exact.unit(u)
+
+
+def joint_point(cx: Context, v, loc, key) -> sp.Matrix:
+    """``at``: [x, y, z] in R0, a point name of one body, or body.point (exact: the
+    point as the body's ``points`` wrote it)."""
+    if isinstance(v, YList):
+        return exact.vector(vector(v, loc, key))
+    if not isinstance(v, str):
+        fail(f"expected [x, y, z] or a point name, got {kind_of(v)}", loc, key)
+    body, _, pt = v.rpartition(".")
+    owners = [b for b in cx.bodies.values() if pt in b.points and body in ("", b.name)]
+    if len(owners) != 1:
+        known = sorted(f"{b.name}.{p}" for b in cx.bodies.values() for p in b.points)
+        why = "names no point" if not owners else "is a point of several bodies"
+        fail(f"'{v}' {why}", loc, key, ("write body.point; " if owners else "")
+             + "known points: " + (", ".join(known) or "none (add 'points:' to a body)"))
+    return cx.point_r0[(owners[0].name, pt)]

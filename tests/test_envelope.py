@@ -1,0 +1,53 @@
+"""The chirp-envelope analysis alone, on a synthetic response (no model, no solver): the
+helper ``bgc simulate`` and a scene's run share (``envelope.chirp_sweep``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from bgc.analysis.envelope import chirp_sweep, minima_hz
+from bgc.errors import Loc
+from bgc.model.model import Excitation, Signal
+from bgc.model.signals import chirp_frequency
+from bgc.simulate import Result
+
+CHIRP = {"t1": 0.5, "t2": 1.0, "t3": 11.0, "f_start": 1.0, "f_end": 6.0}
+
+
+def _excitation() -> Excitation:
+    at = Loc("e.yaml", 1)
+    return Excitation({"push": ("j", 1.0)},
+                      {"sweep": Signal("sweep", "chirp", sp.S.Zero, at, numbers=CHIRP),
+                       "step": Signal("step", "constant", sp.S.One, at)}, None, at)
+
+
+def _response(t_end: float) -> Result:
+    """An output whose amplitude dips at 3 Hz of the sweep, and the excitation g."""
+    t = np.linspace(0.0, t_end, int(t_end * 2000) + 1)
+    f = chirp_frequency(t, CHIRP["t2"], CHIRP["t3"], CHIRP["f_start"], CHIRP["f_end"])
+    phase = 2 * np.pi * np.cumsum(f) * (t[1] - t[0])
+    z = (1 - 0.8 * np.exp(-((f - 3.0) / 0.3) ** 2)) * np.sin(phase)
+    return Result(t, np.zeros((len(t), 0)), np.column_stack([z, np.sin(phase)]), (),
+                  ("z", "g"), "synthetic")
+
+
+def test_the_envelope_of_a_chirp_run_finds_its_dip():
+    curves = chirp_sweep(_excitation(), {"kind": "sweep", "direction": "push"},
+                         _response(11.0))
+    assert list(curves) == ["z"]                  # g, the excitation, is left out
+    freq, amp, minima = curves["z"]
+    assert freq.min() < 1.5 and freq.max() > 5.5 and amp.max() == pytest.approx(1, abs=0.01)
+    assert minima[0] == pytest.approx(3.0, abs=0.1)
+    assert minima_hz(curves, 1)["z"][0] == round(minima[0], 1)
+
+
+def test_no_envelope_without_a_chirp_or_its_sweep():
+    exc = _excitation()
+    assert chirp_sweep(exc, None, _response(11.0)) is None
+    assert chirp_sweep(exc, {"kind": "step", "direction": "push"}, _response(11.0)) is None
+    # a run that stops before a tenth of the sweep [t2, t3] has no envelope to read
+    assert chirp_sweep(exc, {"kind": "sweep", "direction": "push"}, _response(1.9)) is None
+    assert chirp_sweep(exc, {"kind": "sweep", "direction": "push"}, _response(2.1))
+    assert minima_hz(None, 2) is None

@@ -1,6 +1,7 @@
 """``bgc check``: what the front end makes of a model (causality, algebraic loops,
 derivative causality, the mechanism's counts; with --method zcp the zero-order causal
-paths), or of a scene (the state count before and after each reduction pass)."""
+paths), or of a scene (the state count before and after each reduction pass); with
+``--stage STAGE``, the output of one compiler stage (``stages``)."""
 
 from __future__ import annotations
 
@@ -10,23 +11,38 @@ import click
 
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import json_option, loops_option, method_option, progress_option
+from bgc.cli.stages import STAGES
+from bgc.errors import BgcError
 from bgc.pipeline import build
 
 
 @main.command()
 @click.argument("model", type=click.Path())
+@click.option("--stage", type=click.Choice(STAGES),
+              help="show one stage's output instead: load (the Model), expand (the bond "
+                   "graph), causality (the causal strokes), equations (the equation "
+                   "system), emit (the generated module's source, not written)")
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="--stage emit: where bgc compile would write the module")
 @method_option
 @loops_option
 @json_option
 @user_errors
 @progress_option
-def check(model, method, keep_loops, as_json):
+def check(model, stage, out_dir, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
     Given a scene file: the state count before and after each reduction pass."""
     from bgc.scene import scenes as bscene
     if bscene.is_scene(model):
+        if stage is not None:
+            raise BgcError(f"--stage applies to a model file, not the scene {model}",
+                           key="--stage", hint="give the scene's model file to see its "
+                                               "stages")
         _check_scene(bscene, model, as_json)
+        return
+    if stage is not None:
+        _show_stage(stage, model, method, not keep_loops, out_dir, as_json)
         return
     c = build(model, method, open_loops=not keep_loops)
     report, zcps = _report(c, model, method)
@@ -34,6 +50,18 @@ def check(model, method, keep_loops, as_json):
         click.echo(json.dumps(report, indent=2))
         return
     _print_report(c, report, zcps, model, method)
+
+
+def _show_stage(stage: str, model: str, method: str, open_loops: bool, out_dir: str,
+                as_json: bool) -> None:
+    """One stage's output (``stages.report``), as JSON or text."""
+    from bgc.cli import stages
+    rep = stages.report(stage, model, method, open_loops, out_dir)
+    if as_json:
+        click.echo(json.dumps(rep, indent=2))
+        return
+    for line in stages.lines(rep):
+        click.echo(line)
 
 
 def _check_scene(bscene, path, as_json: bool) -> None:

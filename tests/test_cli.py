@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 from click.testing import CliRunner
-from conftest import MODELS
+from conftest import MODELS, ROOT
 
 from bgc.analysis.results import read_csv
 from bgc.cli import main
@@ -95,3 +95,93 @@ def test_failed_simulation_keeps_partial_results(tmp_path):
     assert "Traceback" not in r.output
     names, data = read_csv(csv)
     assert len(data) > 1 and data[-1, 0] < 10
+
+
+# bgc check --stage STAGE: each stage's output alone, as text and as JSON
+
+
+def stage(name, model, *args):
+    """``bgc check --stage NAME MODEL ARGS --quiet``: the text and the JSON report."""
+    text = run("check", "--stage", name, model, "--quiet", *args)
+    js = run("check", "--stage", name, model, "--quiet", "--json", *args)
+    assert text.exit_code == 0 and js.exit_code == 0, text.output + js.output
+    return text.stdout, json.loads(js.stdout)
+
+
+def test_stage_load_shows_the_model():
+    text, rep = stage("load", MODELS / "rlc.yaml")
+    assert rep["stage"] == "load" and rep["model"] == "rlc"
+    assert rep["counts"]["elements"] == 5 and rep["counts"]["bonds"] == 4
+    assert rep["elements"]["capacitor"] == "C" and rep["parameters"]["R"]["value"] == 10
+    assert rep["outputs"] == ["current", "v_C", "v_R"]
+    assert "5 elements, 4 bonds, 0 bodies" in text
+    assert "parameter R = 10 [ohm]" in text and "element capacitor: C" in text
+    assert "bond b2: loop -> resistor" in text
+    assert "outputs: current, v_C, v_R" in text
+
+
+def test_stage_expand_shows_the_bond_graph_of_a_mechanism():
+    text, rep = stage("expand", MODELS / "pendulum.yaml", "--method", "lagrange")
+    assert rep["stage"] == "expand" and rep["method"] == "lagrange"
+    assert rep["bodies"] == ["rod"]
+    assert rep["joints"] == {"hinge": {"blocked": ["tx", "ty", "tz", "ry", "rz"],
+                                       "free": ["rx"]}}
+    assert rep["constraints"] == ["hinge.tx", "hinge.ty", "hinge.tz", "hinge.ry", "hinge.rz"]
+    assert rep["by_kind"]["EJS"] == 1 and rep["by_kind"]["I"] == 2     # mass, inertia
+    assert set(rep["bond_dimensions"]) == {"1", "3"}
+    assert sum(rep["by_kind"].values()) == rep["elements"]
+    assert sum(rep["bond_dimensions"].values()) == rep["bonds"]
+    assert "joint hinge: blocked tx, ty, tz, ry, rz; free rx" in text
+    assert "constraint elements: 5" in text and "EJS: 1" in text
+    # under parasitic the blocked directions are spring-dampers, not constraint elements
+    _, rep = stage("expand", MODELS / "pendulum.yaml")
+    assert rep["method"] == "parasitic" and rep["constraints"] == []
+
+
+def test_stage_causality_shows_storage_causality_and_strokes():
+    text, rep = stage("causality", MODELS / "geared_inertias.yaml")
+    assert rep["storage"]["J_l"] == {"kind": "I", "causality": "derivative"}
+    assert rep["storage"]["J_r"] == {"kind": "I", "causality": "integral"}
+    assert rep["conflicts"] == [] and rep["strokes"]
+    assert {"bond", "from", "to", "effort_into"} == set(rep["strokes"][0])
+    assert "causality: no conflicts" in text
+    assert "I J_l: derivative" in text and "R damper: resistance" in text
+
+
+def test_stage_equations_shows_states_and_algebraic_loops():
+    text, rep = stage("equations", MODELS / "rr_loop.yaml")
+    assert rep["states"] == ["cap.q"] and rep["assignments"] > 0
+    [loop] = rep["algebraic_loops"]
+    assert loop["kind"] == "algebraic" and {"r1", "r2", "r3"} <= set(loop["elements"])
+    assert "1 state, " in text and "algebraic loops: 1" in text
+    assert "algebraic loop through" in text
+    text, rep = stage("equations", MODELS / "geared_inertias.yaml")
+    assert rep["dependent"] == {"J_l": "J_l.p"}
+    assert "dependent state J_l.p (J_l: derivative causality)" in text
+
+
+def test_stage_equations_shows_the_lagrange_multipliers_block():
+    _, rep = stage("equations", MODELS / "pendulum.yaml", "--method", "lagrange")
+    [block] = rep["linear_blocks"]
+    assert len(block["unknowns"]) == 5 and len(rep["constraints"]) == 5
+
+
+def test_stage_emit_renders_the_module_compile_writes(tmp_path):
+    """--stage emit renders the source without writing it; it is the module bgc compile
+    writes, byte for byte, and once written it is reported fresh."""
+    text, rep = stage("emit", MODELS / "rlc.yaml", "-o", tmp_path)
+    path = tmp_path / "rlc.py"
+    assert rep["module"] == str(path) and rep["fresh"] is False and not path.exists()
+    assert rep["kernels"]["rhs"] >= 1 and rep["kernel_functions"] >= len(rep["kernels"])
+    assert f"{path} (not written yet or stale), {rep['bytes']} bytes" in text
+    r = run("compile", MODELS / "rlc.yaml", "-o", tmp_path, "--quiet")
+    assert r.exit_code == 0, r.output
+    assert len(path.read_bytes()) == rep["bytes"]
+    _, again = stage("emit", MODELS / "rlc.yaml", "-o", tmp_path)
+    assert again["fresh"] is True
+
+
+def test_stage_of_a_scene_is_refused():
+    r = run("check", "--stage", "load", ROOT / "scenes" / "pumping_chirp.yaml")
+    assert r.exit_code == 2
+    assert r.stderr.startswith("error: --stage: --stage applies to a model file"), r.stderr

@@ -1,0 +1,5 @@
+"""``python -m bgc.cli ARGS``: the ``bgc`` command."""
+
+from bgc.cli import main
+
+main()

@@ -1,0 +1,98 @@
+"""The ``bgc`` command group and how a command's failure reaches the user.
+
+User mistakes (BgcError) are printed as one line and exit with status 2; with ``--json``
+the same error is printed as a JSON object; click's own usage errors take the same one-line
+form. Ctrl-C exits with status 130 and no traceback.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+
+import click
+
+from bgc import __version__
+from bgc.errors import BgcError, SimulationError
+from bgc.simulate import Interrupted
+
+# exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it)
+EXIT_INTERRUPTED = 130
+
+
+class _Bgc(click.Group):
+    """The bgc group; click's own usage errors (a bad option value, an unknown option, a
+    missing argument) are shown as one line in bgc's form, ``error: OPTION: message
+    (hint: ...)``, with exit status 2, instead of click's usage block."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.UsageError as exc:
+            click.echo(usage_line(exc), err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:         # Ctrl-C outside a command's own handling
+            click.echo("interrupted (Ctrl-C)", err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def usage_line(exc: click.UsageError) -> str:
+    """One line for a click usage error, naming the option or argument."""
+    param = getattr(exc, "param", None)
+    if isinstance(param, click.Option):
+        key = max(param.opts, key=len)
+    elif isinstance(param, click.Argument):
+        key = param.human_readable_name
+    elif getattr(exc, "option_name", None):
+        key = exc.option_name
+    else:
+        key = "COMMAND"
+    where = exc.ctx.command_path if exc.ctx is not None else "bgc"
+    text = f"error: {key}: {exc.message or exc.format_message()} (hint: see '{where} --help')"
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+
+
+def user_errors(fn):
+    """BgcError: one line (and the JSON object with --json), partial results of a failed
+    run saved, exit 2. Ctrl-C: a note on stderr (the results so far saved if the
+    integration was under way), exit 130, no traceback."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except BgcError as exc:
+            if kwargs.get("as_json"):
+                click.echo(json.dumps(exc.to_dict()))
+            interrupted = isinstance(exc, Interrupted)
+            click.echo(f"{'interrupted' if interrupted else 'error'}: {exc}", err=True)
+            if isinstance(exc, SimulationError) and exc.result is not None:
+                _save_partial(exc.result, kwargs)
+            sys.exit(EXIT_INTERRUPTED if interrupted else 2)
+        except KeyboardInterrupt:
+            click.echo("interrupted (Ctrl-C): nothing was written", err=True)
+            sys.exit(EXIT_INTERRUPTED)
+    return wrapper
+
+
+def _save_partial(result, kwargs):
+    """A failed run's results so far, to the command's ``--out`` (if it has one)."""
+    from bgc.analysis.results import write_csv
+    out = kwargs.get("out")
+    if out and len(result.t):
+        write_csv(result, out, kwargs.get("states", True))
+        click.echo(f"partial results up to t = {result.t[-1]:.6g} written to {out}",
+                   err=True)
+
+
+@click.group(cls=_Bgc)
+@click.version_option(__version__, prog_name="bgc")
+def main():
+    """bgc: compile bond-graph models to fast simulation code."""

@@ -1,0 +1,64 @@
+"""``bgc run``: run a scene (``bgc.scene.scenes``): its reduced module built once, then
+simulated; CSV, PNG and a JSON summary written."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from bgc.cli.app import main, user_errors
+from bgc.cli.options import json_option, params_option, progress_option
+from bgc.errors import BgcError
+from bgc.fileio import check_writable
+
+
+@main.command("run")
+@click.argument("scene", type=click.Path())
+@click.option("--out", "out_dir", default="results/scenes", show_default=True,
+              type=click.Path(file_okay=False), help="where the CSV, PNG and JSON go")
+@click.option("-o", "--gen-dir", default="generated/scenes", show_default=True,
+              help="where the scene's reduced module goes")
+@params_option("set a parameter the scene exposes (repeatable)")
+@json_option
+@user_errors
+@progress_option
+def run_cmd(scene, out_dir, gen_dir, params, as_json):
+    """Run a scene: build its reduced model (once), simulate, write CSV, PNG and a JSON
+    summary."""
+    from bgc.scene import scenes as bscene
+    sc = bscene.load_scene(scene)
+    values = {}
+    for name, value in params:
+        if name not in sc.expose:
+            raise BgcError(f"parameter '{name}' is not exposed by scene {sc.name}",
+                           key="-p", hint="exposed: " + (", ".join(sc.expose) or "none; "
+                                                       "add it to the scene's expose list"))
+        values[name] = value
+    check_writable(out_dir, "--out", directory=True)
+    check_writable(gen_dir, "-o", directory=True)
+    summary = bscene.run_scene(sc, out_dir, gen_dir, values)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, default=str))
+    else:
+        _print_summary(sc, summary)
+    if not summary["ok"]:
+        raise click.ClickException(f"{sc.name}: {summary['error']} (results up to there "
+                                   f"in {summary['files']['csv']})")
+
+
+def _print_summary(sc, summary: dict) -> None:
+    """A scene run's summary as lines: its states and statistics, the reduction passes,
+    the envelope minima and the files written."""
+    st = summary["stats"]
+    click.echo(f"scene {sc.name}: {summary['states']} states, {summary['solver']} to "
+               f"t = {summary['t_end']:g} s: {st['steps']} steps, "
+               f"{st['wall_time']:.3f} s")
+    for r in summary["passes"]:
+        click.echo(f"  {r['pass']:16s} states {r['states_before']} -> "
+                   f"{r['states_after']}")
+    for name, fs in (summary["envelope_minima_hz"] or {}).items():
+        click.echo(f"  envelope minima of {name}: "
+                   f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
+    for kind, f in summary["files"].items():
+        click.echo(f"  {kind}: {f}")

@@ -1,0 +1,322 @@
+"""``bgc simulate``: compile a model if needed, choose its parameters (``-p``, an
+excitation, ``--parasitic auto``), integrate, write CSV and PNG, report the statistics.
+
+The command's options are gathered in one ``SimulateOptions``; the run goes through
+``_prepare`` (the module), ``_choose_parameters``, ``_integrate``, ``_write_files`` and
+``_report``, each reading the options and the ``_Run`` so far. Whatever needs sympy or the
+loader is imported only where it is used: on a fresh module the warm path imports neither
+(``pipeline.ensure_module``, tests/test_warm_start.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import click
+import numpy as np
+
+from bgc import progress
+from bgc.cli.app import main, user_errors
+from bgc.cli.options import (
+    NUMBER,
+    POINTS,
+    POSITIVE,
+    check_overrides,
+    json_option,
+    loops_option,
+    method_option,
+    params_option,
+    parse_params,
+    progress_option,
+)
+from bgc.errors import BgcError
+from bgc.fileio import check_writable
+from bgc.methods.parasitic import SEPARATION
+from bgc.model.model import MAX_POINTS, Settings
+from bgc.pipeline import ensure_module
+from bgc.simulate import SOLVERS
+
+
+@dataclass(frozen=True)
+class SimulateOptions:
+    """What ``bgc simulate`` was asked: its options by click's names (None: not given)."""
+    model: str
+    t_end: float | None
+    rtol: float | None
+    atol: float | None
+    solver: str | None
+    step: float | None
+    points: int | None
+    max_steps: int | None
+    params: tuple[tuple[str, float], ...]       # -p NAME=VALUE, checked (param_items)
+    out: str | None
+    plot: str | None
+    states: bool
+    out_dir: str
+    parasitic_mode: str                         # "given" | "auto"
+    separation: float
+    exc_kind: str | None
+    exc_dir: str | None
+    amplitude: float | None
+    frequency: float | None
+    zoom: tuple[float, float] | None
+    method: str
+    keep_loops: bool
+    as_json: bool
+
+
+@dataclass
+class _Run:
+    """One run as it proceeds: the module and its Model (None on the warm path), the
+    Compiled if it was rebuilt, the seconds of each stage before integrating, the
+    parameters and choices made, then the Result and the files written."""
+    module: object
+    model: object
+    compiled: object
+    stages: dict
+    settings: Settings
+    p: np.ndarray | None = None
+    excitation: dict | None = None
+    parasitic: object = None        # parasitic.auto's choice
+    result: object = None
+    files: dict = field(default_factory=dict)
+    minima: dict | None = None      # envelope minima [Hz] per output, under a chirp
+
+
+def _points(st: Settings, t_end: float | None) -> int:
+    """The model's output times over ``t_end``: its spacing (``st.points`` over its own
+    t_end) kept, so that ``--t-end 0.01`` on the 28 s SARIB (28001 points, 1 ms) gives 11
+    output times, not 28001 within 10 ms."""
+    if t_end is None or t_end == st.t_end or not st.t_end > 0:
+        return st.points
+    return min(max(round((st.points - 1) * t_end / st.t_end) + 1, 2), MAX_POINTS)
+
+
+@main.command()
+@click.argument("model", type=click.Path())
+@click.option("--t-end", type=POSITIVE, help="end time [s] (default: the model's)")
+@click.option("--rtol", type=POSITIVE, help="relative tolerance (default: the model's or 1e-6)")
+@click.option("--atol", type=POSITIVE, help="absolute tolerance (default: the model's or 1e-8)")
+@click.option("--solver", help="integrator (default: the model's, else bdf): "
+              + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
+@click.option("--step", type=POSITIVE, help="fixed-step solvers (rk4): the step [s]")
+@click.option("--points", type=POINTS,
+              help="number of output times (default: the model's simulation.points, or "
+                   "1001, over its t_end; a --t-end keeps that spacing)")
+@click.option("--max-steps", type=click.IntRange(1), help="stop the run after this many "
+              "steps, keeping its results (default: 10^6; rk4: its planned steps)")
+@params_option("override a parameter (no recompilation)")
+@click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
+@click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
+@click.option("--states/--no-states", default=True, show_default=True,
+              help="whether the CSV holds the states besides t and the outputs")
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="where the generated module is kept")
+@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
+              default="given", show_default=True,
+              help="method parasitic: the joints' stiffness and damping as the model gives "
+                   "them, or chosen from the eigenfrequencies")
+@click.option("--separation", type=NUMBER, default=SEPARATION, show_default=True,
+              help="--parasitic auto: parasitic frequencies over the highest functional one")
+@click.option("--excitation", "exc_kind", metavar="KIND",
+              help="the model's excitation g(t) (e.g. constant, sine, chirp)")
+@click.option("--direction", "exc_dir", metavar="NAME",
+              help="where the excitation acts (e.g. pumping, roll, pitch)")
+@click.option("--amplitude", type=NUMBER, help="excitation amplitude (default: the model's)")
+@click.option("--frequency", type=POSITIVE, help="sine excitation frequency [Hz]")
+@click.option("--zoom", type=(NUMBER, NUMBER), metavar="T0 T1",
+              help="with --plot: also <plot>_zoom.png over [T0, T1], outputs that differ "
+                   "only by a number (F_A1_z, F_A2_z) in one panel")
+@method_option
+@loops_option
+@json_option
+@user_errors
+@progress_option
+def simulate(**options):
+    """Compile MODEL if needed and integrate it; print solver statistics."""
+    o = SimulateOptions(**options)
+    _check_options(o)
+    run = _prepare(o)
+    _choose_parameters(o, run)
+    _integrate(o, run)
+    _write_files(o, run)
+    _report(o, run)
+
+
+def _check_options(o: SimulateOptions) -> None:
+    """What can be refused before any work: the solver's name, the output paths."""
+    if o.solver is not None and o.solver not in SOLVERS:
+        raise BgcError(f"unknown solver '{o.solver}'", key="--solver",
+                       hint="valid solvers: " + ", ".join(SOLVERS))
+    check_writable(o.out, "--out")       # before the run: a bad path fails at once
+    check_writable(o.plot, "--plot")
+    if o.plot:
+        from bgc.analysis.results import plot_format
+        plot_format(o.plot, "--plot")
+
+
+def _prepare(o: SimulateOptions) -> _Run:
+    """The model's generated module, rebuilt only if stale; the Model only for what reads
+    it (an excitation, --parasitic auto): else a fresh module is found from the model
+    file's YAML, without sympy (``pipeline.ensure_module``)."""
+    from bgc.simulate import precompile_loop
+
+    def loop_beside(settings):          # the native loop compiles beside the model's build
+        precompile_loop(o.solver or settings.solver)
+    need_model = (o.exc_kind is not None or o.exc_dir is not None
+                  or o.parasitic_mode == "auto")
+    with progress.record() as stages:       # what this run paid before integrating
+        module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
+                                            open_loops=not o.keep_loops, on_load=loop_beside,
+                                            need_model=need_model)
+    st = Settings(**module.SETTINGS)        # the model's, as the module was written
+    return _Run(module, m, compiled, stages, st)
+
+
+def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
+    """The parameter array: the module's defaults, the excitation's, --parasitic auto's,
+    then the explicit ``-p`` values, which always win; the step plan checked."""
+    module = run.module
+    check_overrides(o.model, o.params)
+    run.p = parse_params(module, o.params)
+    run.excitation = _excitation(module, run.model, run.p, o)
+    if run.excitation:
+        run.p = parse_params(module, o.params, base=run.p)
+    if o.parasitic_mode == "auto":
+        from bgc.methods import parasitic
+        if o.method != "parasitic":
+            raise BgcError(f"--parasitic auto applies to --method parasitic, not {o.method}",
+                           key="--parasitic", hint="drop --parasitic or use --method "
+                                                    "parasitic")
+        if not o.separation > 1:
+            raise BgcError(f"--separation must be > 1, got {o.separation}",
+                           key="--separation")
+        run.p, run.parasitic = parasitic.auto(module, run.model, module.initial_state(run.p),
+                                              run.p, o.separation)
+        run.p = parse_params(module, o.params, base=run.p)
+    key = "--frequency" if o.frequency is not None else "--param" if o.params else "--t-end"
+    _check_plan(module, run.p, o.t_end or run.settings.t_end, o.step, key)
+
+
+def _check_plan(module, p, t_end, step, key):
+    """Refuse a run whose step plan alone exceeds ``limits.MAX_PLANNED_STEPS``: a fixed
+    ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
+    ``key``: the option the error names when the signal is too fast."""
+    from bgc.model.limits import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
+    if step is not None and t_end / step > MAX_PLANNED_STEPS:
+        raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
+                       f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
+                       key="--step", hint="a larger --step or a shorter --t-end")
+    h = float(module.max_step(p)) if hasattr(module, "max_step") else math.inf
+    why = too_fast(1.0 / (STEPS_PER_PERIOD * h), t_end) if h > 0 else "no step is possible"
+    if why:
+        raise BgcError(f"the fastest input signal: {why}",
+                       key=key,
+                       hint="a lower frequency (--frequency, -p) or a shorter --t-end")
+
+
+def _excitation(module, m, p, o: SimulateOptions) -> dict | None:
+    """Set the parameters of the excitation the options choose (in place); what was chosen."""
+    kind, direction = o.exc_kind, o.exc_dir
+    if kind is None and direction is None:
+        for opt, val in (("--amplitude", o.amplitude), ("--frequency", o.frequency)):
+            if val is not None:
+                raise BgcError(f"{opt} needs --excitation KIND --direction NAME", key=opt)
+        return None
+    exc = m.excitation
+    if exc is None:
+        raise BgcError(f"{m.file} has no 'excitation' section", key="--excitation",
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    if kind is None or direction is None:
+        raise BgcError("--excitation and --direction go together", key="--excitation",
+                       hint=f"kinds: {', '.join(exc.kinds)}; directions: "
+                            f"{', '.join(exc.directions)}")
+    for name, value in exc.select(kind, direction, o.amplitude, o.frequency).items():
+        p[module.PARAM_NAMES.index(name)] = value
+    return {"kind": kind, "direction": direction,
+            "amplitude": float(p[module.PARAM_NAMES.index(exc.param(direction))]),
+            "frequency": (float(p[module.PARAM_NAMES.index(exc.FREQUENCY)])
+                          if exc.kinds[kind].kind == "sine" else None)}
+
+
+def _integrate(o: SimulateOptions, run: _Run) -> None:
+    """The integrate stage: the options' settings, else the model's."""
+    from bgc.simulate import simulate as integrate
+    st = run.settings
+    with progress.stage("integrate") as stage:
+        result = integrate(run.module, t_end=o.t_end or st.t_end, rtol=o.rtol or st.rtol,
+                           atol=o.atol or st.atol, solver=o.solver or st.solver,
+                           points=o.points or _points(st, o.t_end), params=run.p,
+                           step=o.step, max_steps=o.max_steps)
+        stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
+                   f"t = {result.t[-1]:g} s, "
+                   f"{progress.seconds(result.stats.compile_time)} of it JIT/cache load")
+    run.result = result
+
+
+def _write_files(o: SimulateOptions, run: _Run) -> None:
+    """--out's CSV, --plot's PNG and beside it, under a chirp, the envelopes against the
+    instantaneous frequency (and their minima) and, with --zoom, a window."""
+    from bgc.analysis.results import plot as plot_png
+    from bgc.analysis.results import write_csv
+    result, exc, files = run.result, run.excitation, run.files
+    if o.out:
+        files["csv"] = str(write_csv(result, o.out, o.states))
+    title = f"{run.module.MODEL_NAME} ({result.solver}" + (
+        f", {exc['kind']} {exc['direction']}" if exc else "") + ")"
+    if o.plot:
+        files["png"] = str(plot_png(result, o.plot, title=title))
+    if exc and run.model.excitation.kinds[exc["kind"]].kind == "chirp":
+        from bgc.analysis.envelope import analyse
+        from bgc.analysis.results import plot_envelopes
+        chirp = run.model.excitation.kinds[exc["kind"]].numbers
+        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
+            curves = analyse(result, chirp)
+            run.minima = {k: [round(f, 2) for f in c[2]] for k, c in curves.items()}
+            if o.plot:
+                path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
+                files["envelope_png"] = str(plot_envelopes(curves, path, title))
+    if o.zoom and o.plot:
+        t0, t1 = o.zoom
+        path = Path(o.plot).with_name(Path(o.plot).stem + "_zoom.png")
+        files["zoom_png"] = str(plot_png(result, path, title=title, window=(t0, t1),
+                                         overlay=True))
+
+
+def _report(o: SimulateOptions, run: _Run) -> None:
+    """The run's report on stdout: JSON, or the statistics as lines."""
+    result, module = run.result, run.module
+    stats = result.stats.to_dict()
+    proj, choice = result.projection, run.parasitic
+    if o.as_json:
+        click.echo(json.dumps({"model": module.MODEL_NAME, "method": o.method,
+                               "solver": result.solver,
+                               "t_end": float(result.t[-1]), "stats": stats,
+                               "projection": proj.to_dict() if proj else None,
+                               "parasitic": choice.to_dict() if choice else None,
+                               "excitation": run.excitation,
+                               "envelope_minima_hz": run.minima,
+                               "compiled": run.compiled is not None, "stages": run.stages,
+                               "files": run.files}, indent=2))
+        return
+    if proj is not None:
+        click.echo(proj.describe())
+    if choice is not None:
+        click.echo(choice.describe())
+    click.echo(f"{module.MODEL_NAME}: {result.solver} to t = {result.t[-1]:g} s: "
+               f"{stats['steps']} steps, "
+               f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
+               f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "
+               f"(+{stats['compile_time']:.2f} s JIT/cache load"
+               f"{', recompiled' if run.compiled else ''})")
+    if stats["drift_position"] is not None:
+        click.echo(f"  constraint drift: position {stats['drift_position']:.3g}, velocity "
+                   f"{stats['drift_velocity']:.3g}")
+    for name, fs in (run.minima or {}).items():
+        click.echo(f"  envelope minima of {name} over the chirp: "
+                   f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
+    for kind, f in run.files.items():
+        click.echo(f"  {kind}: {f}")

@@ -12,7 +12,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bgc import methods, progress
-from bgc.codegen.module_file import import_module, is_stale, module_name_problem, module_path
+from bgc.codegen.module_file import (
+    import_module,
+    is_stale,
+    module_name_problem,
+    module_path,
+)
 from bgc.fileio import check_writable
 from bgc.model import document
 from bgc.model.model import Model, Settings

@@ -125,7 +125,13 @@ class Live(Silent):
 
     def _open(self):
         from rich.console import Console
-        from rich.progress import BarColumn, Progress, ProgressColumn, SpinnerColumn, TextColumn
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            ProgressColumn,
+            SpinnerColumn,
+            TextColumn,
+        )
         from rich.text import Text
 
         class Status(SpinnerColumn):

@@ -85,16 +85,23 @@ def test_a_fourth_method_is_one_class(penalty):
 
 
 def _method_name_tests(tree: ast.AST):
-    """Comparisons of anything with a method's name (``x == "zcp"``, ``in ("lagrange",
-    ...)``)."""
+    """Comparisons of a method (``method``, ``o.method``, ``system.method`` ...) with a
+    method's name (``method == "zcp"``, ``method in ("lagrange", ...)``)."""
     names = set(methods.NAMES)
+
+    def is_method(node) -> bool:
+        return (isinstance(node, ast.Name) and "method" in node.id) or \
+            (isinstance(node, ast.Attribute) and "method" in node.attr)
+
+    def has_name(node) -> bool:
+        consts = node.elts if isinstance(node, (ast.Tuple, ast.List, ast.Set)) else [node]
+        return any(isinstance(c, ast.Constant) and c.value in names for c in consts)
+
     for node in ast.walk(tree):
         if isinstance(node, ast.Compare):
-            for side in [node.left, *node.comparators]:
-                consts = [side] if isinstance(side, ast.Constant) else \
-                    list(side.elts) if isinstance(side, (ast.Tuple, ast.List, ast.Set)) else []
-                if any(isinstance(c, ast.Constant) and c.value in names for c in consts):
-                    yield node.lineno
+            sides = [node.left, *node.comparators]
+            if any(map(is_method, sides)) and any(map(has_name, sides)):
+                yield node.lineno
 
 
 def test_nothing_outside_methods_branches_on_a_method_name():

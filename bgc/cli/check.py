@@ -45,11 +45,11 @@ def check(model, stage, out_dir, method, keep_loops, as_json):
         _show_stage(stage, model, method, not keep_loops, out_dir, as_json)
         return
     c = build(model, method, open_loops=not keep_loops)
-    report, zcps = _report(c, model, method)
+    report, method_lines = _report(c, model, method)
     if as_json:
         click.echo(json.dumps(report, indent=2))
         return
-    _print_report(c, report, zcps, model, method)
+    _print_report(c, report, method_lines, model, method)
 
 
 def _show_stage(stage: str, model: str, method: str, open_loops: bool, out_dir: str,
@@ -79,21 +79,21 @@ def _check_scene(bscene, path, as_json: bool) -> None:
                    f"{r['assignments_after']}: {r['note']}")
 
 
-def _report(c, model: str, method: str) -> tuple[dict, list]:
+def _report(c, model: str, method: str) -> tuple[dict, list[str]]:
     """The report of a built model (``pipeline.Compiled``) as ``--json`` prints it, and
-    its zero-order causal paths (method zcp)."""
+    the method's own findings as text lines (``ConstraintMethod.report``: zcp's zero-order
+    causal paths, lagrange's multipliers)."""
+    from bgc import methods
     from bgc.mechanics.joints import JOINT_KINDS
-    from bgc.methods.zcp import paths
-    s = c.system
-    zcps = paths(c.causal.graph, s) if method == "zcp" else []
+    s, m = c.system, methods.get(method)
+    own, own_lines = m.report(c)
     rep = c.causal.report()
     report = {
         "model": c.model.name, "file": model, "method": method,
         "elements": len(c.causal.graph.elements), "bonds": len(c.causal.graph.bonds),
         "bodies": len(c.model.bodies),
         "states": [st.name for st in s.states],
-        "storage": {n: (c.causal.graph.zcp.storage(n) if c.causal.graph.zcp else None) or v
-                    for n, v in rep["storage"].items()},
+        "storage": {n: m.storage(c.causal.graph, n) or v for n, v in rep["storage"].items()},
         "resistors": rep["resistors"],
         "derivative_causality": dict(s.dependent),
         "algebraic_loops": [lp.__dict__ for lp in s.loops],
@@ -106,15 +106,15 @@ def _report(c, model: str, method: str) -> tuple[dict, list]:
         report["constraints"] = sum(len(JOINT_KINDS[j.kind].blocked)
                                     for j in c.model.joints.values())
         report["dof"] = report["coordinates"] - report["constraints"]
-    if method == "zcp":
-        report["zcp_paths"] = [z.to_dict() for z in zcps]
-    return report, zcps
+    report.update(own)
+    return report, own_lines
 
 
-def _print_report(c, report: dict, zcps: list, model: str, method: str) -> None:
+def _print_report(c, report: dict, method_lines: list[str], model: str, method: str) -> None:
     """The report as lines: counts, mechanism, each storage element's and resistor's
     causality, the algebraic loops, the constraints or ZCPs, the notes."""
-    s = c.system
+    from bgc import methods
+    s, m = c.system, methods.get(method)
     rep = c.causal.report()
     click.echo(f"{model}: {report['bodies']} bodies, {report['elements']} elements, "
                f"{report['bonds']} bonds, "
@@ -125,30 +125,19 @@ def _print_report(c, report: dict, zcps: list, model: str, method: str) -> None:
                    f"freedom (Gruebler count: redundant constraints make the real mobility "
                    f"larger)")
     click.echo("causality: no conflicts")
-    plan = c.causal.graph.zcp
     for name, cz in rep["storage"].items():
         kind = c.causal.graph.elements[name].kind
         extra = f" (dependent state {s.dependent[name]})" if name in s.dependent else ""
-        if plan is not None:
-            cz = plan.storage(name) or cz
+        cz = m.storage(c.causal.graph, name) or cz
         click.echo(f"  {kind} {name}: {cz}{extra}")
     for name, form in rep["resistors"].items():
         click.echo(f"  R {name}: {form}")
-    # under zcp the flow-source and constraint blocks are reported as ZCPs below
-    loops = [lp for lp in s.loops if method != "zcp" or lp.kind not in ("imposed-flow",
-                                                                       "constraint")]
+    # a method may report some blocks under its own heading (zcp: as ZCPs, below)
+    loops = [lp for lp in s.loops if not m.hides_loop(lp)]
     click.echo(f"algebraic loops: {len(loops) or 'none'}")
     for lp in loops:
         click.echo(f"  {lp.describe()}")
-    if s.constraints and method == "lagrange":
-        click.echo(f"constraints (method {method}): {len(s.constraints)} multipliers, "
-                   f"solved at the acceleration level with Baumgarte stabilisation")
-    if method == "zcp":
-        n_imp = len(s.imposed)
-        click.echo(f"zero-order causal paths: {len(zcps) or 'none'} ({n_imp} flow sources, "
-                   f"{len(s.constraints) - n_imp} break variables)")
-        for z in zcps:
-            click.echo(f"  class {z.cls}: {z.what}")
-            click.echo(f"    {z.summary()}")
+    for line in method_lines:
+        click.echo(line)
     for note in rep["free_choices"] + s.notes:
         click.echo(f"note: {note}")

@@ -10,13 +10,12 @@ import math
 import click
 import numpy as np
 
-from bgc import progress
+from bgc import methods, progress
 from bgc.errors import BgcError
 from bgc.model.model import MAX_POINTS
-from bgc.pipeline import METHODS
 
 json_option = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
-method_option = click.option("--method", type=click.Choice(METHODS), default="parasitic",
+method_option = click.option("--method", type=click.Choice(methods.NAMES), default=methods.DEFAULT,
                              show_default=True, help="how constraint elements are handled")
 loops_option = click.option("--keep-loops", is_flag=True,
                             help="method zcp: keep kinematic loops (class-4 ZCPs) closed, an "

@@ -186,8 +186,9 @@ def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
     if run.excitation:
         run.p = parse_params(module, o.params, base=run.p)
     if o.parasitic_mode == "auto":
+        from bgc import methods
         from bgc.methods import parasitic
-        if o.method != "parasitic":
+        if methods.get(o.method).ideal:     # auto chooses a compliant joint's values
             raise BgcError(f"--parasitic auto applies to --method parasitic, not {o.method}",
                            key="--parasitic", hint="drop --parasitic or use --method "
                                                     "parasitic")
@@ -269,16 +270,14 @@ def _write_files(o: SimulateOptions, run: _Run) -> None:
         f", {exc['kind']} {exc['direction']}" if exc else "") + ")"
     if o.plot:
         files["png"] = str(plot_png(result, o.plot, title=title))
-    if exc and run.model.excitation.kinds[exc["kind"]].kind == "chirp":
-        from bgc.analysis.envelope import analyse
+    if exc:         # the Model is loaded (need_model)
+        from bgc.analysis.envelope import chirp_sweep, minima_hz
         from bgc.analysis.results import plot_envelopes
-        chirp = run.model.excitation.kinds[exc["kind"]].numbers
-        if result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
-            curves = analyse(result, chirp)
-            run.minima = {k: [round(f, 2) for f in c[2]] for k, c in curves.items()}
-            if o.plot:
-                path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
-                files["envelope_png"] = str(plot_envelopes(curves, path, title))
+        curves = chirp_sweep(run.model.excitation, exc, result)
+        run.minima = minima_hz(curves, 2)
+        if curves is not None and o.plot:
+            path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
+            files["envelope_png"] = str(plot_envelopes(curves, path, title))
     if o.zoom and o.plot:
         t0, t1 = o.zoom
         path = Path(o.plot).with_name(Path(o.plot).stem + "_zoom.png")

@@ -108,13 +108,14 @@ def expand_view(graph) -> dict:
 
 def causality_view(cg) -> dict:
     """The CausalGraph: SCAP's strokes and what they make of each element."""
+    from bgc import methods
     rep = cg.report()
-    plan = cg.graph.zcp
+    method = methods.get(cg.graph.method)
     kinds = {n: cg.graph.elements[n].kind for n in rep["storage"]}
     return {
         "stage": "causality", "model": cg.graph.model.name, "method": cg.graph.method,
         "storage": {n: {"kind": kinds[n],
-                        "causality": (plan.storage(n) if plan else None) or v}
+                        "causality": method.storage(cg.graph, n) or v}
                     for n, v in rep["storage"].items()},
         "resistors": rep["resistors"], "free_choices": rep["free_choices"],
         "strokes": rep["bonds"], "conflicts": [],

@@ -24,13 +24,14 @@ import json
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from bgc import methods
 from bgc.codegen import emit
 from bgc.errors import Loc, ModelError
 from bgc.fileio import atomic_write
 from bgc.model import document, limits, load
 from bgc.model.document import YMap
 from bgc.model.values import check_keys, fail, mapping, number, points, string, strings
-from bgc.pipeline import METHODS, build
+from bgc.pipeline import build
 from bgc.scene import reduce
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
@@ -80,9 +81,9 @@ def load_scene(path: str | Path) -> Scene:
     model = load.load(model_path)
     method = string(doc.get("method", "parasitic"), _at(doc, "method"), "method",
                     "a method name")
-    if method not in METHODS:
+    if method not in methods.NAMES:
         fail(f"unknown method '{method}'", _at(doc, "method"), "method",
-             "valid methods: " + ", ".join(METHODS))
+             "valid methods: " + ", ".join(methods.NAMES))
     solver = string(doc.get("solver", "native"), _at(doc, "solver"), "solver",
                     "a solver name")
     if solver not in SOLVERS:
@@ -224,7 +225,8 @@ def reduced_system(scene: Scene):
     merged, removed, note = reduce.merge_relays(
         c.model, scene.outputs, list(scene.expose) + list(scene.params))
     merged_c = c
-    wanted = scene.method != "parasitic" if scene.merge_relays is None else scene.merge_relays
+    wanted = methods.get(scene.method).ideal if scene.merge_relays is None \
+        else scene.merge_relays
     if removed and wanted:
         merged_c = build(merged, scene.method)
     elif removed:

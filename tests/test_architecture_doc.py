@@ -10,9 +10,6 @@ from conftest import ROOT
 from bgc.cli.stages import STAGES
 
 DOC = ROOT / "docs" / "architecture.md"
-# named by the map before they land (issue 25: the constraint-method interface, on the
-# lead's branch); drop each once it exists
-PENDING = {"bgc/methods/base.py"}
 
 
 def test_every_path_the_map_names_exists():
@@ -20,7 +17,7 @@ def test_every_path_the_map_names_exists():
     paths = set(re.findall(r"`((?:bgc|tests|models|docs|generated)/[\w./<>\[\]-]*)`", text))
     paths = {p for p in paths if "<" not in p and "[" not in p}     # patterns, not files
     assert len(paths) > 20
-    missing = sorted(p for p in paths - PENDING if not (ROOT / p).exists())
+    missing = sorted(p for p in paths if not (ROOT / p).exists())
     assert not missing, f"docs/architecture.md names missing paths: {missing}"
 
 

@@ -155,7 +155,7 @@ def test_fourteen_body_model_stays_lean(tmp_path):
     mass) compiles to causal assignments that grow with the graph, not with its depth:
     no long substituted expressions, a bounded number of statements per state, and a
     Jacobian tape whose compressed width is the densest row of the Jacobian."""
-    from bgc.codegen.emit import _cone
+    from bgc.codegen.emit import cone
     from bgc.codegen.jacobian import tape
     c, path = compile_model(MODELS / "sarib.yaml", tmp_path)
     assert len(c.model.bodies) == 14 and len(c.model.joints) == 18
@@ -169,7 +169,7 @@ def test_fourteen_body_model_stays_lean(tmp_path):
     assert len(rhs) < 150 * n, len(rhs)
     assert max(map(len, rhs)) < 200
     assert len(text) < 4_500_000
-    rhs_asg, _ = _cone(s.assignments, [st.dsym for st in s.states])
+    rhs_asg, _ = cone(s.assignments, [st.dsym for st in s.states])
     jt = tape(rhs_asg, s.states)
     densest = np.bincount([i for i, _, _ in jt.pattern]).max()
     assert jt.n_colours <= densest + 5, (jt.n_colours, densest)

@@ -93,7 +93,7 @@ def test_pruning_and_folding_keep_the_answer_of_a_small_model(tmp_path):
         assert (tmp_path / "out" / f"scene.{f}").stat().st_size > 100
 
 
-def test_idle_spin_of_the_four_bar_coupler_is_no_state(tmp_path):
+def test_idle_spin_of_the_four_bar_coupler_is_no_state(tmp_path, compiled):
     """The RSSR coupler between two spherical joints, axisymmetric: its spin momentum is
     dropped, and the mechanism moves as the full model does."""
     model = MODELS / "four_bar.yaml"
@@ -103,7 +103,7 @@ def test_idle_spin_of_the_four_bar_coupler_is_no_state(tmp_path):
     assert passes["idle_dofs"]["removed"] == ["coupler.J.pz"]
     assert passes["idle_dofs"]["states_after"] == passes["idle_dofs"]["states_before"] - 1
     reduced, _ = ensure_scene_module(load_scene(path), tmp_path / "gen")
-    full, _, _ = ensure_module(model, ROOT / "generated")
+    full = compiled("four_bar")
     a = simulate(full, t_end=1.0, rtol=1e-8, atol=1e-10, points=101, solver="native")
     b = simulate(reduced, t_end=1.0, rtol=1e-8, atol=1e-10, points=101, solver="native")
     for out in ("crank_angle", "rocker_angle"):
@@ -145,12 +145,12 @@ def test_shipped_scenes_load():
 
 
 @pytest.mark.slow      # two SARIB modules compiled cold: minutes
-def test_reduced_sarib_pumping_scene_answers_like_the_full_model(tmp_path):
+def test_reduced_sarib_pumping_scene_answers_like_the_full_model(tmp_path, compiled):
     scene = load_scene(ROOT / "scenes" / "pumping_sine.yaml")
     reduced, passes = ensure_scene_module(scene, tmp_path / "gen")
     assert passes[0]["states_after"] == passes[0]["states_before"] == 152     # parasitic
     assert passes[2]["removed"] == [f"bar_{i}.J.pz" for i in (1, 2, 3, 4)]
-    full, model, _ = ensure_module(MODELS / "sarib.yaml", ROOT / "generated")
+    full, model = compiled("sarib"), load.load(MODELS / "sarib.yaml")
     p = np.array(full.PARAMS)
     for name, v in scene_values(scene, model).items():
         p[list(full.PARAM_NAMES).index(name)] = v

@@ -97,6 +97,18 @@ def body_model(tmp_path, name, body, extra=""):
     return import_module(path)
 
 
+# the smallest model with a body and a joint: a rod hung on a revolute joint (axis y, the
+# rod's own y axis) from the fixed frame
+HINGE = """\
+name: hinge
+gravity: 9.81
+bodies:
+  rod: {mass: 2.0, com: [0, 0, -0.5], inertia: [0.2, 0.2, 0.01]}
+joints:
+  hinge: {type: revolute, between: [fixed_frame, rod], at: [0, 0, 0], axis: [0, 1, 0]}
+"""
+
+
 # -------------------------------------------------- the benchmark mechanisms' references
 T_SINGULAR = 0.1575     # the isosceles slider-crank's crank reaches 90 deg (slider at x = 0)
 

@@ -59,6 +59,27 @@ def dwell_amplitude(t, y, f, periods: int = 10) -> float:
     return float(np.hypot(c[0], c[1]))
 
 
+def resolved_rates(system) -> dict:
+    """State name -> its rate as one expression in states and parameters: an
+    EquationSystem's assignments substituted, after checking that each reads only what is
+    defined before it (causal order) and none is a numeric block."""
+    from bgc.codegen.equations import LinearBlock
+    known = {st.sym for st in system.states} | {sym for sym, _, _ in system.params}
+    defs = {}
+    for item in system.assignments:
+        assert not isinstance(item, LinearBlock), "a loop left to a numeric block"
+        var, expr = item
+        assert var not in defs and expr.free_symbols <= known | set(defs), var
+        defs[var] = expr
+    out = {}
+    for st in system.states:
+        e = defs[st.dsym]
+        while e.free_symbols & set(defs):
+            e = e.xreplace(defs)
+        out[st.name] = e
+    return out
+
+
 # ----------------------------------------------------------------- what bgc answers
 ERROR_LINE = re.compile(
     r"^error: (?P<file>.+?):(?P<line>\d+):(?P<col>\d+): (?P<key>[^\s:]+): (?P<msg>.+) "

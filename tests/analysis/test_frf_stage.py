@@ -1,6 +1,5 @@
-"""The analysis stage on its own: the frequency response of a hand-written linearization
-(``frf.Linearization``, ``extrema``) and the envelope of a synthetic chirp response
-(``envelope.envelope``, ``minima``), against closed forms; no model is compiled. (The
+"""The frequency response on its own: a hand-written linearization (``frf.Linearization``,
+``extrema``) of one and two masses against closed forms; no model is compiled. (The
 linearization of a compiled model: analysis/test_excitation.py.)"""
 
 from __future__ import annotations
@@ -9,8 +8,6 @@ import numpy as np
 import pytest
 
 from bgc.analysis import frf
-from bgc.analysis.envelope import envelope, minima
-from bgc.model.signals import chirp_frequency
 
 
 def oscillators(m1, k1, c1, m2=None, k2=None) -> frf.Linearization:
@@ -59,22 +56,3 @@ def test_tuned_absorber_cancels_the_main_mass_at_its_own_frequency():
     assert res[0] < fa < res[1]
     # there the absorber's spring holds the force off: k2 z2 = -F
     assert lin.response([fa], "z2")[0] == pytest.approx(-1 / k2, rel=1e-9)
-
-
-def test_envelope_of_a_chirp_response_finds_its_dip():
-    """y = A(f(t)) sin(phase) over a 5 -> 25 Hz sweep, A dipping at 15 Hz: the envelope
-    follows A at the instantaneous frequency and its one minimum is the dip."""
-    chirp = dict(t1=0.0, t2=1.0, t3=11.0, f_start=5.0, f_end=25.0)
-    t = np.linspace(0.0, 11.0, 110_001)
-    f = chirp_frequency(t, chirp["t2"], chirp["t3"], chirp["f_start"], chirp["f_end"])
-    phase = np.concatenate([[0.0], np.cumsum((f[1:] + f[:-1]) / 2 * np.diff(t))])
-
-    def amplitude(f):
-        return 0.1 + np.abs(f - 15.0) / 10
-
-    freq, amp = envelope(t, amplitude(f) * np.sin(2 * np.pi * phase), chirp)
-    assert freq[0] == pytest.approx(5.2, abs=0.05) and freq[-1] == pytest.approx(25, abs=0.5)
-    assert np.all(np.diff(freq) > 0)
-    assert np.abs(amp - amplitude(freq)).max() < 0.02     # one period's sweep apart
-    (dip,) = minima(freq, amp)
-    assert dip == pytest.approx(15.0, abs=0.1)

@@ -9,7 +9,7 @@ nothing with ``--quiet``); stdout holds only the command's own output.
 
 A command module imports at its top only what is light: sympy, the loader and the code
 generator are imported where a command needs them, so that ``bgc simulate`` on a fresh
-module loads none of them (tests/test_warm_start.py).
+module loads none of them (tests/cli/test_warm_start.py).
 """
 
 from bgc.cli import bench, check, compile, frf, run, simulate  # noqa: F401  (the commands)

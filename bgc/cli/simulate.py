@@ -5,7 +5,7 @@ The command's options are gathered in one ``SimulateOptions``; the run goes thro
 ``_prepare`` (the module), ``_choose_parameters``, ``_integrate``, ``_write_files`` and
 ``_report``, each reading the options and the ``_Run`` so far. Whatever needs sympy or the
 loader is imported only where it is used: on a fresh module the warm path imports neither
-(``pipeline.ensure_module``, tests/test_warm_start.py).
+(``pipeline.ensure_module``, tests/cli/test_warm_start.py).
 """
 
 from __future__ import annotations

@@ -169,15 +169,20 @@ def compile_cost(rows, path: Path, title: str) -> Path:
     method's smallest chain; below, per method, the cold time of each model split into
     the stages its report gives (without any: the integrator's JIT time from its solver
     statistics), the rest unattributed (interpreter start, imports)."""
-    def num(v):
-        try:
-            return float(v)
-        except (TypeError, ValueError):
-            return float("nan")
-
+    from bgc.bench.compile_cost import as_number as num
     methods = list(dict.fromkeys(r["method"] for r in rows))
     fig, axes = panels(1 + len(methods), 3.4, sharex=False)
-    ax = axes[0, 0]
+    _cold_against_states(axes[0, 0], rows, methods, num)
+    stage_cols = [k for k in dict.fromkeys(k for r in rows for k in r)
+                  if k.endswith("_s") and k not in ("cold_s", "warm_s", "cold_jit_s",
+                                                    "warm_jit_s")]
+    for j, m in enumerate(methods):
+        _cold_by_stage(axes[1 + j, 0], [r for r in rows if r["method"] == m], m,
+                       stage_cols, num)
+    return save_figure(fig, path, title)
+
+
+def _cold_against_states(ax, rows, methods, num) -> None:
     for i, m in enumerate(methods):
         rs = [r for r in rows if r["method"] == m]
         chains = sorted((r for r in rs if str(r["N"]) != "sarib"), key=lambda r: num(r["N"]))
@@ -211,39 +216,34 @@ def compile_cost(rows, path: Path, title: str) -> Path:
                  "(chain 40), 10 s (SARIB)", fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=3)
-    stage_cols = [k for k in dict.fromkeys(k for r in rows for k in r)
-                  if k.endswith("_s") and k not in ("cold_s", "warm_s", "cold_jit_s",
-                                                    "warm_jit_s")]
-    for j, m in enumerate(methods):
-        ax = axes[1 + j, 0]
-        rs = [r for r in rows if r["method"] == m]
-        x = np.arange(len(rs))
-        bottom = np.zeros(len(rs))
-        for k, col in enumerate(stage_cols):
-            h = np.array([num(r.get(col)) for r in rs])
-            h = np.where(np.isfinite(h), h, 0.0)
-            if h.any():
-                ax.bar(x, h, bottom=bottom, color=f"C{k}", label=col[:-2].replace("_", " "))
-                bottom += h
-        # a report without stages: its solver statistics' JIT/cache-load time, at least
-        jit = np.array([num(r.get("cold_jit_s")) if not bottom[i] else 0.0
-                        for i, r in enumerate(rs)])
-        jit = np.where(np.isfinite(jit), jit, 0.0)
-        if jit.any():
-            ax.bar(x, jit, bottom=bottom, color="0.45",
-                   label="JIT/cache load (solver statistics; no stages reported)")
-            bottom += jit
-        cold = np.array([num(r["cold_s"]) for r in rs])
-        rest = np.where(np.isfinite(cold), np.maximum(cold - bottom, 0.0), 0.0)
-        ax.bar(x, rest, bottom=bottom, color="0.8", hatch="//", edgecolor="0.6",
-               label="unattributed")
-        for xi, r in zip(x, rs):
-            if r.get("status", "ok") != "ok":
-                ax.annotate(str(r["status"])[:20], (xi, 0), fontsize=6, rotation=90,
-                            ha="center", va="bottom")
-        ax.set_xticks(x, [f"N={r['N']}" if str(r["N"]) != "sarib" else "SARIB"
-                          for r in rs])
-        ax.set_ylabel(f"{m}: cold [s]")
-        ax.grid(True, axis="y", alpha=0.3)
-        ax.legend(fontsize=6, ncol=4)
-    return save_figure(fig, path, title)
+
+
+def _cold_by_stage(ax, rs, m, stage_cols, num) -> None:
+    x = np.arange(len(rs))
+    bottom = np.zeros(len(rs))
+    for k, col in enumerate(stage_cols):
+        h = np.array([num(r.get(col)) for r in rs])
+        h = np.where(np.isfinite(h), h, 0.0)
+        if h.any():
+            ax.bar(x, h, bottom=bottom, color=f"C{k}", label=col[:-2].replace("_", " "))
+            bottom += h
+    # a report without stages: its solver statistics' JIT/cache-load time, at least
+    jit = np.array([num(r.get("cold_jit_s")) if not bottom[i] else 0.0
+                    for i, r in enumerate(rs)])
+    jit = np.where(np.isfinite(jit), jit, 0.0)
+    if jit.any():
+        ax.bar(x, jit, bottom=bottom, color="0.45",
+               label="JIT/cache load (solver statistics; no stages reported)")
+        bottom += jit
+    cold = np.array([num(r["cold_s"]) for r in rs])
+    rest = np.where(np.isfinite(cold), np.maximum(cold - bottom, 0.0), 0.0)
+    ax.bar(x, rest, bottom=bottom, color="0.8", hatch="//", edgecolor="0.6",
+           label="unattributed")
+    for xi, r in zip(x, rs):
+        if r.get("status", "ok") != "ok":
+            ax.annotate(str(r["status"])[:20], (xi, 0), fontsize=6, rotation=90,
+                        ha="center", va="bottom")
+    ax.set_xticks(x, [f"N={r['N']}" if str(r["N"]) != "sarib" else "SARIB" for r in rs])
+    ax.set_ylabel(f"{m}: cold [s]")
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=6, ncol=4)

@@ -1,5 +1,5 @@
 """The native integrators (issue 6): Radau IIA order 5 and fixed-step RK4, their step
-loops in numba (``bgc/radau5.py``, ``bgc/rk4.py``, compiled once per machine) calling a
+loops in numba (``bgc/solvers/radau5.py``, ``rk4.py``, compiled once per machine) calling a
 generated module through its C entry points, and SUNDIALS' CVODE/IDA. Each run is checked
 against scipy on the same generated code."""
 

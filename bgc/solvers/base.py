@@ -108,6 +108,43 @@ class Solver(abc.ABC):
         scipy) falls through zero; no step longer than ``max_step``."""
 
 
+def names_where(names, mask, most: int = 6) -> str:
+    """The names where ``mask`` holds, at most ``most`` of them and how many more."""
+    picked = [n for n, m in zip(names, mask) if m]
+    more = len(picked) - most
+    return ", ".join(picked[:most]) + (f" and {more} more" if more > 0 else "")
+
+
+def fastest(problem: Problem, t, x, most: int = 3) -> str:
+    """The states changing fastest at (t, x) (|dx/dt| over |x| + 1), as a clause."""
+    f = np.asarray(problem.rhs(t, np.asarray(x, dtype=np.float64)))
+    names = problem.module.STATE_NAMES
+    if not np.all(np.isfinite(f)):
+        return f"; d/dt of {names_where(names, ~np.isfinite(f))} not finite"
+    rate = np.abs(f) / (np.abs(x) + 1.0)
+    top = [names[i] for i in np.argsort(-rate)[:most] if rate[i] > 0]
+    return f"; fastest states there: {', '.join(top)}" if top else ""
+
+
+def budget_message(problem: Problem, t, x) -> str:
+    """Why a run stopped at its step budget, with the states moving fastest there."""
+    return (f"the step budget ({problem.max_steps} steps) is spent at t = {t:.6g}"
+            + fastest(problem, t, x))
+
+
+def collapse_message(problem: Problem, t, x, h, diag=None, most: int = 3) -> str:
+    """Why a step size collapsed at (t, x): the states with the largest share of the last
+    rejected step's error (``diag``, native Radau), else the fastest ones."""
+    text = f"the step size collapsed to {h:.3g} s at t = {t:.6g}"
+    if diag is not None and np.any(diag != 0):
+        names = problem.module.STATE_NAMES
+        if not np.all(np.isfinite(diag)):
+            return text + f"; d/dt of {names_where(names, ~np.isfinite(diag))} not finite there"
+        top = [names[i] for i in np.argsort(-diag)[:most] if diag[i] > 0]
+        return text + f"; largest error in {', '.join(top)}"
+    return text + fastest(problem, t, x)
+
+
 class Interrupt:
     """Ctrl-C (SIGINT) during a run, as a request to stop rather than an exception, so the
     states computed so far are kept. Within ``with Interrupt() as stop:`` a SIGINT sets

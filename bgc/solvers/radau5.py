@@ -552,7 +552,7 @@ def radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, M, index2, plan, r
 
 
 def compile_loop():
-    """Compile ``radau5`` for the argument types ``simulate.NativeSolver`` passes, into
+    """Compile ``radau5`` for the argument types ``native_solver.NativeSolver`` passes, into
     numba's cache (``native.Precompile`` runs this in a separate process); it returns at
     once (t1 = t0), calling none of the entry points."""
     n = 1

@@ -166,7 +166,7 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
 
 
 def compile_loop():
-    """Compile ``rk4`` for the argument types ``simulate.NativeSolver`` passes, into
+    """Compile ``rk4`` for the argument types ``native_solver.NativeSolver`` passes, into
     numba's cache (``native.Precompile`` runs this in a separate process); it returns at
     once (t1 = t0), calling none of the entry points."""
     n = 1

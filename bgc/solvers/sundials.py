@@ -17,6 +17,7 @@ import numpy as np
 
 from bgc.errors import SimulationError
 from bgc.solvers.base import Segment, Solver
+from bgc.solvers.scipy_ivp import StopEvent
 
 MAX_STEPS = 10 ** 8         # per output interval: the run's own budget, not SUNDIALS' 500
 
@@ -88,7 +89,6 @@ class SundialsSolver(Solver):
 
     def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
                   max_step=np.inf):
-        from bgc.simulate import StopEvent
         # Ctrl-C stops it at the end of a step (SUNDIALS calls events between steps too,
         # so they do not count its steps: the step budget is its own MAX_STEPS)
         stop = StopEvent(problem, stats, budget=False)

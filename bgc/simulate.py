@@ -1,9 +1,12 @@
 """Stage **simulate**: a generated module + run settings -> Result (time, states, outputs,
 solver statistics).
 
-Solvers share one small interface (``Solver.integrate`` over one smooth segment); the run
-is split at the model's breakpoints (step times, table knots) so no step straddles a jump.
-Statistics are kept honestly: what an integrator does not report is ``None``, not 0.
+``simulate`` refuses what cannot run, makes the start consistent (``prepare``), checks it
+(``check_start``) and integrates segment by segment with one of ``SOLVERS``: the methods
+in ``bgc/solvers``, one file each behind one small interface (``base.Solver.integrate``
+over one smooth segment). The run is split at the model's breakpoints (step times, table
+knots) so no step straddles a jump. Statistics are counted by the solvers, where the work
+happens: what an integrator does not report is ``None``, not 0.
 """
 
 from __future__ import annotations
@@ -89,6 +92,10 @@ SOLVERS: dict[str, Solver] = {s.name: s for s in (
 
 _GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's frame so that "
                "its large rotations are not about its y axis")
+
+
+_FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model for a "
+              "singularity at that time")
 
 
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
@@ -271,6 +278,9 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
     return x, p, projection
 
 
+# (16 parameters, all but the module keyword-only with defaults: the run's settings as the
+# CLI, the benchmarks, the tests and docs/generated-modules.md pass them, by name; a
+# settings object would only move the same names into every caller)
 def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
              solver: str = "bdf", points: int = 1001, params=None, x0=None,
              step: float | None = None, mass=None, check_stability: bool = True,
@@ -301,13 +311,53 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     ``result`` holds everything computed up to the failure; Ctrl-C during the integration
     stops it within a step and raises ``Interrupted`` (a SimulationError) likewise.
     """
+    method = _method(solver, t_start, t_end)
+    mass, index2 = _mass_matrix(module, method, mass, check_index)
+    budget = _budget(method, step, max_steps, t_start, t_end)
+    p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
+    x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
+    stats = method.new_stats()
+
+    t0 = time.perf_counter()
+    _refuse_non_finite(module, x, p, t_start)
+    x, p, projection = prepare(module, x, p, t_start, redundancy)
+    check_start(module, x, p, t_start, projection)
+    if index2 is not None:
+        _check_index2(module, x, p, list(module.ALGEBRAIC), t_start)
+    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
+    problem = Problem(module, p, step, mass, check_stability,
+                      index2 if check_index else None, max_steps=budget, rtol=rtol,
+                      atol=atol, max_step=max_step)
+    method.check(problem, t_start, x)
+    method.warm_up(problem, x)
+    module.outputs(t_start, x, p)
+    events, monitor = _events(module, x, p, t_start, projection)
+    stats.compile_time = time.perf_counter() - t0
+
+    stats.max_step = max_step if np.isfinite(max_step) else None
+    grid = np.linspace(t_start, t_end, int(points))
+    wall = time.perf_counter()
+    run = _integrate(method, problem, x, grid, _segments(t_start, t_end, module.BREAKPOINTS),
+                     stats, events, monitor)
+    stats.wall_time = time.perf_counter() - wall
+    return _result(module, method, problem, run, stats, projection, monitor, check_drift)
+
+
+def _method(solver: str, t_start: float, t_end: float) -> Solver:
+    """The solver named ``solver``, for a run from t_start to t_end."""
     if solver not in SOLVERS:
         raise SimulationError(f"unknown solver '{solver}'",
                               hint="valid solvers: " + ", ".join(SOLVERS))
     if not t_end > t_start >= 0:
         raise SimulationError(f"need 0 <= t_start < t_end, got t_start = {t_start} and "
                               f"t_end = {t_end}")
-    method = SOLVERS[solver]
+    return SOLVERS[solver]
+
+
+def _mass_matrix(module, method: Solver, mass, check_index: bool):
+    """The mass matrix of the run (a module that is an index-2 DAE brings its own unless
+    given one) and ``index2`` (1.0 where a state is algebraic of index 2; None for an
+    ODE or index-1 DAE); refused where ``method`` cannot take it."""
     algebraic = list(getattr(module, "ALGEBRAIC", ()))
     index2 = None
     if algebraic:
@@ -318,7 +368,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             loops = sorted({module.STATE_NAMES[i].split(".")[0] for i in algebraic})
             raise SimulationError(
                 f"{module.MODEL_NAME} ({module.METHOD}, kinematic loops kept closed by joint "
-                f"{', '.join(map(repr, loops))}) is an index-2 DAE: solver {solver} "
+                f"{', '.join(map(repr, loops))}) is an index-2 DAE: solver {method.name} "
                 + ("takes ODEs only" if not method.max_index else
                    f"takes index {method.max_index} at most") + "; nothing was run",
                 hint="use --solver native (Radau IIA, index-2 error scaling) or let zcp "
@@ -330,9 +380,15 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             raise SimulationError(f"the mass matrix must be {n} x {n}, got "
                                   f"{' x '.join(map(str, mass.shape))}")
         if not method.takes_mass:
-            raise SimulationError(f"solver {solver} cannot integrate a system with a mass "
-                                  "matrix", hint="solvers that can: " + ", ".join(
+            raise SimulationError(f"solver {method.name} cannot integrate a system with a "
+                                  "mass matrix", hint="solvers that can: " + ", ".join(
                                       s.name for s in SOLVERS.values() if s.takes_mass))
+    return mass, index2
+
+
+def _budget(method: Solver, step, max_steps, t_start: float, t_end: float) -> int:
+    """The run's step budget: ``max_steps`` if given (refused below rk4's plan of fixed
+    steps), else rk4's plan, else ``MAX_STEPS``."""
     if max_steps is not None and not (isinstance(max_steps, (int, np.integer))
                                       and max_steps >= 1):
         raise SimulationError(f"the step budget must be a whole number >= 1, got "
@@ -344,22 +400,13 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                               f"{t_start:g} to {t_end:g}, more than the step budget "
                               f"{max_steps}; nothing was run", key="--max-steps",
                               hint=f"take --max-steps {planned} or a larger --step")
-    budget = max_steps or (planned + 1 if planned is not None else MAX_STEPS)
-    p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
-    x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
-    stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
+    return max_steps or (planned + 1 if planned is not None else MAX_STEPS)
 
-    t0 = time.perf_counter()
-    _refuse_non_finite(module, x, p, t_start)
-    x, p, projection = prepare(module, x, p, t_start, redundancy)
-    check_start(module, x, p, t_start, projection)
-    if algebraic:
-        _check_index2(module, x, p, algebraic, t_start)
-    problem = Problem(module, p, step, mass, check_stability,
-                      index2 if check_index else None, budget)
-    method.check(problem, t_start, x)
-    method.warm_up(problem, x)
-    module.outputs(t_start, x, p)
+
+def _events(module, x, p, t_start: float, projection):
+    """The run's events: one per guard (refused if one is already reached at the start)
+    and, for a constrained model whose rank is above its imposed rows, the rank monitor
+    (last; also returned, None without one)."""
     events = _guard_events(module, p)
     if events:
         margins = module.guards(t_start, x, p)
@@ -371,20 +418,32 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     if projection is not None and projection.rank > int(np.sum(module.IMPOSED)):
         monitor = consistent.RankMonitor(module, x, p, projection)
         events.append(monitor)
-    stats.compile_time = time.perf_counter() - t0
+    return events, monitor
 
 
-    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
-    stats.max_step = max_step if np.isfinite(max_step) else None
-    grid = np.linspace(t_start, t_end, int(points))
+@dataclass
+class _Run:
+    """What the segment loop reached: the output times and states, and how it ended
+    (``hint``: what to do about a failure; ``last``: the last segment integrated)."""
+    t: np.ndarray
+    x: np.ndarray
+    ok: bool = True
+    message: str = ""
+    hint: str | None = _FAIL_HINT
+    interrupted: bool = False
+    last: Segment | None = None
+
+
+def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
+               monitor) -> _Run:
+    """Integrate segment by segment (``segs``: no jump inside one), the outputs at the
+    ``grid`` times; stop at a guard, a singular configuration the rank ``monitor`` sees
+    (where only its minor went singular it re-picks one and goes on), Ctrl-C or a
+    failure."""
+    module = problem.module
     ts, xs = [], []
-    ok, message = True, ""
-    hint = ("tighten --rtol/--atol, try another --solver, or check the model for a "
-            "singularity at that time")
-    wall = time.perf_counter()
-    segs = _segments(t_start, t_end, module.BREAKPOINTS)
+    run = _Run(grid[:0], np.empty((0, len(x))))
     done = -np.inf                # last output time recorded
-    interrupted = False
     with _one_blas_thread(), problem.interrupt:
         while segs:
             a, b = segs.pop(0)
@@ -394,55 +453,66 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                 ts.append(sel)
                 xs.append(np.zeros((len(sel), 0)))
                 continue
-            seg = method.integrate(problem, a, b, x, sel, rtol, atol, stats, events, max_step)
+            seg = run.last = method.integrate(problem, a, b, x, sel, stats, events)
             ts.append(sel[:len(seg.x_eval)])
             xs.append(seg.x_eval)
             done = ts[-1][-1] if len(ts[-1]) else done
             if monitor is not None and seg.event == len(events) - 1:
                 singular = _singular(monitor, seg, consistent.LOST_RANK_EVENT)
                 if singular:
-                    ok, message, hint = False, singular, _SINGULAR_HINT
+                    run.ok, run.message, run.hint = False, singular, _SINGULAR_HINT
                     break
                 monitor.repick(seg.x_end)        # only the monitored minor was singular
                 x = np.array(seg.x_end, dtype=np.float64)
                 segs.insert(0, (seg.t_reached, b))
                 continue
             if seg.event is not None:
-                ok, message = False, (f"{module.GUARD_NAMES[seg.event]} reached at "
-                                      f"t = {seg.t_reached:.6g}")
-                hint = _GUARD_HINT
+                run.ok, run.hint = False, _GUARD_HINT
+                run.message = (f"{module.GUARD_NAMES[seg.event]} reached at "
+                               f"t = {seg.t_reached:.6g}")
                 break
             if seg.interrupted:
-                ok, interrupted = False, True
-                message = f"Ctrl-C at t = {seg.t_reached:.6g}: the run stopped there"
-                hint = None
+                run.ok, run.interrupted, run.hint = False, True, None
+                run.message = f"Ctrl-C at t = {seg.t_reached:.6g}: the run stopped there"
                 break
             if not seg.ok:
-                ok, message = False, f"{method.name} failed at t = {seg.t_reached:.6g}: {seg.message}"
+                run.ok = False
+                run.message = (f"{method.name} failed at t = {seg.t_reached:.6g}: "
+                               f"{seg.message}")
                 break
             x = np.array(seg.x_end, dtype=np.float64)
-    stats.wall_time = time.perf_counter() - wall
-    t_all = np.concatenate(ts) if ts else np.empty(0)
-    x_all = np.vstack(xs) if xs else np.empty((0, len(module.STATE_NAMES)))
+    if ts:
+        run.t, run.x = np.concatenate(ts), np.vstack(xs)
+    return run
+
+
+def _result(module, method: Solver, problem: Problem, run: _Run, stats: Stats, projection,
+            monitor, check_drift: bool) -> Result:
+    """The run's Result, its outputs computed and, for a constrained model, its drift
+    checked (a run whose joints came apart ends where they did); raised with its failure
+    (``Interrupted`` for Ctrl-C) if it has one."""
+    p = problem.p
+    t_all, x_all = run.t, run.x
     y_all = module.outputs_at(t_all, x_all, p)
+    ok, message, hint = run.ok, run.message, run.hint
     if projection is not None and len(x_all):
         g_t, v_t = consistent.drift_history(module, x_all, p)
         # a state gone non-finite has no drift: NaN there, the run's message says why
         stats.drift_position = float(np.nanmax(g_t, initial=0.0))
         stats.drift_velocity = float(np.nanmax(v_t, initial=0.0))
-        singular = None if ok or interrupted or hint == _SINGULAR_HINT or monitor is None \
-            else _singular(
-            monitor, seg, consistent.LOST_RANK)
+        singular = None if ok or run.interrupted or hint == _SINGULAR_HINT or monitor is None \
+            else _singular(monitor, run.last, consistent.LOST_RANK)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
-        limit = consistent.drift_limit(module, x_all[0], rtol, atol)
+        limit = consistent.drift_limit(module, x_all[0], problem.rtol, problem.atol)
         if ok and check_drift and stats.drift_position > limit:   # joints apart: keep the run
             k = int(np.argmax(g_t > limit))
             ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
-                    tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection, p)
-    if interrupted:
+                    tuple(module.OUTPUT_NAMES), method.name, stats, ok, message, projection,
+                    p)
+    if run.interrupted:
         raise Interrupted(message, result=result, hint=hint)
     if not ok:
         raise SimulationError(message, result=result, hint=hint)

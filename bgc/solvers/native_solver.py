@@ -76,43 +76,47 @@ class NativeSolver(Solver):
                 f"{np.degrees(np.angle(lam)):.0f} deg; the limit there is h |lambda| = "
                 f"{h_max * abs(lam):.3g}, h = {h_max:.3g} s)")
 
-    def _run(self, problem, t0, t1, x0, t_eval, rtol, atol, max_step, stats, h_start=0.0,
-             max_steps=0):
-        rhs, jac, guards = problem.module.native_entry_points()
-        n_guards = len(problem.module.GUARD_NAMES)
+    def new_stats(self):
+        """Every count is the loop's own (rk4: no factorizations, no rejected steps)."""
+        return Stats(rejected_steps=0)
+
+    def _run(self, problem, t0, t1, x0, t_eval, stats, h_start=0.0, max_steps=0):
+        """One call of the loop from (t0, x0) towards t1 (a ``native.Outcome``), pausing
+        after ``max_steps`` steps (0: none); its counts added to ``stats``."""
+        model = native.Model(*problem.module.native_entry_points(),
+                             len(problem.module.GUARD_NAMES), problem.p)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
         if self.loop == "rk4":
             from bgc.solvers import rk4
             # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
-            res = rk4.rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                          float(problem.step), GUARD_TOLERANCE, check, max_steps, counts,
-                          problem.interrupt.flag)
+            settings = rk4.settings(problem.step, GUARD_TOLERANCE, check, max_steps,
+                                    problem.interrupt.flag)
+            res = rk4.rk4(model, settings, t0, t1, x0, t_eval, counts)
         else:
+            from bgc.solvers import radau5
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
-            from bgc.solvers import radau5
+            system = radau5.System(model, mass, index2, problem.lu_plan)
+            settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
+                                       GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))
-            res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                                mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
-                                GUARD_TOLERANCE, max_steps, counts, problem.interrupt.flag,
-                                self.diag)
+            res = radau5.radau5(system, settings, t0, t1, x0, t_eval, counts, self.diag)
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
         stats.lu_decompositions += int(counts[native.ST_LU])
-        stats.rejected_steps = (stats.rejected_steps or 0) + int(counts[native.ST_REJECTED])
+        stats.rejected_steps += int(counts[native.ST_REJECTED])
         return res
 
     def warm_up(self, problem, x0):
         """Compile (or load from numba's cache) the loop and the module's entry points."""
         native.await_precompiled(self.loop)
-        self._run(problem, 0.0, 0.0, np.array(x0, dtype=np.float64), np.empty(0), 1e-6,
-                  1e-6, np.inf, Stats())
+        self._run(problem, 0.0, 0.0, np.array(x0, dtype=np.float64), np.empty(0),
+                  self.new_stats())
 
-    def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
-                  max_step=np.inf):
+    def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
         watched = [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)]
         t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
         t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
@@ -129,7 +133,7 @@ class NativeSolver(Solver):
             if left is not None:
                 pause = min(pause, left) if pause else left
             out, k, t_r, x_r, status, guard, h = self._run(
-                problem, t, t1, x, sel, rtol, atol, max_step, stats, h, pause)
+                problem, t, t1, x, sel, stats, h, pause)
             xs.append(out[:k])
             if status == native.INTERRUPTED:
                 return Segment(np.vstack(xs), np.array(x_r), float(t_r), False, "interrupted",
@@ -141,8 +145,8 @@ class NativeSolver(Solver):
                 if hit:
                     xs.pop()
                     j = hit[0]
-                    return self._locate(problem, t, t_r, x, sel, rtol, atol, max_step,
-                                        stats, watched[j], before[j], after[j], h, xs)
+                    return self._locate(problem, stats, (t, x), (t_r, after[j]), sel,
+                                        (*watched[j], before[j]), h, xs)
                 t, x, before, done = float(t_r), np.array(x_r), after, done + k
                 if status == native.REACHED:
                     return Segment(np.vstack(xs), x, float(t1), True)
@@ -179,19 +183,18 @@ class NativeSolver(Solver):
         return (f"the state became non-finite with the step {problem.step:.3g} s inside the "
                 f"stability limit {h_max:.3g} s there: the model itself diverges")
 
-    def _locate(self, problem, a, b, x, sel, rtol, atol, max_step, stats, event, before,
-                after, h, xs):
-        """An event changed sign on [a, b] (from ``x`` at a, value ``before`` there and
-        ``after`` at b). One re-integration of [a, b] scans the event on a grid of the
+    def _locate(self, problem, stats, start, end, sel, event, h, xs):
+        """An event changed sign on [a, b]: from ``start`` = (a, x), where it was ``before``
+        (``event`` = (its index, function, before)), to ``end`` = (b, its value there,
+        ``after``). One re-integration of [a, b] scans the event on a grid of the
         dense output; from the integrated state at the grid point before the change,
         regula falsi with the Illinois modification (superlinear on a smooth event, the
         bracket always holding the change) re-integrates short intervals only. Every
         restart takes the step size ``h`` the loop had; the requested outputs are kept."""
-        k, fun = event
+        (a, x), (b, after), (k, fun, before) = start, end, event
         sign = np.sign(before)
         grid = np.linspace(a, b, LOCATE_GRID + 1)[1:-1]
-        out, n, _, _, _, _, _ = self._run(problem, a, b, x, grid, rtol, atol, max_step,
-                                          stats, h)
+        out, n, _, _, _, _, _ = self._run(problem, a, b, x, grid, stats, h)
         vals = [fun(t, xi) for t, xi in zip(grid[:n], out[:n])]
         first = next((j for j, v in enumerate(vals) if v == 0 or np.sign(v) != sign), n)
         lo, f_lo, x_lo, done = a, before, x, 0
@@ -199,8 +202,7 @@ class NativeSolver(Solver):
         if first > 0:                  # integrate to the grid point before the change
             t_g = grid[first - 1]
             pts = sel[sel <= t_g]
-            o, m, _, x_g, _, _, _ = self._run(problem, a, t_g, x, pts, rtol, atol, max_step,
-                                              stats, min(h, t_g - a))
+            o, m, _, x_g, _, _, _ = self._run(problem, a, t_g, x, pts, stats, min(h, t_g - a))
             f_g = fun(t_g, x_g)
             if f_g != 0 and np.sign(f_g) == sign:
                 xs.append(o[:m])
@@ -216,7 +218,7 @@ class NativeSolver(Solver):
             mid = min(max(mid, lo + 1e-3 * width), hi - 1e-3 * width)
             pts = sel[done:]
             o, m, _, x_mid, _, _, _ = self._run(problem, lo, mid, x_lo, pts[pts <= mid],
-                                                rtol, atol, max_step, stats, min(h, mid - lo))
+                                                stats, min(h, mid - lo))
             f_mid = fun(mid, x_mid)
             if f_mid == 0 or np.sign(f_mid) != sign:
                 hi, f_hi = mid, f_mid
@@ -228,7 +230,7 @@ class NativeSolver(Solver):
                 f_hi = 0.5 * f_hi if side == 1 else f_hi
                 side = 1
         pts = sel[done:]
-        o, m, t_r, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], rtol,
-                                            atol, max_step, stats, min(h, hi - lo))
+        o, m, _, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], stats,
+                                          min(h, hi - lo))
         xs.append(o[:m])
         return Segment(np.vstack(xs), np.array(x_r), float(hi), False, "", event=k)

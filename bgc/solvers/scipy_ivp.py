@@ -12,7 +12,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from bgc.solvers.base import Segment, Solver, budget_message, collapse_message, fastest
+from bgc.solvers.base import (
+    Segment,
+    Solver,
+    Stats,
+    budget_message,
+    collapse_message,
+    fastest,
+)
+
+# solve_ivp's methods that take the Jacobian (and factor Newton matrices)
+IMPLICIT = ("BDF", "Radau", "LSODA")
 
 
 class ScipySolver(Solver):
@@ -26,15 +36,23 @@ class ScipySolver(Solver):
         with bgc), so wall time is the run's."""
         import scipy.integrate  # noqa: F401
 
-    def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
-                  max_step=np.inf):
+    @property
+    def implicit(self) -> bool:
+        """Whether the method solves its steps by Newton (a Jacobian, LU factors)."""
+        return self.method in IMPLICIT
+
+    def new_stats(self):
+        """Rejected steps solve_ivp does not report; an explicit method factors nothing."""
+        return Stats(rejected_steps=None, lu_decompositions=0 if self.implicit else None)
+
+    def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
         from scipy.integrate import solve_ivp
-        kw = {"jac": problem.jac} if self.method in ("BDF", "Radau", "LSODA") else {}
+        kw = {"jac": problem.jac} if self.implicit else {}
         stop = StopEvent(problem, stats, span=t1 - t0)
         try:
-            sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=rtol,
-                            atol=atol, dense_output=True, events=[*events, stop],
-                            max_step=max_step, **kw)
+            sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=problem.rtol,
+                            atol=problem.atol, dense_output=True, events=[*events, stop],
+                            max_step=problem.max_step, **kw)
         except (ValueError, np.linalg.LinAlgError) as exc:
             # scipy's LU refuses a Newton matrix with NaN in it ("array must not contain
             # infs or NaNs"): the state left the model's domain after the last step

@@ -28,8 +28,8 @@ LOCATE_MAXITER = 60
 
 
 class NativeSolver(Solver):
-    """A step loop in numba (``radau5``, ``rk4``, imported when a run takes
-    it), compiled once for every model, that calls the module's rhs, Jacobian and guards
+    """A step loop in numba (``radau5``, ``rk4``, imported when a run takes it),
+    compiled once for every model, that calls the module's rhs, Jacobian and guards
     through their C entry points without returning to Python per step. Guards are
     checked in the loop; other events (the rank monitor, Python functions) and rk4's
     stability limit are checked while the loop pauses every so many steps, an event

@@ -282,6 +282,8 @@ def _record(out, k_out, t_eval, t_end, t_old, h_last, y_old, Q):
     return k_out
 
 
+# (its arguments are the loop's own arrays, one by one: a tuple of them cost compile time,
+# the note at ``radau5``; so do those of ``_newton_matrices`` and ``_guard_bisect``)
 @inner
 def _newton(rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
             lu_complex, piv_real, piv_complex, plan, lu_kind, scale, newton_tol, stats,

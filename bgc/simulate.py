@@ -1,9 +1,12 @@
 """Stage **simulate**: a generated module + run settings -> Result (time, states, outputs,
 solver statistics).
 
-Solvers share one small interface (``Solver.integrate`` over one smooth segment); the run
-is split at the model's breakpoints (step times, table knots) so no step straddles a jump.
-Statistics are kept honestly: what an integrator does not report is ``None``, not 0.
+``simulate`` refuses what cannot run, makes the start consistent (``prepare``), checks it
+(``check_start``) and integrates segment by segment with one of ``SOLVERS``: the methods
+in ``bgc/solvers``, one file each behind one small interface (``base.Solver.integrate``
+over one smooth segment). The run is split at the model's breakpoints (step times, table
+knots) so no step straddles a jump. Statistics are counted by the solvers, where the work
+happens: what an integrator does not report is ``None``, not 0.
 """
 
 from __future__ import annotations
@@ -17,7 +20,16 @@ from threadpoolctl import threadpool_limits
 from bgc.errors import SimulationError
 from bgc.methods import consistent
 from bgc.solvers import native
-from bgc.solvers.base import GUARD_TOLERANCE, Problem, Segment, Solver, Stats
+from bgc.solvers.base import (
+    GUARD_TOLERANCE,
+    Problem,
+    Segment,
+    Solver,
+    Stats,
+    names_where,
+)
+from bgc.solvers.native_solver import NativeSolver
+from bgc.solvers.scipy_ivp import ScipySolver
 from bgc.solvers.sundials import SundialsSolver
 
 
@@ -45,114 +57,6 @@ class Result:
         return self.x[:, self.state_names.index(name)]
 
 
-class ScipySolver(Solver):
-    """scipy.integrate.solve_ivp with the generated analytic Jacobian."""
-
-    def __init__(self, name: str, method: str, description: str):
-        self.name, self.method, self.description = name, method, description
-
-    def warm_up(self, problem, x0):
-        """Import scipy.integrate (0.3 s, which only these solvers need: imported here, not
-        with bgc), so wall time is the run's."""
-        import scipy.integrate  # noqa: F401
-
-    def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
-                  max_step=np.inf):
-        from scipy.integrate import solve_ivp
-        kw = {"jac": problem.jac} if self.method in ("BDF", "Radau", "LSODA") else {}
-        stop = StopEvent(problem, stats, span=t1 - t0)
-        try:
-            sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=rtol,
-                            atol=atol, dense_output=True, events=[*events, stop],
-                            max_step=max_step, **kw)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            # scipy's LU refuses a Newton matrix with NaN in it ("array must not contain
-            # infs or NaNs"): the state left the model's domain after the last step
-            t_ok, x_ok = stop.last if stop.last[0] is not None else (t0, x0)
-            return Segment(np.empty((0, len(x0))), np.array(x_ok), t_ok, False,
-                           f"{self.name} stopped after t = {t_ok:.6g} ({exc})"
-                           + _fastest(problem, t_ok, x_ok))
-        stats.steps += max(len(sol.t) - 1, 0)
-        stats.rhs_calls += int(sol.nfev)
-        stats.jac_calls += int(sol.njev)
-        if stats.lu_decompositions is not None:
-            stats.lu_decompositions += int(sol.nlu)
-        t_ok = float(sol.t[-1]) if len(sol.t) else t0
-        x_end = sol.y[:, -1] if sol.y.size else np.asarray(x0)
-        if sol.status < 0 or sol.sol is None:
-            reached = t_eval[t_eval <= t_ok] if sol.sol is not None else t_eval[:0]
-            why = sol.message
-            if "step size is less than spacing" in why:
-                why = collapse_message(problem, t_ok, x_end, np.spacing(t_ok))
-            return Segment(_dense(sol, reached, len(x0)), x_end, t_ok, False, why)
-        if sol.status == 1:       # a guard fired: keep what lies before it
-            k = next(i for i, te in enumerate(sol.t_events) if len(te))
-            x_eval = _dense(sol, t_eval[t_eval <= t_ok], len(x0))
-            if k == len(events):  # the stop event: Ctrl-C or the step budget
-                return Segment(x_eval, x_end, t_ok, False, stop.why(t_ok, x_end),
-                               interrupted=stop.interrupted)
-            return Segment(x_eval, x_end, t_ok, False, "", event=k)
-        return Segment(_dense(sol, t_eval, len(x0)), x_end, t_ok, True)
-
-
-class StopEvent:
-    """A terminal event that stops a Python-driven integrator (scipy, SUNDIALS) at the end
-    of the step where Ctrl-C was pressed (``Problem.interrupt``), the run's step budget
-    ran out, or the step size collapsed: ``COLLAPSE_STEPS`` accepted steps in a row each
-    shorter than ``TINY_STEP`` of the segment (``span``; scipy's own test, a step below
-    the spacing of t, never fires near t = 0, where BDF crawled through a million steps
-    of 1e-145 s on a millimetre mechanism, nor for LSODA chattering in steps of 1e-13 s). +1 until then, t - t_stop after (a root exactly at the step's end
-    t_stop). solve_ivp calls it once at the start and once per accepted step; it also
-    keeps the last accepted point (``last``)."""
-
-    terminal, direction = True, 0
-
-    def __init__(self, problem, stats, budget: bool = True, span: float = 0.0):
-        self.problem, self.t_stop, self.calls = problem, None, 0
-        self.left = problem.budget(stats) if budget else None
-        self.interrupted = False
-        self.tiny, self.h, self.floor = 0, None, TINY_STEP * span
-        self.last = (None, None)
-
-    def __call__(self, t, x):
-        if self.t_stop is None:
-            self.calls += 1
-            if self.last[0] is not None:
-                self.h = abs(t - self.last[0])
-                self.tiny = self.tiny + 1 if self.h < self.floor else 0
-            self.last = (float(t), np.array(x))
-            self.interrupted = self.problem.interrupt.requested
-            if (self.interrupted or self.tiny >= COLLAPSE_STEPS
-                    or (self.left is not None and self.calls - 1 >= self.left)):
-                self.t_stop = t
-            else:
-                return 1.0
-        return t - self.t_stop
-
-    def why(self, t, x) -> str:
-        if self.interrupted:
-            return "interrupted"
-        if self.tiny >= COLLAPSE_STEPS:
-            return collapse_message(self.problem, t, x, self.h)
-        return budget_message(self.problem, t, x)
-
-
-# a collapsed step size: so many accepted steps in a row, each below this part of the
-# segment's length. A run that advanced less than 1e-7 of its segment in a thousand steps
-# would need more than 1e10 steps at that pace (a chattering switch, a state pressed
-# against a singularity); no healthy start or event takes a thousand such steps in a row.
-TINY_STEP, COLLAPSE_STEPS = 1e-10, 1000
-
-
-def _dense(sol, ts, n: int) -> np.ndarray:
-    """solve_ivp's dense output at the times ``ts`` (rows); none: an empty (0, n) array
-    (scipy's OdeSolution fails on an empty array: a segment between two of a run's
-    breakpoints may hold no output point)."""
-    if not len(ts):
-        return np.empty((0, n))
-    return sol.sol(ts).T.reshape(len(ts), n)
-
-
 # the step budget of a run (``--max-steps``) unless told: a million accepted steps. The
 # shipped models need at most ~1e5 (the SARIB over a 60 s chirp, its step limited by the
 # excitation), native Radau takes ~1e5 steps a second on small models, so a run that
@@ -169,253 +73,12 @@ def precompile_loop(solver: str | None):
         native.precompile(method.loop)
 
 
-def budget_message(problem, t, x) -> str:
-    """Why a run stopped at its step budget, with the states moving fastest there."""
-    return (f"the step budget ({problem.max_steps} steps) is spent at t = {t:.6g}"
-            + _fastest(problem, t, x))
-
-
-def _fastest(problem, t, x, most: int = 3) -> str:
-    """The states changing fastest at (t, x) (|dx/dt| over |x| + 1), as a clause."""
-    f = np.asarray(problem.rhs(t, np.asarray(x, dtype=np.float64)))
-    if not np.all(np.isfinite(f)):
-        return f"; d/dt of {_names(problem.module.STATE_NAMES, ~np.isfinite(f))} not finite"
-    rate = np.abs(f) / (np.abs(x) + 1.0)
-    top = [problem.module.STATE_NAMES[i] for i in np.argsort(-rate)[:most] if rate[i] > 0]
-    return f"; fastest states there: {', '.join(top)}" if top else ""
-
-
-def collapse_message(problem, t, x, h, diag=None, most: int = 3) -> str:
-    """Why a step size collapsed at (t, x): the states with the largest share of the last
-    rejected step's error (``diag``, native Radau), else the fastest ones."""
-    text = f"the step size collapsed to {h:.3g} s at t = {t:.6g}"
-    if diag is not None and np.any(diag != 0):
-        names = problem.module.STATE_NAMES
-        if not np.all(np.isfinite(diag)):
-            return text + f"; d/dt of {_names(names, ~np.isfinite(diag))} not finite there"
-        top = [names[i] for i in np.argsort(-diag)[:most] if diag[i] > 0]
-        return text + f"; largest error in {', '.join(top)}"
-    return text + _fastest(problem, t, x)
-
-
-# an event's location: the grid its scan of the dense output takes, and at most so many
-# re-integrations of the bracket (regula falsi) down to 1e-12 of the time
-LOCATE_GRID = 32
-LOCATE_MAXITER = 60
-
-
-class NativeSolver(Solver):
-    """A step loop in numba (``bgc/radau5.py``, ``bgc/rk4.py``, imported when a run takes
-    it), compiled once for every model, that calls the module's rhs, Jacobian and guards
-    through their C entry points without returning to Python per step. Guards are
-    checked in the loop; other events (the rank monitor, Python functions) and rk4's
-    stability limit are checked while the loop pauses every so many steps, an event
-    located by bisection, re-integrating from the last pause."""
-    STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
-
-    def __init__(self, name: str, loop: str, description: str):
-        self.name, self.loop, self.description = name, loop, description
-        self.max_index = 2 if loop == "radau5" else 0
-
-    def check(self, problem, t0, x0):
-        """rk4: a step beyond the method's stability limit at the start is refused (the
-        run would blow up, or worse, just ring): every h lambda of the Jacobian's
-        eigenvalues there must lie in RK4's stability region (``rk4.stable_step``). It
-        cannot take a mass matrix."""
-        if not hasattr(problem.module, "native_entry_points"):
-            raise SimulationError(f"solver {self.name} needs a module generated by this "
-                                  "bgc", hint="recompile the model (bgc compile)")
-        if self.loop != "rk4":
-            return
-        if not problem.step or problem.step <= 0:
-            raise SimulationError("solver rk4 takes a fixed step: give --step H (s)",
-                                  hint="its stability limit is |R(h lambda)| <= 1 for the "
-                                       "Jacobian's eigenvalues lambda")
-        unstable = problem.check_stability and self._unstable(problem, t0, x0)
-        if unstable:
-            from bgc.solvers import rk4
-            h_max = rk4.stable_step(np.linalg.eigvals(problem.jac(t0, x0)))[0]
-            raise SimulationError(f"rk4 {unstable}", hint=f"take --step {h_max:.3g} or "
-                                                          "less, or a stiff solver (native, "
-                                                          "bdf, radau)")
-
-    @staticmethod
-    def _unstable(problem, t, x) -> str | None:
-        """Why rk4's step is unstable at (t, x) (h lambda outside the stability region
-        for an eigenvalue of the Jacobian there), or None."""
-        from bgc.solvers import rk4
-        h_max, lam = rk4.stable_step(np.linalg.eigvals(problem.jac(t, x)))
-        if problem.step <= h_max:
-            return None
-        return (f"step {problem.step:.3g} s is beyond its stability limit at t = {t:g}: "
-                f"h lambda = {problem.step * lam:.4g} lies outside the method's stability "
-                f"region (|lambda| = {abs(lam):.4g} 1/s from the Jacobian, at "
-                f"{np.degrees(np.angle(lam)):.0f} deg; the limit there is h |lambda| = "
-                f"{h_max * abs(lam):.3g}, h = {h_max:.3g} s)")
-
-    def _run(self, problem, t0, t1, x0, t_eval, rtol, atol, max_step, stats, h_start=0.0,
-             max_steps=0):
-        rhs, jac, guards = problem.module.native_entry_points()
-        n_guards = len(problem.module.GUARD_NAMES)
-        counts = np.zeros(native.N_STATS, dtype=np.int64)
-        if self.loop == "rk4":
-            from bgc.solvers import rk4
-            # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
-            # steps (~n^2 each) it costs about what they do
-            check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
-            res = rk4.rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                          float(problem.step), GUARD_TOLERANCE, check, max_steps, counts,
-                          problem.interrupt.flag)
-        else:
-            mass = problem.mass if problem.mass is not None else np.empty((0, 0))
-            index2 = problem.index2 if problem.index2 is not None else np.empty(0)
-            from bgc.solvers import radau5
-            self.diag = np.zeros(len(x0))
-            res = radau5.radau5(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, problem.p,
-                                mass, index2, problem.lu_plan, rtol, atol, max_step, h_start,
-                                GUARD_TOLERANCE, max_steps, counts, problem.interrupt.flag,
-                                self.diag)
-        stats.steps += int(counts[native.ST_STEPS])
-        stats.rhs_calls += int(counts[native.ST_RHS])
-        stats.jac_calls += int(counts[native.ST_JAC])
-        stats.lu_decompositions += int(counts[native.ST_LU])
-        stats.rejected_steps = (stats.rejected_steps or 0) + int(counts[native.ST_REJECTED])
-        return res
-
-    def warm_up(self, problem, x0):
-        """Compile (or load from numba's cache) the loop and the module's entry points."""
-        native.await_precompiled(self.loop)
-        self._run(problem, 0.0, 0.0, np.array(x0, dtype=np.float64), np.empty(0), 1e-6,
-                  1e-6, np.inf, Stats())
-
-    def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
-                  max_step=np.inf):
-        watched = [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)]
-        t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
-        t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
-        xs, done = [], 0
-        before = [e(t0, x) for _, e in watched]
-        while True:
-            sel = t_eval[done:]
-            # pause for the watched events, and where the run's step budget ends
-            left = problem.budget(stats)
-            if left == 0:
-                x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
-                return Segment(x_eval, x, float(t), False, budget_message(problem, t, x))
-            pause = self.STEPS_PER_CHECK if watched else 0
-            if left is not None:
-                pause = min(pause, left) if pause else left
-            out, k, t_r, x_r, status, guard, h = self._run(
-                problem, t, t1, x, sel, rtol, atol, max_step, stats, h, pause)
-            xs.append(out[:k])
-            if status == native.INTERRUPTED:
-                return Segment(np.vstack(xs), np.array(x_r), float(t_r), False, "interrupted",
-                               interrupted=True)
-            if status in (native.REACHED, native.PAUSED):
-                after = [e(t_r, x_r) for _, e in watched]
-                hit = [j for j in range(len(watched))
-                       if np.sign(after[j]) != np.sign(before[j]) and before[j] != 0]
-                if hit:
-                    xs.pop()
-                    j = hit[0]
-                    return self._locate(problem, t, t_r, x, sel, rtol, atol, max_step,
-                                        stats, watched[j], before[j], after[j], h, xs)
-                t, x, before, done = float(t_r), np.array(x_r), after, done + k
-                if status == native.REACHED:
-                    return Segment(np.vstack(xs), x, float(t1), True)
-                continue
-            x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
-            if status == native.GUARD:
-                return Segment(x_eval, np.array(x_r), float(t_r), False, "", event=int(guard))
-            if status == native.UNSTABLE:
-                return Segment(x_eval, np.array(x_r), float(t_r), False,
-                               self._unstable(problem, float(t_r), x_r))
-            why = {native.NOT_FINITE: self._diverged(problem, float(t_r), x_r),
-                   native.SINGULAR: "the Newton matrix is singular at every step size",
-                   }.get(status) or collapse_message(problem, float(t_r), x_r, h,
-                                                     getattr(self, "diag", None))
-            return Segment(x_eval, np.array(x_r), float(t_r), False, why)
-
-    def _diverged(self, problem, t, x) -> str:
-        """Why the state became non-finite after (t, x), the last finite state: for rk4,
-        the step against the stability limit there (the spectrum moves with the state)."""
-        if self.loop != "rk4":
-            diag = getattr(self, "diag", None)
-            bad = (_names(problem.module.STATE_NAMES, ~np.isfinite(diag))
-                   if diag is not None and not np.all(np.isfinite(diag)) else "")
-            return "the state became non-finite" + (f" (d/dt of {bad} first)" if bad else "")
-        J = problem.jac(t, x)
-        if not np.all(np.isfinite(J)):     # a singular configuration: no spectrum there
-            return (f"the state became non-finite after t = {t:.6g}, where the Jacobian "
-                    "already is not (a singular configuration, or beyond the model's range)")
-        from bgc.solvers import rk4
-        h_max, lam = rk4.stable_step(np.linalg.eigvals(J))
-        if problem.step > h_max:
-            return (f"the state became non-finite: the step {problem.step:.3g} s is beyond "
-                    f"the stability limit {h_max:.3g} s there (lambda = {lam:.4g} 1/s)")
-        return (f"the state became non-finite with the step {problem.step:.3g} s inside the "
-                f"stability limit {h_max:.3g} s there: the model itself diverges")
-
-    def _locate(self, problem, a, b, x, sel, rtol, atol, max_step, stats, event, before,
-                after, h, xs):
-        """An event changed sign on [a, b] (from ``x`` at a, value ``before`` there and
-        ``after`` at b). One re-integration of [a, b] scans the event on a grid of the
-        dense output; from the integrated state at the grid point before the change,
-        regula falsi with the Illinois modification (superlinear on a smooth event, the
-        bracket always holding the change) re-integrates short intervals only. Every
-        restart takes the step size ``h`` the loop had; the requested outputs are kept."""
-        k, fun = event
-        sign = np.sign(before)
-        grid = np.linspace(a, b, LOCATE_GRID + 1)[1:-1]
-        out, n, _, _, _, _, _ = self._run(problem, a, b, x, grid, rtol, atol, max_step,
-                                          stats, h)
-        vals = [fun(t, xi) for t, xi in zip(grid[:n], out[:n])]
-        first = next((j for j, v in enumerate(vals) if v == 0 or np.sign(v) != sign), n)
-        lo, f_lo, x_lo, done = a, before, x, 0
-        hi, f_hi = (grid[first], vals[first]) if first < n else (b, after)
-        if first > 0:                  # integrate to the grid point before the change
-            t_g = grid[first - 1]
-            pts = sel[sel <= t_g]
-            o, m, _, x_g, _, _, _ = self._run(problem, a, t_g, x, pts, rtol, atol, max_step,
-                                              stats, min(h, t_g - a))
-            f_g = fun(t_g, x_g)
-            if f_g != 0 and np.sign(f_g) == sign:
-                xs.append(o[:m])
-                lo, f_lo, x_lo, done = t_g, f_g, x_g, m
-            else:                      # the integrated state disagrees with the scan
-                hi, f_hi = t_g, f_g
-        side = 0
-        for _ in range(LOCATE_MAXITER):
-            if hi - lo <= 1e-12 * max(1.0, abs(hi)) or f_hi == 0:
-                break
-            mid = hi - f_hi * (hi - lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
-            width = hi - lo                   # keep inside: round-off, a flat event
-            mid = min(max(mid, lo + 1e-3 * width), hi - 1e-3 * width)
-            pts = sel[done:]
-            o, m, _, x_mid, _, _, _ = self._run(problem, lo, mid, x_lo, pts[pts <= mid],
-                                                rtol, atol, max_step, stats, min(h, mid - lo))
-            f_mid = fun(mid, x_mid)
-            if f_mid == 0 or np.sign(f_mid) != sign:
-                hi, f_hi = mid, f_mid
-                f_lo = 0.5 * f_lo if side == -1 else f_lo
-                side = -1
-            else:
-                xs.append(o[:m])
-                lo, f_lo, x_lo, done = mid, f_mid, x_mid, done + m
-                f_hi = 0.5 * f_hi if side == 1 else f_hi
-                side = 1
-        pts = sel[done:]
-        o, m, t_r, x_r, _, _, _ = self._run(problem, lo, hi, x_lo, pts[pts <= hi], rtol,
-                                            atol, max_step, stats, min(h, hi - lo))
-        xs.append(o[:m])
-        return Segment(np.vstack(xs), np.array(x_r), float(hi), False, "", event=k)
-
-
 SOLVERS: dict[str, Solver] = {s.name: s for s in (
-    NativeSolver("native", "radau5", "Radau IIA order 5, numba step loop (bgc/radau5.py), "
-                                     "stiff, mass matrices (DAEs of index 1 and 2)"),
+    NativeSolver("native", "radau5", "Radau IIA order 5, numba step loop "
+                                     "(bgc/solvers/radau5.py), stiff, mass matrices (DAEs "
+                                     "of index 1 and 2)"),
     NativeSolver("rk4", "rk4", "classical Runge-Kutta 4, fixed step (--step), explicit, "
-                               "numba step loop (bgc/rk4.py)"),
+                               "numba step loop (bgc/solvers/rk4.py)"),
     ScipySolver("bdf", "BDF", "scipy BDF (variable order 1-5), stiff"),
     ScipySolver("radau", "Radau", "scipy Radau IIA order 5, stiff"),
     ScipySolver("lsoda", "LSODA", "scipy LSODA (ODEPACK), switches stiff/non-stiff"),
@@ -429,6 +92,10 @@ SOLVERS: dict[str, Solver] = {s.name: s for s in (
 
 _GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's frame so that "
                "its large rotations are not about its y axis")
+
+
+_FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model for a "
+              "singularity at that time")
 
 
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
@@ -509,20 +176,13 @@ def _segments(t_start: float, t_end: float, breakpoints) -> list[tuple[float, fl
     return list(zip(cuts[:-1], cuts[1:]))
 
 
-def _names(names, mask, most: int = 6) -> str:
-    """The names where ``mask`` holds, at most ``most`` of them and how many more."""
-    picked = [n for n, m in zip(names, mask) if m]
-    more = len(picked) - most
-    return ", ".join(picked[:most]) + (f" and {more} more" if more > 0 else "")
-
-
 def _refuse_non_finite(module, x, p, t):
     """Refuse an initial state or parameter values that are not finite, naming them."""
     for what, names, v in (("parameter", module.PARAM_NAMES, p),
                            ("initial state", module.STATE_NAMES, x)):
         bad = ~np.isfinite(v)
         if bad.any():
-            raise SimulationError(f"{what}(s) {_names(names, bad)} not finite at t = {t:g} "
+            raise SimulationError(f"{what}(s) {names_where(names, bad)} not finite at t = {t:g} "
                                   f"({', '.join(map(str, v[bad][:3]))}); nothing was run",
                                   hint=f"give every {what} a finite value")
 
@@ -571,7 +231,7 @@ def check_start(module, x, p, t, projection=None):
         where = "the Jacobian row of"
         if not bad.any():
             return
-    states = f"{where} {_names(module.STATE_NAMES, bad)} not finite at the initial state " \
+    states = f"{where} {names_where(module.STATE_NAMES, bad)} not finite at the initial state " \
              f"(t = {t:g})"
     if projection is not None and consistent.RANK_PARAM in module.PARAM_NAMES:
         kept = _block_rank(module, x, p, t)
@@ -618,6 +278,9 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
     return x, p, projection
 
 
+# (16 parameters, all but the module keyword-only with defaults: the run's settings as the
+# CLI, the benchmarks, the tests and docs/generated-modules.md pass them, by name; a
+# settings object would only move the same names into every caller)
 def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
              solver: str = "bdf", points: int = 1001, params=None, x0=None,
              step: float | None = None, mass=None, check_stability: bool = True,
@@ -648,13 +311,53 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     ``result`` holds everything computed up to the failure; Ctrl-C during the integration
     stops it within a step and raises ``Interrupted`` (a SimulationError) likewise.
     """
+    method = _method(solver, t_start, t_end)
+    mass, index2 = _mass_matrix(module, method, mass, check_index)
+    budget = _budget(method, step, max_steps, t_start, t_end)
+    p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
+    x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
+    stats = method.new_stats()
+
+    t0 = time.perf_counter()
+    _refuse_non_finite(module, x, p, t_start)
+    x, p, projection = prepare(module, x, p, t_start, redundancy)
+    check_start(module, x, p, t_start, projection)
+    if index2 is not None:
+        _check_index2(module, x, p, list(module.ALGEBRAIC), t_start)
+    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
+    problem = Problem(module, p, step, mass, check_stability,
+                      index2 if check_index else None, max_steps=budget, rtol=rtol,
+                      atol=atol, max_step=max_step)
+    method.check(problem, t_start, x)
+    method.warm_up(problem, x)
+    module.outputs(t_start, x, p)
+    events, monitor = _events(module, x, p, t_start, projection)
+    stats.compile_time = time.perf_counter() - t0
+
+    stats.max_step = max_step if np.isfinite(max_step) else None
+    grid = np.linspace(t_start, t_end, int(points))
+    wall = time.perf_counter()
+    run = _integrate(method, problem, x, grid, _segments(t_start, t_end, module.BREAKPOINTS),
+                     stats, events, monitor)
+    stats.wall_time = time.perf_counter() - wall
+    return _result(module, method, problem, run, stats, projection, monitor, check_drift)
+
+
+def _method(solver: str, t_start: float, t_end: float) -> Solver:
+    """The solver named ``solver``, for a run from t_start to t_end."""
     if solver not in SOLVERS:
         raise SimulationError(f"unknown solver '{solver}'",
                               hint="valid solvers: " + ", ".join(SOLVERS))
     if not t_end > t_start >= 0:
         raise SimulationError(f"need 0 <= t_start < t_end, got t_start = {t_start} and "
                               f"t_end = {t_end}")
-    method = SOLVERS[solver]
+    return SOLVERS[solver]
+
+
+def _mass_matrix(module, method: Solver, mass, check_index: bool):
+    """The mass matrix of the run (a module that is an index-2 DAE brings its own unless
+    given one) and ``index2`` (1.0 where a state is algebraic of index 2; None for an
+    ODE or index-1 DAE); refused where ``method`` cannot take it."""
     algebraic = list(getattr(module, "ALGEBRAIC", ()))
     index2 = None
     if algebraic:
@@ -665,7 +368,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             loops = sorted({module.STATE_NAMES[i].split(".")[0] for i in algebraic})
             raise SimulationError(
                 f"{module.MODEL_NAME} ({module.METHOD}, kinematic loops kept closed by joint "
-                f"{', '.join(map(repr, loops))}) is an index-2 DAE: solver {solver} "
+                f"{', '.join(map(repr, loops))}) is an index-2 DAE: solver {method.name} "
                 + ("takes ODEs only" if not method.max_index else
                    f"takes index {method.max_index} at most") + "; nothing was run",
                 hint="use --solver native (Radau IIA, index-2 error scaling) or let zcp "
@@ -677,9 +380,15 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
             raise SimulationError(f"the mass matrix must be {n} x {n}, got "
                                   f"{' x '.join(map(str, mass.shape))}")
         if not method.takes_mass:
-            raise SimulationError(f"solver {solver} cannot integrate a system with a mass "
-                                  "matrix", hint="solvers that can: " + ", ".join(
+            raise SimulationError(f"solver {method.name} cannot integrate a system with a "
+                                  "mass matrix", hint="solvers that can: " + ", ".join(
                                       s.name for s in SOLVERS.values() if s.takes_mass))
+    return mass, index2
+
+
+def _budget(method: Solver, step, max_steps, t_start: float, t_end: float) -> int:
+    """The run's step budget: ``max_steps`` if given (refused below rk4's plan of fixed
+    steps), else rk4's plan, else ``MAX_STEPS``."""
     if max_steps is not None and not (isinstance(max_steps, (int, np.integer))
                                       and max_steps >= 1):
         raise SimulationError(f"the step budget must be a whole number >= 1, got "
@@ -691,22 +400,13 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                               f"{t_start:g} to {t_end:g}, more than the step budget "
                               f"{max_steps}; nothing was run", key="--max-steps",
                               hint=f"take --max-steps {planned} or a larger --step")
-    budget = max_steps or (planned + 1 if planned is not None else MAX_STEPS)
-    p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
-    x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
-    stats = Stats(lu_decompositions=0 if solver != "rk45" else None)
+    return max_steps or (planned + 1 if planned is not None else MAX_STEPS)
 
-    t0 = time.perf_counter()
-    _refuse_non_finite(module, x, p, t_start)
-    x, p, projection = prepare(module, x, p, t_start, redundancy)
-    check_start(module, x, p, t_start, projection)
-    if algebraic:
-        _check_index2(module, x, p, algebraic, t_start)
-    problem = Problem(module, p, step, mass, check_stability,
-                      index2 if check_index else None, budget)
-    method.check(problem, t_start, x)
-    method.warm_up(problem, x)
-    module.outputs(t_start, x, p)
+
+def _events(module, x, p, t_start: float, projection):
+    """The run's events: one per guard (refused if one is already reached at the start)
+    and, for a constrained model whose rank is above its imposed rows, the rank monitor
+    (last; also returned, None without one)."""
     events = _guard_events(module, p)
     if events:
         margins = module.guards(t_start, x, p)
@@ -718,20 +418,32 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     if projection is not None and projection.rank > int(np.sum(module.IMPOSED)):
         monitor = consistent.RankMonitor(module, x, p, projection)
         events.append(monitor)
-    stats.compile_time = time.perf_counter() - t0
+    return events, monitor
 
 
-    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
-    stats.max_step = max_step if np.isfinite(max_step) else None
-    grid = np.linspace(t_start, t_end, int(points))
+@dataclass
+class _Run:
+    """What the segment loop reached: the output times and states, and how it ended
+    (``hint``: what to do about a failure; ``last``: the last segment integrated)."""
+    t: np.ndarray
+    x: np.ndarray
+    ok: bool = True
+    message: str = ""
+    hint: str | None = _FAIL_HINT
+    interrupted: bool = False
+    last: Segment | None = None
+
+
+def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
+               monitor) -> _Run:
+    """Integrate segment by segment (``segs``: no jump inside one), the outputs at the
+    ``grid`` times; stop at a guard, a singular configuration the rank ``monitor`` sees
+    (where only its minor went singular it re-picks one and goes on), Ctrl-C or a
+    failure."""
+    module = problem.module
     ts, xs = [], []
-    ok, message = True, ""
-    hint = ("tighten --rtol/--atol, try another --solver, or check the model for a "
-            "singularity at that time")
-    wall = time.perf_counter()
-    segs = _segments(t_start, t_end, module.BREAKPOINTS)
+    run = _Run(grid[:0], np.empty((0, len(x))))
     done = -np.inf                # last output time recorded
-    interrupted = False
     with _one_blas_thread(), problem.interrupt:
         while segs:
             a, b = segs.pop(0)
@@ -741,55 +453,66 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                 ts.append(sel)
                 xs.append(np.zeros((len(sel), 0)))
                 continue
-            seg = method.integrate(problem, a, b, x, sel, rtol, atol, stats, events, max_step)
+            seg = run.last = method.integrate(problem, a, b, x, sel, stats, events)
             ts.append(sel[:len(seg.x_eval)])
             xs.append(seg.x_eval)
             done = ts[-1][-1] if len(ts[-1]) else done
             if monitor is not None and seg.event == len(events) - 1:
                 singular = _singular(monitor, seg, consistent.LOST_RANK_EVENT)
                 if singular:
-                    ok, message, hint = False, singular, _SINGULAR_HINT
+                    run.ok, run.message, run.hint = False, singular, _SINGULAR_HINT
                     break
                 monitor.repick(seg.x_end)        # only the monitored minor was singular
                 x = np.array(seg.x_end, dtype=np.float64)
                 segs.insert(0, (seg.t_reached, b))
                 continue
             if seg.event is not None:
-                ok, message = False, (f"{module.GUARD_NAMES[seg.event]} reached at "
-                                      f"t = {seg.t_reached:.6g}")
-                hint = _GUARD_HINT
+                run.ok, run.hint = False, _GUARD_HINT
+                run.message = (f"{module.GUARD_NAMES[seg.event]} reached at "
+                               f"t = {seg.t_reached:.6g}")
                 break
             if seg.interrupted:
-                ok, interrupted = False, True
-                message = f"Ctrl-C at t = {seg.t_reached:.6g}: the run stopped there"
-                hint = None
+                run.ok, run.interrupted, run.hint = False, True, None
+                run.message = f"Ctrl-C at t = {seg.t_reached:.6g}: the run stopped there"
                 break
             if not seg.ok:
-                ok, message = False, f"{method.name} failed at t = {seg.t_reached:.6g}: {seg.message}"
+                run.ok = False
+                run.message = (f"{method.name} failed at t = {seg.t_reached:.6g}: "
+                               f"{seg.message}")
                 break
             x = np.array(seg.x_end, dtype=np.float64)
-    stats.wall_time = time.perf_counter() - wall
-    t_all = np.concatenate(ts) if ts else np.empty(0)
-    x_all = np.vstack(xs) if xs else np.empty((0, len(module.STATE_NAMES)))
+    if ts:
+        run.t, run.x = np.concatenate(ts), np.vstack(xs)
+    return run
+
+
+def _result(module, method: Solver, problem: Problem, run: _Run, stats: Stats, projection,
+            monitor, check_drift: bool) -> Result:
+    """The run's Result, its outputs computed and, for a constrained model, its drift
+    checked (a run whose joints came apart ends where they did); raised with its failure
+    (``Interrupted`` for Ctrl-C) if it has one."""
+    p = problem.p
+    t_all, x_all = run.t, run.x
     y_all = module.outputs_at(t_all, x_all, p)
+    ok, message, hint = run.ok, run.message, run.hint
     if projection is not None and len(x_all):
         g_t, v_t = consistent.drift_history(module, x_all, p)
         # a state gone non-finite has no drift: NaN there, the run's message says why
         stats.drift_position = float(np.nanmax(g_t, initial=0.0))
         stats.drift_velocity = float(np.nanmax(v_t, initial=0.0))
-        singular = None if ok or interrupted or hint == _SINGULAR_HINT or monitor is None \
-            else _singular(
-            monitor, seg, consistent.LOST_RANK)
+        singular = None if ok or run.interrupted or hint == _SINGULAR_HINT or monitor is None \
+            else _singular(monitor, run.last, consistent.LOST_RANK)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
-        limit = consistent.drift_limit(module, x_all[0], rtol, atol)
+        limit = consistent.drift_limit(module, x_all[0], problem.rtol, problem.atol)
         if ok and check_drift and stats.drift_position > limit:   # joints apart: keep the run
             k = int(np.argmax(g_t > limit))
             ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
-                    tuple(module.OUTPUT_NAMES), solver, stats, ok, message, projection, p)
-    if interrupted:
+                    tuple(module.OUTPUT_NAMES), method.name, stats, ok, message, projection,
+                    p)
+    if run.interrupted:
         raise Interrupted(message, result=result, hint=hint)
     if not ok:
         raise SimulationError(message, result=result, hint=hint)

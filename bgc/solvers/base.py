@@ -53,8 +53,9 @@ class Segment:
 
 @dataclass
 class Problem:
-    """What a solver integrates: a generated module at parameter values ``p``,
-    ``mass @ dx/dt = rhs(t, x, p)`` (no mass matrix: the identity)."""
+    """What a solver integrates, and how finely: a generated module at parameter values
+    ``p``, ``mass @ dx/dt = rhs(t, x, p)`` (no mass matrix: the identity), to the
+    tolerances ``rtol``, ``atol`` with no step longer than ``max_step``."""
     module: object
     p: np.ndarray
     step: float | None = None         # fixed-step methods: the step
@@ -63,7 +64,10 @@ class Problem:
     # a DAE: 1.0 where a state is algebraic of index 2 (its error scaled by the step)
     index2: np.ndarray | None = None
     max_steps: int = 0                # the run's step budget over all segments (0: none)
-    interrupt: "Interrupt" = field(default_factory=lambda: Interrupt())
+    rtol: float = 1e-6
+    atol: float = 1e-8
+    max_step: float = np.inf          # the step limit the input signals set
+    interrupt: Interrupt = field(default_factory=lambda: Interrupt())
 
     def budget(self, stats: "Stats") -> int | None:
         """Steps left of the run's budget (None: no budget)."""
@@ -100,12 +104,56 @@ class Solver(abc.ABC):
     def warm_up(self, problem: Problem, x0: np.ndarray):
         """Compile (or load from a cache) what the method runs, so wall time is the run's."""
 
+    def new_stats(self) -> Stats:
+        """The statistics of a run before its first step: 0 for what this method counts,
+        ``None`` for what it does not report."""
+        return Stats()
+
     @abc.abstractmethod
-    def integrate(self, problem: Problem, t0, t1, x0, t_eval, rtol, atol, stats: Stats,
-                  events=(), max_step=np.inf) -> Segment:
-        """Integrate from t0 to t1, recording the states at ``t_eval``; stop early where
-        one of ``events`` (functions of (t, x), ``terminal`` and ``direction`` as in
-        scipy) falls through zero; no step longer than ``max_step``."""
+    def integrate(self, problem: Problem, t0, t1, x0, t_eval, stats: Stats,
+                  events=()) -> Segment:
+        """Integrate from t0 to t1, recording the states at ``t_eval`` and adding the
+        work done to ``stats`` (made by ``new_stats``); stop early where one of
+        ``events`` (functions of (t, x), ``terminal`` and ``direction`` as in scipy)
+        falls through zero."""
+
+
+def names_where(names, mask, most: int = 6) -> str:
+    """The names where ``mask`` holds, at most ``most`` of them and how many more."""
+    picked = [n for n, m in zip(names, mask) if m]
+    more = len(picked) - most
+    return ", ".join(picked[:most]) + (f" and {more} more" if more > 0 else "")
+
+
+def fastest(problem: Problem, t, x, most: int = 3) -> str:
+    """The states changing fastest at (t, x) (|dx/dt| over |x| + 1), as a clause."""
+    f = np.asarray(problem.rhs(t, np.asarray(x, dtype=np.float64)))
+    names = problem.module.STATE_NAMES
+    if not np.all(np.isfinite(f)):
+        return f"; d/dt of {names_where(names, ~np.isfinite(f))} not finite"
+    rate = np.abs(f) / (np.abs(x) + 1.0)
+    top = [names[i] for i in np.argsort(-rate)[:most] if rate[i] > 0]
+    return f"; fastest states there: {', '.join(top)}" if top else ""
+
+
+def budget_message(problem: Problem, t, x) -> str:
+    """Why a run stopped at its step budget, with the states moving fastest there."""
+    return (f"the step budget ({problem.max_steps} steps) is spent at t = {t:.6g}"
+            + fastest(problem, t, x))
+
+
+def collapse_message(problem: Problem, t, x, h, diag=None, most: int = 3) -> str:
+    """Why a step size collapsed at (t, x): the states with the largest share of the last
+    rejected step's error (``diag``, native Radau), else the fastest ones."""
+    text = f"the step size collapsed to {h:.3g} s at t = {t:.6g}"
+    if diag is not None and np.any(diag != 0):
+        names = problem.module.STATE_NAMES
+        if not np.all(np.isfinite(diag)):
+            bad = names_where(names, ~np.isfinite(diag))
+            return text + f"; d/dt of {bad} not finite there"
+        top = [names[i] for i in np.argsort(-diag)[:most] if diag[i] > 0]
+        return text + f"; largest error in {', '.join(top)}"
+    return text + fastest(problem, t, x)
 
 
 class Interrupt:

@@ -10,6 +10,8 @@ nanoseconds; a model's cold compile no longer includes a step loop.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from llvmlite import ir
 from numba import njit, types
@@ -24,6 +26,30 @@ N_STATS = 5
 # INTERRUPTED: its ``stop`` flag was set, by Ctrl-C: ``solver.Interrupt``)
 REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE, INTERRUPTED = \
     range(8)
+
+
+class Model(NamedTuple):
+    """A generated module at parameter values ``p`` as the loops call it: the addresses
+    of its C entry points (``native_entry_points()``) and how many guards it has."""
+    rhs: int
+    jac: int
+    guards: int
+    n_guards: int
+    p: np.ndarray
+
+
+class Outcome(NamedTuple):
+    """What a native loop returns: the states at the output times reached (the first
+    ``n_eval`` rows of ``x_eval``), the time reached ``t`` and the state ``x`` there, the
+    status (above), the guard that stopped it (-1: none) and the step size to go on
+    with."""
+    x_eval: np.ndarray
+    n_eval: int
+    t: float
+    x: np.ndarray
+    status: int
+    guard: int
+    h: float
 
 
 # a function called only from compiled code: no Python or C wrapper to lower and optimize

@@ -6,6 +6,8 @@ entry points (``bgc.solvers.native``)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -16,9 +18,12 @@ from bgc.solvers.native import (
     NOT_FINITE,
     PAUSED,
     REACHED,
+    ST_JAC,
     ST_RHS,
     ST_STEPS,
     UNSTABLE,
+    Model,
+    Outcome,
     call_entry,
     evaluate,
     guard_min,
@@ -73,11 +78,12 @@ def stable_step(eigenvalues) -> tuple[float, complex | None]:
 
 
 @inner
-def _unstable(jac, t, y, p, step) -> bool:
+def _unstable(jac, t, y, p, step, stats) -> bool:
     """Whether ``step`` is beyond the stability limit of the Jacobian at (t, y)."""
     n = y.shape[0]
     J = np.empty((n, n))
     call_entry(jac, t, y, p, J)
+    stats[ST_JAC] += 1
     return step > _stable_step(np.linalg.eigvals(J.astype(np.complex128)))[0]
 
 
@@ -88,21 +94,35 @@ def _axpy(y, a, x, out):
         out[i] = y[i] + a * x[i]
 
 
-@njit(cache=True)
-def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, check_every,
-        max_steps, stats, stop):
-    """Steps of ``step`` from t0 to t1 (the last one shortened to land on t1); states at
-    ``t_eval`` by cubic Hermite interpolation. Every ``check_every`` steps (0: never) the
-    step is checked against the stability limit of the Jacobian there, since the
-    spectrum moves with the state: a step just beyond it grows slowly, with no overflow
-    to give it away. Stops there (UNSTABLE), where the state becomes non-finite or where
-    a guard margin reaches ``guard_tol``.
+class Settings(NamedTuple):
+    """The step, where to stop: a guard margin at ``guard_tol`` (0: never), the ``stop``
+    flag set (a uint8 array, ``base.Interrupt``; empty: never); how often to check the
+    step against the stability limit (``check_every`` steps; 0: never) and to pause
+    (after ``max_steps`` steps; 0: never)."""
+    step: float
+    guard_tol: float
+    check_every: int
+    max_steps: int
+    stop: np.ndarray
 
-    Returns (states at t_eval, how many were reached, t reached, state there, status,
-    guard index, the step); status PAUSED after ``max_steps`` steps (0: no limit),
-    INTERRUPTED as soon as the ``stop`` flag is set (``solver.Interrupt``; empty: none).
+
+@njit(cache=True)
+def rk4(model, settings, t0, t1, x0, t_eval, stats):
+    """Integrate ``model`` (``native.Model``) in steps of ``settings.step`` from t0 to
+    t1 (the last one shortened to land on t1); states at ``t_eval`` by cubic Hermite
+    interpolation. Every ``check_every`` steps (0: never) the step is checked against
+    the stability limit of the Jacobian there, since the spectrum moves with the state:
+    a step just beyond it grows slowly, with no overflow to give it away. Stops there
+    (UNSTABLE), where the state becomes non-finite or where a guard margin reaches
+    ``guard_tol``.
+
+    Returns a ``native.Outcome`` (states at t_eval and how many were reached, t reached,
+    state there, status, guard index, the step); status PAUSED after ``max_steps`` steps,
+    INTERRUPTED as soon as the ``stop`` flag is set.
     (Scalar loops, not array expressions: they compile in a fraction of the time,
     ``radau5``.)"""
+    rhs, jac, guards, n_guards, p = model
+    step, guard_tol, check_every, max_steps, stop = settings
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
     k_out = 0
@@ -112,7 +132,7 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
         k_out += 1
     t, y = t0, x0.copy()
     if t1 <= t0:
-        return out, k_out, t, y, REACHED, -1, step
+        return Outcome(out, k_out, t, y, REACHED, -1, step)
     f = evaluate(rhs, t, y, p, n)
     stats[ST_RHS] += 1
     work = np.empty(n)
@@ -122,7 +142,7 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
     taken = 0
     while t < t1:
         if stopped(stop):
-            return out, k_out, t, y, INTERRUPTED, -1, step
+            return Outcome(out, k_out, t, y, INTERRUPTED, -1, step)
         h = min(step, t1 - t)
         if t1 - (t + h) < 1e-9 * step:
             h = t1 - t
@@ -141,7 +161,7 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
         stats[ST_STEPS] += 1
         stats[ST_RHS] += 3
         if not finite:
-            return out, k_out, t, y, NOT_FINITE, -1, step
+            return Outcome(out, k_out, t, y, NOT_FINITE, -1, step)
         f_new = evaluate(rhs, t_new, y_new, p, n)
         stats[ST_RHS] += 1
         while k_out < t_eval.shape[0] and t_eval[k_out] <= t_new:
@@ -156,19 +176,26 @@ def rk4(rhs, jac, guards, n_guards, t0, t1, x0, t_eval, p, step, guard_tol, chec
         if guard_tol > 0.0 and n_guards > 0:
             kg, low = guard_min(guards, n_guards, t, y, p, guard_tol)
             if low <= 0.0:
-                return out, k_out, t, y, GUARD, kg, step
+                return Outcome(out, k_out, t, y, GUARD, kg, step)
         taken += 1
-        if check_every > 0 and taken % check_every == 0 and _unstable(jac, t, y, p, step):
-            return out, k_out, t, y, UNSTABLE, -1, step
+        if (check_every > 0 and taken % check_every == 0
+                and _unstable(jac, t, y, p, step, stats)):
+            return Outcome(out, k_out, t, y, UNSTABLE, -1, step)
         if max_steps > 0 and taken >= max_steps and t < t1:
-            return out, k_out, t, y, PAUSED, -1, step
-    return out, k_out, t, y, REACHED, -1, step
+            return Outcome(out, k_out, t, y, PAUSED, -1, step)
+    return Outcome(out, k_out, t, y, REACHED, -1, step)
+
+
+def settings(step, guard_tol, check_every, max_steps, stop) -> Settings:
+    """``Settings`` with the types ``compile_loop`` compiled for (one specialization)."""
+    return Settings(float(step), float(guard_tol), int(check_every), int(max_steps), stop)
 
 
 def compile_loop():
-    """Compile ``rk4`` for the argument types ``simulate.NativeSolver`` passes, into
+    """Compile ``rk4`` for the argument types ``native_solver.NativeSolver`` passes, into
     numba's cache (``native.Precompile`` runs this in a separate process); it returns at
     once (t1 = t0), calling none of the entry points."""
     n = 1
-    rk4(0, 0, 0, 0, 0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(1), 0.1, 1e-3, 0, 0,
-        np.zeros(N_STATS, dtype=np.int64), np.zeros(0, dtype=np.uint8))
+    flag = np.zeros(0, dtype=np.uint8)
+    rk4(Model(0, 0, 0, 0, np.zeros(1)), settings(0.1, 1e-3, 0, 0, flag), 0.0, 0.0,
+        np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64))

@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from bgc.errors import SimulationError
-from bgc.solvers.base import Segment, Solver
+from bgc.solvers.base import Segment, Solver, Stats
+from bgc.solvers.scipy_ivp import StopEvent
 
 MAX_STEPS = 10 ** 8         # per output interval: the run's own budget, not SUNDIALS' 500
 
@@ -59,13 +60,19 @@ class SundialsSolver(Solver):
                                   hint="pip install scikit-sundae") from None
         return cvode, ida
 
-    def _solver(self, problem, rtol, atol, events, max_step):
+    def new_stats(self):
+        """Steps, LU factorizations and rejected steps the bindings do not report."""
+        return Stats(steps=None, lu_decompositions=None, rejected_steps=None)
+
+    def _solver(self, problem, events):
         cvode, ida = self._import()
         m, p = problem.module, problem.p
         # SUNDIALS hands read-only views of its vectors: numba would compile the model
         # again for read-only arrays, so the states are copied (0.2 us)
-        opts = dict(rtol=rtol, atol=atol, linsolver="dense", max_num_steps=MAX_STEPS,
-                    max_step=float(max_step) if np.isfinite(max_step) else 0.0)
+        h_max = problem.max_step
+        opts = dict(rtol=problem.rtol, atol=problem.atol, linsolver="dense",
+                    max_num_steps=MAX_STEPS,
+                    max_step=float(h_max) if np.isfinite(h_max) else 0.0)
         if self.kind == "cvode":
             def rhsfn(t, y, yp):
                 yp[:] = m.rhs(t, np.array(y), p)
@@ -86,14 +93,12 @@ class SundialsSolver(Solver):
         return ida.IDA(resfn, jacfn=jacfn, algebraic_idx=algebraic, **opts,
                        **_events(events, self.kind))
 
-    def integrate(self, problem, t0, t1, x0, t_eval, rtol, atol, stats, events=(),
-                  max_step=np.inf):
-        from bgc.simulate import StopEvent
+    def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
         # Ctrl-C stops it at the end of a step (SUNDIALS calls events between steps too,
         # so they do not count its steps: the step budget is its own MAX_STEPS)
         stop = StopEvent(problem, stats, budget=False)
         watched = [*events, stop]
-        solver = self._solver(problem, rtol, atol, watched, max_step)
+        solver = self._solver(problem, watched)
         # output times: the segment's start and end always, so the end state is exact
         tspan = np.unique(np.concatenate([[t0], np.asarray(t_eval, dtype=float), [t1]]))
         x0 = np.array(x0, dtype=np.float64)
@@ -103,12 +108,10 @@ class SundialsSolver(Solver):
             # x' from M x' = f (least squares: an algebraic state's derivative enters no
             # residual); x0 itself must be consistent
             f0 = problem.rhs(t0, x0)
+            stats.rhs_calls += 1
             M = problem.mass
             yp0 = f0 if M is None else np.linalg.lstsq(M, f0, rcond=None)[0]
             sol = solver.solve(tspan, x0, yp0)
-        stats.steps = None
-        stats.lu_decompositions = None
-        stats.rejected_steps = None
         stats.rhs_calls += int(sol.nfev)
         stats.jac_calls += int(sol.njev)
         t, y = np.asarray(sol.t, dtype=float), np.asarray(sol.y, dtype=float)

@@ -1,5 +1,5 @@
 """The native integrators (issue 6): Radau IIA order 5 and fixed-step RK4, their step
-loops in numba (``bgc/radau5.py``, ``bgc/rk4.py``, compiled once per machine) calling a
+loops in numba (``bgc/solvers/radau5.py``, ``rk4.py``, compiled once per machine) calling a
 generated module through its C entry points, and SUNDIALS' CVODE/IDA. Each run is checked
 against scipy on the same generated code."""
 
@@ -175,12 +175,12 @@ def test_a_segment_with_no_output_point_in_it_yields_no_rows(compiled, solver):
     """A run is split into segments (at breakpoints, where the rank monitor re-picks its
     minor); with few output points one may hold none: the solver returns no rows and the
     state it reached (scipy's dense output fails on an empty time array)."""
-    from bgc.solvers.base import Problem, Stats
+    from bgc.solvers.base import Problem
     mod = compiled("msd_forced")
     p = np.array(mod.PARAMS, dtype=np.float64)
     x0 = np.array(mod.initial_state(p), dtype=np.float64)
-    seg = SOLVERS[solver].integrate(Problem(mod, p), 0.0, 0.5, x0, np.empty(0), 1e-8, 1e-8,
-                                    Stats())
+    seg = SOLVERS[solver].integrate(Problem(mod, p, rtol=1e-8, atol=1e-8), 0.0, 0.5, x0,
+                                    np.empty(0), SOLVERS[solver].new_stats())
     assert seg.ok and seg.x_eval.shape == (0, len(x0)) and seg.t_reached == 0.5
     ref = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-10, solver="native", points=2)
     assert np.allclose(seg.x_end, ref.x[-1], rtol=1e-5, atol=1e-7)

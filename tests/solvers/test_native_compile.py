@@ -36,15 +36,16 @@ def test_loops_return_at_once_with_nothing_to_integrate():
     counts = np.zeros(native.N_STATS, dtype=np.int64)
     flag = np.zeros(0, dtype=np.uint8)
     from bgc.solvers import sparse_lu
-    r = radau5.radau5(0, 0, 0, 0, 1.0, 1.0, x0, np.array([1.0]), np.zeros(1),
-                      np.empty((0, 0)), np.empty(0), sparse_lu.DENSE, 1e-6, 1e-6, np.inf,
-                      0.25, 1e-3, 0, counts, flag, np.zeros(2))
+    model = native.Model(0, 0, 0, 0, np.zeros(1))
+    system = radau5.System(model, np.empty((0, 0)), np.empty(0), sparse_lu.DENSE)
+    r = radau5.radau5(system, radau5.settings(1e-6, 1e-6, np.inf, 0.25, 1e-3, 0, flag),
+                      1.0, 1.0, x0, np.array([1.0]), counts, np.zeros(2))
     out, k, t, x, status, _, h = r
     assert (k, t, status, h) == (1, 1.0, native.REACHED, 0.25)
     assert np.array_equal(out[0], x0) and np.array_equal(x, x0)
-    r = rk4.rk4(0, 0, 0, 0, 1.0, 1.0, x0, np.array([1.0]), np.zeros(1), 0.1, 1e-3, 0, 0,
-                counts, flag)
-    assert r[1] == 1 and r[4] == native.REACHED and np.array_equal(r[0][0], x0)
+    r = rk4.rk4(model, rk4.settings(0.1, 1e-3, 0, 0, flag), 1.0, 1.0, x0, np.array([1.0]),
+                counts)
+    assert r.n_eval == 1 and r.status == native.REACHED and np.array_equal(r.x_eval[0], x0)
     assert not counts.any()
 
 

@@ -38,7 +38,7 @@ class BondGraph:
     ports: dict[str, list[int]]     # element name -> indices of its bonds, in file order
     bodies: dict[str, Body] = field(default_factory=dict)
     joints: dict[str, list] = field(default_factory=dict)   # joint -> its Directions
-    method: str = "parasitic"
+    method: str = "parasitic"     # the name of its constraint method (bgc.methods)
     constraints: list = field(default_factory=list)          # lagrange, zcp: [Constraint]
     zcp: object = None      # method zcp: the zcp.Plan (spanning tree, loops, dependents)
 

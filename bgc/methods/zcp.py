@@ -208,8 +208,8 @@ def _pivot_columns(A: np.ndarray, k: int) -> list[int]:
 
 def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
     """Choose the flow-source (tree) and break-variable (loop-closing) directions and the
-    dependent velocity components; return the graph with its ``zcp`` plan and its
-    constraints marked ``imposed`` where L is a flow source."""
+    dependent velocity components; return a copy of the graph with its ``zcp`` plan and
+    its constraints marked ``imposed`` where L is a flow source (``graph`` unchanged)."""
     model = graph.model
     tree, chords, relays = _spanning_tree(graph)
     parent = {child: (name, par) for name, par, child in tree}
@@ -243,10 +243,9 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
         plan.tree.append(TreeJoint(name, par, child, dep))
     imposed = {tj.joint for tj in plan.tree}
     closed = {lp.cut for lp in plan.loops} if plan.closed else set()
-    graph.constraints = [replace(c, imposed=c.joint in imposed, closed=c.joint in closed)
-                         for c in graph.constraints]
-    graph.zcp = plan
-    return graph
+    return replace(graph, zcp=plan, constraints=[
+        replace(c, imposed=c.joint in imposed, closed=c.joint in closed)
+        for c in graph.constraints])
 
 
 def dependent_states(graph: BondGraph) -> list[tuple[sp.Symbol, sp.Symbol, str]]:

@@ -172,8 +172,10 @@ class _Expander:
                 parts = self.method.constraint_element(self, j, d, zero)
             else:
                 parts = []
-                def p(role, d=d):
-                    return symbols.param(joint_param(j.name, f"{d.label}_{role}"))
+                def p(role, d=d, fun=fun):     # a number: its joint parameter
+                    v = getattr(fun, role)
+                    return v if isinstance(v, sp.Expr) else \
+                        symbols.param(joint_param(j.name, f"{d.label}_{role}"))
                 if fun.k != 0:
                     q = symbols.LOCAL["q"]
                     parts.append(self.add(f"{zero}__spring", "C", j.loc,

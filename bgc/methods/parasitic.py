@@ -133,15 +133,24 @@ def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarra
         choice.parasitic_hz[jn] = min(choice.parasitic_hz.get(jn, hz), hz)
     ratios = []
     for rot in (False, True):
-        functional = [abs(f.k) for j in model.joints.values()
+        functional = [abs(k) for j in model.joints.values()
                       for label, f in j.functional.items()
-                      if f is not None and f.k and label.startswith("r") == rot]
+                      if f is not None and (k := _at(f.k, names, p))
+                      and label.startswith("r") == rot]
         chosen = [out[ks] for (_, role, _), ks in zip(roles, stiff)
                   if role.startswith("rot") == rot]
         if functional and chosen:
             ratios.append(min(chosen) / max(functional))
     choice.stiffness_ratio = min(ratios) if ratios else None
     return out, choice
+
+
+def _at(value, names, p) -> float:
+    """A functional spring's value: a number, or an expression of parameters at ``p``."""
+    if not hasattr(value, "free_symbols"):
+        return float(value)
+    from bgc.model import symbols
+    return float(value.xreplace({symbols.param(n): float(v) for n, v in zip(names, p)}))
 
 
 class Parasitic(ConstraintMethod):

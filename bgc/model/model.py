@@ -166,9 +166,10 @@ class Body:
 class Functional:
     """Functional elements on a joint's free direction: a spring with preload, a damper
     and an actuator. On the second body: preload - k*q - c*dq/dt + actuator."""
-    k: float = 0.0
-    c: float = 0.0
-    preload: float = 0.0
+    # numbers, or expressions of parameters (read as they are by the generated code)
+    k: float | sp.Expr = 0.0
+    c: float | sp.Expr = 0.0
+    preload: float | sp.Expr = 0.0
     actuator: sp.Expr | None = None     # a function of t, signals and parameters
     loc: Loc | None = None
 

@@ -4,10 +4,13 @@ actuators in its free directions."""
 
 from __future__ import annotations
 
+import math
+
 import sympy as sp
 
 from bgc.mechanics import exact
 from bgc.mechanics.joints import JOINT_KINDS, NEEDS_AXIS2
+from bgc.model import symbols
 from bgc.model.document import YList, YMap
 from bgc.model.model import FIXED_FRAME, Body, Functional, Joint, Parameter, Parasitic
 from bgc.model.sections.bodies import frame, joint_point, unit_vector
@@ -141,16 +144,32 @@ def _functionals(cx: Context, v: YMap, kind, key, at, names) -> dict[str, Functi
     return out
 
 
+def spring_value(cx: Context, v, loc, key, names, nonneg: bool):
+    """A spring's ``k``, a damper's ``c`` or a ``preload``: a number, or an expression of
+    the model's parameters (``k: 2 * k_leg``), which the generated code reads as it is, so
+    that ``-p k_leg=...`` changes it without recompiling. Its value at the parameters'
+    values must be finite (and not negative for ``k`` and ``c``)."""
+    if not isinstance(v, str):
+        return number(v, loc, key, nonneg=nonneg)
+    pnames = {n: s for n, s in names.items() if symbols.kind(s) == "parameter"}
+    e = cx.parse(v, loc=loc, key=key, names=pnames)
+    value = float(e.xreplace(cx.pvals)) if e.free_symbols else float(e)
+    if not math.isfinite(value) or (nonneg and value < 0):
+        fail(f"{key.rsplit('.', 1)[-1]} = {v} is {value:g} at the parameters' values", loc,
+             key, "a spring constant or damping must be finite and >= 0" if nonneg else
+             "a preload must be finite")
+    return e if e.free_symbols else value
+
+
 def functional(cx: Context, v, loc, key, names) -> Functional:
     """``{k, c, preload, actuator}`` of one free direction."""
     m = mapping(v, loc, key, "a mapping {k, c, preload, actuator}")
     check_keys(m, ("k", "c", "preload", "actuator"), key)
     kw = {}
-    for k in ("k", "c"):
+    for k in ("k", "c", "preload"):
         if k in m:
-            kw[k] = number(m[k], m.val_locs[k], f"{key}.{k}", nonneg=True)
-    if "preload" in m:
-        kw["preload"] = number(m["preload"], m.val_locs["preload"], f"{key}.preload")
+            kw[k] = spring_value(cx, m[k], m.val_locs[k], f"{key}.{k}", names,
+                                 nonneg=k != "preload")
     if "actuator" in m:
         kw["actuator"] = actuator(cx, m["actuator"], m.val_locs["actuator"],
                                   f"{key}.actuator", names)
@@ -179,8 +198,9 @@ def joint_params(j: Joint, params: dict):
     so they can be changed (and swept) without recompiling."""
     vals = dict(j.parasitic.__dict__)
     vals.update({f"{lab}_load": 0.0 for lab in JOINT_KINDS[j.kind].blocked})
-    for lab, f in j.functional.items():
-        vals.update({f"{lab}_k": f.k, f"{lab}_c": f.c, f"{lab}_preload": f.preload})
+    for lab, f in j.functional.items():      # an expression of parameters is read as such
+        vals.update({f"{lab}_{role}": getattr(f, role) for role in ("k", "c", "preload")
+                     if not isinstance(getattr(f, role), sp.Expr)})
     for role, val in vals.items():
         pname = f"{j.name}__{role}"
         params[pname] = Parameter(pname, float(val), j.loc)

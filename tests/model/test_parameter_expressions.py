@@ -1,0 +1,76 @@
+"""A joint's spring, damper and preload as expressions of the model's parameters (issue 26,
+item 2): the generated code reads the expression, so ``-p`` retunes it without a
+recompile, and it behaves exactly as the same numbers written out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bgc.codegen.emit import import_module
+from bgc.errors import ModelError
+from bgc.model import symbols
+from bgc.model.load import loads
+from bgc.pipeline import compile_model
+from bgc.simulate import simulate
+
+SLIDER = """\
+name: {name}
+parameters:
+  k_s: 400.0
+  c_s: 2.0
+  f0: 5.0
+bodies:
+  cart: {{mass: 2.0, com: [0, 0, 0], inertia: [0.1, 0.1, 0.1]}}
+joints:
+  rail: {{type: prismatic, between: [fixed_frame, cart], at: [0, 0, 0], axis: [1, 0, 0],
+         spring: {{k: {k}, c: {c}, preload: {f}}}}}
+outputs:
+  x: cart.x
+simulation: {{t_end: 0.5}}
+"""
+
+
+def _model(name="slider", k="2 * k_s", c="c_s", f="f0"):
+    return loads(SLIDER.format(name=name, k=k, c=c, f=f), "slider.yaml")
+
+
+def test_the_expression_is_kept_and_no_joint_parameter_made_for_it():
+    m = _model()
+    fun = m.joints["rail"].functional["tx"]
+    P = symbols.param
+    assert fun.k == 2 * P("k_s") and fun.c == P("c_s") and fun.preload == P("f0")
+    assert not {"rail__tx_k", "rail__tx_c", "rail__tx_preload"} & set(m.parameters)
+    lit = _model(k="800.0", c="2.0", f="5.0")       # numbers: joint parameters, as before
+    assert lit.joints["rail"].functional["tx"].k == 800.0
+    assert {"rail__tx_k", "rail__tx_c", "rail__tx_preload"} <= set(lit.parameters)
+
+
+def test_minus_p_retunes_it_without_recompiling_and_matches_the_numbers(tmp_path):
+    _, path = compile_model(_model(), tmp_path)
+    mod = import_module(path)
+    names = list(mod.PARAM_NAMES)
+    for k_s in (400.0, 650.0):
+        p = mod.PARAMS.copy()
+        p[names.index("k_s")] = k_s
+        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+        _, lit_path = compile_model(_model(f"slider_{int(k_s)}", k=f"{2 * k_s}", c="2.0",
+                                           f="5.0"), tmp_path)
+        ref = simulate(import_module(lit_path), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+        assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
+        # it oscillates about the preload's deflection f0 / (2 k_s), at sqrt(2 k_s / m)
+        assert np.mean(r.column("x")[10:]) == pytest.approx(5.0 / (2 * k_s), rel=0.2)
+
+
+@pytest.mark.parametrize("k, c, f, msg", [
+    ("k_s - 1000", "c_s", "f0", "k = k_s - 1000 is -600"),
+    ("2 * k_s", "t", "f0", "unknown name 't'"),
+    ("2 * k_s", "c_s", "x_cart", "unknown name 'x_cart'"),
+    ("2 * k_s", "c_s", "1 / (k_s - 400)", "division by zero"),
+])
+def test_a_bad_expression_is_refused_at_its_line(k, c, f, msg):
+    with pytest.raises(ModelError) as e:
+        _model(k=k, c=c, f=f)
+    assert e.value.loc is not None and e.value.loc.line == 10, e.value
+    assert e.value.key.startswith("joints.rail.spring."), e.value.key
+    assert msg in str(e.value), str(e.value)

@@ -30,7 +30,14 @@ from bgc.codegen.forward_mode import directional, propagate, trivial
 from bgc.errors import EquationError
 from bgc.graph.algorithms import is_cyclic, strongly_connected
 from bgc.graph.causality import CausalGraph
-from bgc.graph.expand import AXES, body_junction, position, rotation_matrix
+from bgc.graph.expand import (
+    AXES,
+    body_junction,
+    body_mass,
+    body_moments,
+    position,
+    rotation_matrix,
+)
 from bgc.mechanics import cardan, exact
 from bgc.methods.consistent import RANK_PARAM
 from bgc.model import symbols
@@ -291,8 +298,9 @@ class Builder:
         massive = body.mass > 0
         if massive:
             acc = (sp.Matrix([symbols.dstate(f"{n}__m", f"p{a}") for a in AXES])
-                   / exact.rational(body.mass))
-            wdot = sp.Matrix([symbols.dstate(f"{n}__J", f"p{a}") / exact.rational(body.inertia[k])
+                   / body_mass(body))
+            J = body_moments(body)
+            wdot = sp.Matrix([symbols.dstate(f"{n}__J", f"p{a}") / J[k]
                               for k, a in enumerate(AXES)])
         for k, a in enumerate(AXES):
             out[symbols.ref(n, a)] = x[k]

@@ -55,6 +55,17 @@ def position(body: str) -> sp.Matrix:
     return sp.Matrix([symbols.state(body, a) for a in AXES])
 
 
+def body_mass(body: Body) -> sp.Expr:
+    """The mass the equations read: its expression of parameters, or the exact number."""
+    return body.mass_expr if body.mass_expr is not None else exact.rational(body.mass)
+
+
+def body_moments(body: Body) -> sp.Matrix:
+    """The principal moments the equations read (expressions of parameters, or exact)."""
+    return sp.Matrix(body.inertia_expr) if body.inertia_expr is not None \
+        else exact.vector(body.inertia)
+
+
 def joint_offset(body: Body, at) -> sp.Matrix:
     """Body-frame offset from G of the body-fixed point that is at ``at`` (R0) initially:
     computed exactly and put in canonical form (``exact``), so no rounding noise of the
@@ -99,8 +110,8 @@ class _Expander:
             return
         frame = exact.matrix(body.frame)
         omega_body = frame.T * exact.vector(body.omega)
-        J = exact.vector(body.inertia)
-        mass = exact.rational(body.mass)
+        J = body_moments(body)
+        mass = body_mass(body)
         self.bond(v, self.add(f"{n}__m", "I", loc, I=mass,
                               initial=exact.vector(body.velocity) * mass), loc)
         self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J), initial=exact.canonical(

@@ -74,7 +74,7 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
     tables: list[Table] = []
     sigs = parameters.signals(cx, section("signals"), params, tables)
     gravity = bodies.gravity(doc)
-    bods = bodies.bodies(cx, section("bodies"))
+    bods = bodies.bodies(cx, section("bodies"), params)
     base = (joints.parasitic(doc["parasitic"], doc.val_locs["parasitic"], "parasitic",
                              Parasitic()) if "parasitic" in doc else Parasitic())
     jts = joints.joints(cx, section("joints"), params, sigs, base)

@@ -154,6 +154,11 @@ class Body:
     points: dict
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)   # of G, in R0
     omega: tuple[float, float, float] = (0.0, 0.0, 0.0)      # angular velocity, in R0
+    # mass and principal moments given as expressions of parameters (``mass``, ``inertia``
+    # then hold their values at the parameters' values, for the checks and the numeric
+    # passes); the equations read the expressions, so ``-p`` changes them
+    mass_expr: sp.Expr | None = None
+    inertia_expr: tuple | None = None
 
     # attributes a model expression may read: body.<attr>
     ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "wx_R0", "wy_R0", "wz_R0",

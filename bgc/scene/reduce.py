@@ -160,8 +160,9 @@ def idle_dofs(system: EquationSystem, outputs=None) -> tuple:
 def _idle_axis(m, body) -> int | None:
     """The body-frame axis about which nothing can turn ``body``: every joint on it is
     spherical with its centre on that axis through G, nothing else is bonded to it, the
-    other two principal moments are equal, and it starts at rest about it."""
-    if body.mass <= 0:
+    other two principal moments are equal, and it starts at rest about it. Moments
+    given by parameters may be changed by ``-p``: no axis is idle for sure then."""
+    if body.mass <= 0 or body.inertia_expr is not None:
         return None
     joints = [j for j in m.joints.values() if body.name in (j.body1, j.body2)]
     if not joints or any(j.kind != "spherical" for j in joints):

@@ -74,3 +74,48 @@ def test_a_bad_expression_is_refused_at_its_line(k, c, f, msg):
     assert e.value.loc is not None and e.value.loc.line == 10, e.value
     assert e.value.key.startswith("joints.rail.spring."), e.value.key
     assert msg in str(e.value), str(e.value)
+
+
+CART = """\
+name: {name}
+parameters:
+  m_c: 2.0
+bodies:
+  cart: {{mass: {m}, com: [0, 0, 0], inertia: [0.1, {i}, 0.1]}}
+joints:
+  rail: {{type: prismatic, between: [fixed_frame, cart], at: [0, 0, 0], axis: [1, 0, 0],
+         spring: {{k: 800.0, c: 2.0, preload: 5.0}}}}
+outputs:
+  x: cart.x
+simulation: {{t_end: 0.5}}
+"""
+
+
+def test_a_mass_and_moments_given_by_parameters_retune_without_recompiling(tmp_path):
+    m = loads(CART.format(name="cart", m="m_c", i='"0.05 * m_c"'), "cart.yaml")
+    cart = m.bodies["cart"]
+    assert cart.mass == 2.0 and cart.mass_expr == symbols.param("m_c")
+    assert cart.inertia == (0.1, 0.1, 0.1) and cart.inertia_expr[1] == 0.05 * symbols.param("m_c")
+    _, path = compile_model(m, tmp_path)
+    mod = import_module(path)
+    for m_c in (2.0, 3.0):
+        p = mod.PARAMS.copy()
+        p[list(mod.PARAM_NAMES).index("m_c")] = m_c
+        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+        _, lit = compile_model(loads(CART.format(name=f"cart_{int(m_c)}", m=m_c,
+                                                 i=0.05 * m_c), "cart.yaml"), tmp_path)
+        ref = simulate(import_module(lit), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+        assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
+
+
+@pytest.mark.parametrize("m, i, msg", [
+    ('"m_c - 2"', "0.1", "mass = m_c - 2 is 0"),
+    ("m_c", '"0.2 * m_c"', "triangle inequality"),        # 0.1, 0.4, 0.1 at m_c = 2
+    ('"m_c * t"', "0.1", "unknown name 't'"),
+])
+def test_a_bad_mass_or_moment_is_refused_at_its_line(m, i, msg):
+    with pytest.raises(ModelError) as e:
+        loads(CART.format(name="cart", m=m, i=i), "cart.yaml")
+    assert e.value.loc is not None and e.value.loc.line == 5, e.value
+    assert e.value.key.startswith("bodies.cart."), e.value.key
+    assert msg in str(e.value), str(e.value)

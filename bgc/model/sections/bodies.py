@@ -10,6 +10,7 @@ import sys
 import sympy as sp
 
 from bgc.mechanics import exact
+from bgc.model import symbols
 from bgc.model.document import YList, YMap
 from bgc.model.model import Body
 from bgc.model.sections.context import Context
@@ -28,9 +29,11 @@ def gravity(doc: YMap) -> tuple[float, float, float]:
     return (0.0, 0.0, -number(v, loc, "gravity", nonneg=True))
 
 
-def bodies(cx: Context, sec: YMap) -> dict[str, Body]:
+def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
     """Each body: mass, centre of mass, inertia (principal moments and axes), points and
-    initial velocities; the bodies and their points are known to ``cx`` from here on."""
+    initial velocities; the bodies and their points are known to ``cx`` from here on.
+    Mass and principal moments may be expressions of the parameters ``params``."""
+    pnames = {n: symbols.param(n) for n in params}
     out = {}
     for name, v in sec.items():
         key = f"bodies.{name}"
@@ -43,14 +46,31 @@ def bodies(cx: Context, sec: YMap) -> dict[str, Body]:
 
         def at(k, v=v, key=key):
             return v.val_locs[k], f"{key}.{k}"
-        mass = number(v["mass"], *at("mass"), nonneg=True, divisor=True)
+        mass_expr = _expression(cx, v["mass"], *at("mass"), pnames)
+        mass = number(v["mass"], *at("mass"), nonneg=True, divisor=True) \
+            if mass_expr is None else float(mass_expr.xreplace(cx.pvals))
+        if mass_expr is not None and not mass > sys.float_info.min:
+            fail(f"mass = {v['mass']} is {mass:g} at the parameters' values", *at("mass"),
+                 "a mass given by parameters must be > 0 (write 0 for a body of "
+                 "negligible mass)")
+        inertia_expr = None
+        if isinstance(v.get("inertia"), YList) and any(isinstance(x, str)
+                                                       for x in v["inertia"]):
+            inertia_expr = tuple(
+                _expression(cx, x, v["inertia"].item_locs[i], f"{key}.inertia[{i}]", pnames)
+                or exact.rational(number(x, v["inertia"].item_locs[i],
+                                         f"{key}.inertia[{i}]"))
+                for i, x in enumerate(v["inertia"]))
+            if len(inertia_expr) != 3:
+                fail(f"expected 3 principal moments, got {len(inertia_expr)}",
+                     *at("inertia"))
         com = exact.vector(vector(v["com"], *at("com")))
         if "inertia" not in v and mass > 0:
             fail("missing 'inertia'", v.loc, key,
                  "a body needs mass, com and inertia (mass: 0 for a body of "
                  "negligible mass)")
         frame_ = frame(v["frame"], *at("frame")) if "frame" in v else sp.eye(3)
-        moments, frame_ = _inertia(v, key, mass, frame_)
+        moments, frame_ = _inertia(v, key, mass, frame_, inertia_expr, cx.pvals)
         points = {}
         if "points" in v:
             pts = mapping(v["points"], *at("points"))
@@ -65,21 +85,39 @@ def bodies(cx: Context, sec: YMap) -> dict[str, Body]:
         omg = vector(v["omega"], *at("omega")) if "omega" in v else (0, 0, 0)
         out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
                          exact.floats(frame_), exact.floats(com), points,
-                         tuple(float(x) for x in vel), tuple(float(x) for x in omg))
+                         tuple(float(x) for x in vel), tuple(float(x) for x in omg),
+                         mass_expr, inertia_expr)
     cx.bodies = out
     return out
 
 
-def _inertia(v: YMap, key, mass, frame_) -> tuple:
+def _expression(cx: Context, x, loc, key, pnames) -> sp.Expr | None:
+    """``x`` as an expression of parameters if it is one (a string that is not a plain
+    number), else None (a number: read by ``number``)."""
+    if not isinstance(x, str):
+        return None
+    try:
+        float(x)
+        return None
+    except ValueError:
+        pass
+    e = cx.parse(x, loc=loc, key=key, names=pnames)
+    return e if e.free_symbols else None
+
+
+def _inertia(v: YMap, key, mass, frame_, inertia_expr=None, pvals=None) -> tuple:
     """A body's principal moments and its principal frame: ``inertia`` as principal
-    moments [Ixx, Iyy, Izz] in ``frame`` or as a symmetric matrix (in ``frame`` if
-    given); none for a body of negligible mass (mass: 0)."""
+    moments [Ixx, Iyy, Izz] in ``frame`` (numbers or expressions of parameters:
+    ``inertia_expr``) or as a symmetric matrix of numbers (in ``frame`` if given); none
+    for a body of negligible mass (mass: 0)."""
     import numpy as np
     inertia = v.get("inertia", [0, 0, 0])     # negligible mass: no inertia either
     loc, kk = ((v.val_locs["inertia"], f"{key}.inertia") if "inertia" in v
                else (v.val_locs["mass"], f"{key}.mass"))
     if "inertia" not in v:
         moments = sp.zeros(3, 1)
+    elif inertia_expr is not None:
+        moments = sp.Matrix([float(e.xreplace(pvals)) for e in inertia_expr])
     elif isinstance(inertia, YList) and inertia and isinstance(inertia[0], YList):
         if len(inertia) != 3:
             fail("an inertia matrix has 3 rows", loc, kk)

@@ -109,13 +109,18 @@ class _Expander:
             self.bond(w, self.add(f"{n}__M0w", "M0", loc), loc)
             return
         frame = exact.matrix(body.frame)
-        omega_body = frame.T * exact.vector(body.omega)
+        omega_body = frame.T * (sp.Matrix(body.omega_expr) if body.omega_expr is not None
+                                else exact.vector(body.omega))
+        velocity = sp.Matrix(body.velocity_expr) if body.velocity_expr is not None \
+            else exact.vector(body.velocity)
         J = body_moments(body)
         mass = body_mass(body)
         self.bond(v, self.add(f"{n}__m", "I", loc, I=mass,
-                              initial=exact.vector(body.velocity) * mass), loc)
-        self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J), initial=exact.canonical(
-            sp.Matrix([J[k] * omega_body[k] for k in range(3)]))), loc)
+                              initial=velocity * mass), loc)
+        Jw = sp.Matrix([J[k] * omega_body[k] for k in range(3)])
+        # numbers: canonical; an expression of parameters stays as it is (exact parts)
+        self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J),
+                              initial=Jw if Jw.free_symbols else exact.canonical(Jw)), loc)
         self.bond(w, self.add(f"{n}__EJS", "EJS", loc, J=J), loc)
         g = self.m.gravity
         if any(g):

@@ -159,6 +159,9 @@ class Body:
     # passes); the equations read the expressions, so ``-p`` changes them
     mass_expr: sp.Expr | None = None
     inertia_expr: tuple | None = None
+    # initial velocity of G and angular velocity (R0) given by parameters, likewise
+    velocity_expr: tuple | None = None
+    omega_expr: tuple | None = None
 
     # attributes a model expression may read: body.<attr>
     ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "wx_R0", "wy_R0", "wz_R0",

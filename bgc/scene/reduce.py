@@ -162,7 +162,7 @@ def _idle_axis(m, body) -> int | None:
     spherical with its centre on that axis through G, nothing else is bonded to it, the
     other two principal moments are equal, and it starts at rest about it. Moments
     given by parameters may be changed by ``-p``: no axis is idle for sure then."""
-    if body.mass <= 0 or body.inertia_expr is not None:
+    if body.mass <= 0 or body.inertia_expr is not None or body.omega_expr is not None:
         return None
     joints = [j for j in m.joints.values() if body.name in (j.body1, j.body2)]
     if not joints or any(j.kind != "spherical" for j in joints):

@@ -119,3 +119,46 @@ def test_a_bad_mass_or_moment_is_refused_at_its_line(m, i, msg):
     assert e.value.loc is not None and e.value.loc.line == 5, e.value
     assert e.value.key.startswith("bodies.cart."), e.value.key
     assert msg in str(e.value), str(e.value)
+
+
+SPIN = """\
+name: {name}
+parameters:
+  w0: 5.0
+  v0: 0.5
+  m_b: 2.0
+bodies:
+  box: {{mass: {m}, com: [0, 0, 0], inertia: [0.1, 0.2, {i}], velocity: [{v}, 0, 0],
+        omega: [{w}, 0.05, 0.1]}}
+outputs:
+  x: box.x
+  wx: box.wx_R0
+  wz: box.wz_R0
+simulation: {{t_end: 0.5}}
+"""
+
+
+def test_initial_velocities_by_parameters_and_a_spinning_body_of_parametric_inertia(tmp_path):
+    """The free body's initial velocity and spin, its mass and a moment as expressions
+    (the spin's momentum J w then is one too): the same run as the numbers written out,
+    for the defaults and for values given at run time."""
+    m = loads(SPIN.format(name="spin", m="m_b", i='"0.1 * m_b"', v="v0", w="w0"),
+              "spin.yaml")
+    assert m.bodies["box"].velocity == (0.5, 0.0, 0.0)
+    assert m.bodies["box"].omega_expr[0] == symbols.param("w0")
+    _, path = compile_model(m, tmp_path)
+    mod = import_module(path)
+    names = list(mod.PARAM_NAMES)
+    for w0, v0, m_b in ((5.0, 0.5, 2.0), (8.0, 1.0, 2.5)):
+        p = mod.PARAMS.copy()
+        for n, val in (("w0", w0), ("v0", v0), ("m_b", m_b)):
+            p[names.index(n)] = val
+        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+        _, lit = compile_model(loads(SPIN.format(name=f"spin_{int(w0)}", m=m_b,
+                                                 i=0.1 * m_b, v=v0, w=w0), "spin.yaml"),
+                               tmp_path)
+        ref = simulate(import_module(lit), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+        assert r.column("x")[-1] == pytest.approx(0.5 * v0, rel=1e-9)   # free flight
+        assert r.column("wx")[0] == pytest.approx(w0, rel=1e-12)
+        for out in ("x", "wx", "wz"):
+            assert np.abs(r.column(out) - ref.column(out)).max() < 1e-9 * max(1.0, w0)

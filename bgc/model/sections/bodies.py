@@ -81,14 +81,32 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
                 pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
                 points[pn] = exact.floats(frame_.T * (pos - com))
                 cx.point_r0[(name, pn)] = pos
-        vel = vector(v["velocity"], *at("velocity")) if "velocity" in v else (0, 0, 0)
-        omg = vector(v["omega"], *at("omega")) if "omega" in v else (0, 0, 0)
+        vel, vel_expr = _initial(cx, v, "velocity", key, pnames)
+        omg, omg_expr = _initial(cx, v, "omega", key, pnames)
         out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
                          exact.floats(frame_), exact.floats(com), points,
                          tuple(float(x) for x in vel), tuple(float(x) for x in omg),
-                         mass_expr, inertia_expr)
+                         mass_expr, inertia_expr, vel_expr, omg_expr)
     cx.bodies = out
     return out
+
+
+def _initial(cx: Context, v: YMap, k, key, pnames) -> tuple:
+    """A body's initial ``velocity`` or ``omega`` [x, y, z] (R0): its values and, where a
+    component is an expression of parameters, the exact components (else None)."""
+    if k not in v:
+        return (0.0, 0.0, 0.0), None
+    vec, loc = v[k], v.val_locs[k]
+    if not (isinstance(vec, YList) and any(_expression(cx, x, vec.item_locs[i],
+                                                       f"{key}.{k}[{i}]", pnames) is not None
+                                           for i, x in enumerate(vec))):
+        return vector(vec, loc, f"{key}.{k}"), None
+    if len(vec) != 3:
+        fail(f"expected 3 components [x, y, z], got {len(vec)}", loc, f"{key}.{k}")
+    exprs = tuple(_expression(cx, x, vec.item_locs[i], f"{key}.{k}[{i}]", pnames)
+                  or exact.rational(number(x, vec.item_locs[i], f"{key}.{k}[{i}]"))
+                  for i, x in enumerate(vec))
+    return tuple(float(e.xreplace(cx.pvals)) for e in exprs), exprs
 
 
 def _expression(cx: Context, x, loc, key, pnames) -> sp.Expr | None:

@@ -122,10 +122,10 @@ class _Expander:
         self.bond(w, self.add(f"{n}__J", "I", loc, I=sp.diag(*J),
                               initial=Jw if Jw.free_symbols else exact.canonical(Jw)), loc)
         self.bond(w, self.add(f"{n}__EJS", "EJS", loc, J=J), loc)
-        g = self.m.gravity
-        if any(g):
-            self.bond(self.add(f"{n}__g", "Se", loc,
-                               effort=exact.vector(g) * mass), v, loc)
+        g, gx = self.m.gravity, self.m.gravity_expr
+        if any(g) or gx is not None:
+            weight = (sp.Matrix(gx) if gx is not None else exact.vector(g)) * mass
+            self.bond(self.add(f"{n}__g", "Se", loc, effort=weight), v, loc)
 
     def omega_r0(self, n: str, loc) -> str:
         W = body_junction(n, "W")

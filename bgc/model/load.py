@@ -73,7 +73,7 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
             cx.pvals[symbols.param(pname)] = float(value)
     tables: list[Table] = []
     sigs = parameters.signals(cx, section("signals"), params, tables)
-    gravity = bodies.gravity(doc)
+    gravity, gravity_expr = bodies.gravity(cx, doc, params)
     bods = bodies.bodies(cx, section("bodies"), params)
     base = (joints.parasitic(doc["parasitic"], doc.val_locs["parasitic"], "parasitic",
                              Parasitic()) if "parasitic" in doc else Parasitic())
@@ -86,7 +86,7 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
     return Model(name=name, file=file, digest=digest(doc), parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bnds, outputs=outputs,
                  settings=sets, description=doc.get("description"), bodies=bods,
-                 gravity=gravity, joints=jts, excitation=exc,
+                 gravity=gravity, gravity_expr=gravity_expr, joints=jts, excitation=exc,
                  static_loads=doc.get("parasitic", {}).get("loads") == "static")
 
 

@@ -282,6 +282,7 @@ class Model:
     description: str | None = None
     bodies: dict[str, Body] = field(default_factory=dict)
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity_expr: tuple | None = None   # its components, where parameters give them
     joints: dict[str, Joint] = field(default_factory=dict)
     excitation: Excitation | None = None
     # parasitic: the initial state is a static equilibrium, so each blocked direction's

@@ -162,3 +162,40 @@ def test_initial_velocities_by_parameters_and_a_spinning_body_of_parametric_iner
         assert r.column("wx")[0] == pytest.approx(w0, rel=1e-12)
         for out in ("x", "wx", "wz"):
             assert np.abs(r.column(out) - ref.column(out)).max() < 1e-9 * max(1.0, w0)
+
+
+PENDULUM = """\
+name: {name}
+parameters:
+  g_acc: 9.81
+gravity: {g}
+bodies:
+  rod: {{mass: 2.0, com: [0.3, 0, -0.4], inertia: [0.2, 0.2, 0.01]}}
+joints:
+  hinge: {{type: revolute, between: [fixed_frame, rod], at: [0, 0, 0], axis: [0, 1, 0]}}
+outputs:
+  x: rod.x
+simulation: {{t_end: 0.5}}
+"""
+
+
+@pytest.mark.parametrize("form", ["g_acc", "[0, 0, -g_acc]"])
+def test_gravity_by_a_parameter_swings_the_pendulum_as_the_number_does(tmp_path, form):
+    m = loads(PENDULUM.format(name="pend", g=form), "pend.yaml")
+    assert m.gravity == (0.0, 0.0, -9.81) and m.gravity_expr[2] == -symbols.param("g_acc")
+    _, path = compile_model(m, tmp_path)
+    mod = import_module(path)
+    for g in (9.81, 1.62):                                  # the Earth, the Moon
+        p = mod.PARAMS.copy()
+        p[list(mod.PARAM_NAMES).index("g_acc")] = g
+        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+        _, lit = compile_model(loads(PENDULUM.format(name=f"pend_{int(g * 100)}", g=g),
+                                     "pend.yaml"), tmp_path)
+        ref = simulate(import_module(lit), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+        assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
+        assert abs(r.column("x")[-1] - 0.3) > 1e-3            # it swings
+
+
+def test_a_negative_gravity_by_parameters_is_refused():
+    with pytest.raises(ModelError, match="gravity = -g_acc is -9.81"):
+        loads(PENDULUM.format(name="pend", g="-g_acc"), "pend.yaml")

@@ -19,14 +19,24 @@ from bgc.model.values import IDENT, check_keys, fail, kind_of, mapping, number, 
 BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
 
 
-def gravity(doc: YMap) -> tuple[float, float, float]:
-    """``gravity:``: a vector [x, y, z], or g >= 0 pointing down z; none by default."""
+def gravity(cx: Context, doc: YMap, params=()) -> tuple:
+    """``gravity:``: a vector [x, y, z], or g >= 0 pointing down z; none by default. Its
+    values, and its exact components where parameters give any (``gravity: g_acc``),
+    else None."""
     if "gravity" not in doc:
-        return (0.0, 0.0, 0.0)
+        return (0.0, 0.0, 0.0), None
     v, loc = doc["gravity"], doc.val_locs["gravity"]
+    pnames = {n: symbols.param(n) for n in params}
     if isinstance(v, YList):
-        return vector(v, loc, "gravity")
-    return (0.0, 0.0, -number(v, loc, "gravity", nonneg=True))
+        return _parametric_vector(cx, doc, "gravity", "model", pnames)
+    g = _expression(cx, v, loc, "gravity", pnames)
+    if g is None:
+        return (0.0, 0.0, -number(v, loc, "gravity", nonneg=True)), None
+    value = float(g.xreplace(cx.pvals))
+    if not value >= 0 or value == float("inf"):
+        fail(f"gravity = {v} is {value:g} at the parameters' values", loc, "gravity",
+             "g >= 0 points down z; give a vector [x, y, z] for another direction")
+    return (0.0, 0.0, -value), (sp.S.Zero, sp.S.Zero, -g)
 
 
 def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
@@ -81,8 +91,8 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
                 pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
                 points[pn] = exact.floats(frame_.T * (pos - com))
                 cx.point_r0[(name, pn)] = pos
-        vel, vel_expr = _initial(cx, v, "velocity", key, pnames)
-        omg, omg_expr = _initial(cx, v, "omega", key, pnames)
+        vel, vel_expr = _parametric_vector(cx, v, "velocity", key, pnames)
+        omg, omg_expr = _parametric_vector(cx, v, "omega", key, pnames)
         out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
                          exact.floats(frame_), exact.floats(com), points,
                          tuple(float(x) for x in vel), tuple(float(x) for x in omg),
@@ -91,20 +101,22 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
     return out
 
 
-def _initial(cx: Context, v: YMap, k, key, pnames) -> tuple:
-    """A body's initial ``velocity`` or ``omega`` [x, y, z] (R0): its values and, where a
-    component is an expression of parameters, the exact components (else None)."""
+def _parametric_vector(cx: Context, v: YMap, k, key, pnames) -> tuple:
+    """A vector [x, y, z] (a body's initial ``velocity`` or ``omega``, R0; the model's
+    ``gravity``): its values and, where a component is an expression of parameters, the
+    exact components (else None)."""
     if k not in v:
         return (0.0, 0.0, 0.0), None
     vec, loc = v[k], v.val_locs[k]
+    where = f"{key}.{k}" if key != "model" else k
     if not (isinstance(vec, YList) and any(_expression(cx, x, vec.item_locs[i],
-                                                       f"{key}.{k}[{i}]", pnames) is not None
+                                                       f"{where}[{i}]", pnames) is not None
                                            for i, x in enumerate(vec))):
-        return vector(vec, loc, f"{key}.{k}"), None
+        return vector(vec, loc, where), None
     if len(vec) != 3:
-        fail(f"expected 3 components [x, y, z], got {len(vec)}", loc, f"{key}.{k}")
-    exprs = tuple(_expression(cx, x, vec.item_locs[i], f"{key}.{k}[{i}]", pnames)
-                  or exact.rational(number(x, vec.item_locs[i], f"{key}.{k}[{i}]"))
+        fail(f"expected 3 components [x, y, z], got {len(vec)}", loc, where)
+    exprs = tuple(_expression(cx, x, vec.item_locs[i], f"{where}[{i}]", pnames)
+                  or exact.rational(number(x, vec.item_locs[i], f"{where}[{i}]"))
                   for i, x in enumerate(vec))
     return tuple(float(e.xreplace(cx.pvals)) for e in exprs), exprs
 

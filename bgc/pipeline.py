@@ -26,8 +26,6 @@ if TYPE_CHECKING:
     from bgc.codegen.equations import EquationSystem
     from bgc.graph.causality import CausalGraph
 
-# what the constraint element L of a blocked joint direction becomes (paper 11.2.5)
-METHODS = methods.NAMES
 
 
 @dataclass

@@ -25,6 +25,7 @@ branches on a method's name.
 
 from __future__ import annotations
 
+import abc
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -33,9 +34,10 @@ if TYPE_CHECKING:
     from bgc.model.model import Joint
 
 
-class ConstraintMethod:
-    """One way of handling a blocked joint direction. Subclasses override the hooks they
-    need; the defaults add nothing."""
+class ConstraintMethod(abc.ABC):
+    """One way of handling a blocked joint direction. A subclass must say what L becomes
+    (``constraint_element``) and overrides the other hooks it needs; their defaults add
+    nothing."""
 
     name: str = ""
     # True: blocked directions are kinematic constraints (multipliers, imposed flows), held
@@ -44,11 +46,11 @@ class ConstraintMethod:
     ideal: bool = False
 
     # --- graph ------------------------------------------------------------------------
+    @abc.abstractmethod
     def constraint_element(self, ex, joint: Joint, d: Direction, zero: str) -> list[str]:
         """Add the element(s) of L for blocked direction ``d`` of ``joint`` through the
         expander ``ex`` (``ex.add``, ``ex.constraints``); return their names, which
         ``expand`` bonds to the direction's 0-junction ``zero``."""
-        raise NotImplementedError(f"method {self.name} does not say what L becomes")
 
     def restructure(self, graph: BondGraph, open_loops: bool = True) -> BondGraph:
         """A pass over the expanded graph before causality. ``open_loops``: whether

@@ -50,7 +50,7 @@ def test_the_digest_moves_with_codegen_code_only(tmp_path):
     outside = [f for f in root.rglob("*.py") if f not in digested]
     assert {"cli", "simulate", "radau5", "frf", "scenes"} <= {f.stem for f in outside} | {
         f.parent.name for f in outside}
-    for path in outside:                  # the CLI, solvers, analysis, scenes, bench ...
+    for path in outside:            # every file outside: CLI, solvers, analysis, scenes, bench
         path.write_text(path.read_text() + "\n# edited\n")
     assert module_file.compiler_digest(root) == base
     for inside in ("codegen/emit.py", "methods/lagrange.py", "graph/causality.py",

@@ -109,15 +109,15 @@ def _parametric_vector(cx: Context, v: YMap, k, key, pnames) -> tuple:
         return (0.0, 0.0, 0.0), None
     vec, loc = v[k], v.val_locs[k]
     where = f"{key}.{k}" if key != "model" else k
-    if not (isinstance(vec, YList) and any(_expression(cx, x, vec.item_locs[i],
-                                                       f"{where}[{i}]", pnames) is not None
-                                           for i, x in enumerate(vec))):
+    parsed = [_expression(cx, x, vec.item_locs[i], f"{where}[{i}]", pnames)
+              for i, x in enumerate(vec)] if isinstance(vec, YList) else []
+    if not any(e is not None for e in parsed):
         return vector(vec, loc, where), None
     if len(vec) != 3:
         fail(f"expected 3 components [x, y, z], got {len(vec)}", loc, where)
-    exprs = tuple(_expression(cx, x, vec.item_locs[i], f"{where}[{i}]", pnames)
-                  or exact.rational(number(x, vec.item_locs[i], f"{where}[{i}]"))
-                  for i, x in enumerate(vec))
+    exprs = tuple(e if e is not None else
+                  exact.rational(number(x, vec.item_locs[i], f"{where}[{i}]"))
+                  for i, (x, e) in enumerate(zip(vec, parsed)))
     return tuple(float(e.xreplace(cx.pvals)) for e in exprs), exprs
 
 

@@ -35,6 +35,7 @@ from bgc.graph.expand import (
     body_junction,
     body_mass,
     body_moments,
+    joint_offset,
     position,
     rotation_matrix,
 )
@@ -355,6 +356,33 @@ class Builder:
             out[symbols.ref(name, f"M{a}_R0")] = M[k]
         return out
 
+    def direction_refs(self, name: str, d) -> dict:
+        """joint.direction.v: the rate of a free direction, its rows applied to the two
+        bodies' joint-point velocities and angular velocities (R0); joint.direction.q: its
+        displacement, geometric for a translation, else its rate integrated (a state)."""
+        j = self.m.joints[name]
+        rate = sp.S.Zero
+        for side, n in ((1, j.body1), (2, j.body2)):
+            if n is None:
+                continue
+            R = rotation_matrix(n)
+            v = self.common_flow(body_junction(n, "v"))
+            w = self.common_flow(body_junction(n, "w"))
+            r = joint_offset(self.m.bodies[n], j.at)
+            for key, vec in ((f"v{side}", v + R * w.cross(r)), (f"w{side}", R * w)):
+                if key in d.rows:
+                    rate += (d.rows[key].T * vec)[0]
+        target = f"{name}__{d.label}"
+        q = d.g
+        if q is None:
+            q, dq = symbols.state(target, "q"), symbols.dstate(target, "q")
+            if dq not in self.eqs:
+                self.define(dq, rate, name)
+                self.states.append(State(f"{name}.{d.label}", q, dq, sp.S.Zero, target))
+                self.display[q], self.display[dq] = f"{name}.{d.label}.q", \
+                    f"d({name}.{d.label}.q)/dt"
+        return {symbols.ref(target, "q"): q, symbols.ref(target, "v"): rate}
+
     def ref_map(self, wanted: set[str] | None = None) -> dict[sp.Symbol, sp.Expr]:
         """Every reference ``target.attr`` -> its expression; with ``wanted``, only those
         of the targets named (building every body's and joint's references costs more
@@ -386,6 +414,9 @@ class Builder:
         for name, dirs in self.g.joints.items():
             if want(name):
                 out.update(self.joint_refs(name, dirs))
+            for d in dirs:
+                if not d.blocked and want(f"{name}__{d.label}"):
+                    out.update(self.direction_refs(name, d))
         for bname, i in bonds.items():
             if not want(bname):
                 continue

@@ -41,6 +41,12 @@ class BondGraph:
     method: str = "parasitic"     # the name of its constraint method (bgc.methods)
     constraints: list = field(default_factory=list)          # lagrange, zcp: [Constraint]
     zcp: object = None      # method zcp: the zcp.Plan (spanning tree, loops, dependents)
+    port_junctions: dict[str, str] = field(default_factory=dict)   # junction -> port name
+
+    def label(self, node: str) -> str:
+        """A node's name as the model knows it: a port's junction is the port."""
+        port = self.port_junctions.get(node)
+        return f"{node} (port {port})" if port else node
 
     def other(self, b: int, node: str) -> str:
         bond = self.bonds[b]

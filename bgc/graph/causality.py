@@ -167,13 +167,14 @@ class _Scap:
 
 def _describe(g: BondGraph, b: int) -> str:
     bond = g.bonds[b]
-    return (f"bond {bond.name} {bond.src}->{bond.dst} (line {bond.loc.line})")
+    return (f"bond {bond.name} {g.label(bond.src)}->{g.label(bond.dst)} "
+            f"(line {bond.loc.line})")
 
 
 def _conflict_error(g: BondGraph, c: _Conflict, during: str) -> CausalityError:
     el = g.elements[c.node]
     bonds = "; ".join(_describe(g, b) for b in c.bonds)
-    others = ", ".join(f"{g.elements[g.other(b, c.node)].kind} '{g.other(b, c.node)}'"
+    others = ", ".join(f"{g.elements[g.other(b, c.node)].kind} '{g.label(g.other(b, c.node))}'"
                        for b in c.bonds)
     what = {"one_in": f"receives effort from {len(c.bonds)} bonds, it takes exactly one",
             "one_out": f"has its flow imposed by {len(c.bonds)} bonds, it takes exactly one",
@@ -191,7 +192,7 @@ def _conflict_error(g: BondGraph, c: _Conflict, during: str) -> CausalityError:
                                "or an R to it"}.get((el.kind, c.rule),
                                                     "check the sources' placement")
     return CausalityError(f"causality conflict while assigning {during}: {el.kind} "
-                          f"'{c.node}' {what}: {bonds} (from {others})", loc=el.loc,
+                          f"'{g.label(c.node)}' {what}: {bonds} (from {others})", loc=el.loc,
                           key=f"elements.{c.node}", hint=hint)
 
 
@@ -202,7 +203,10 @@ def assign(graph: BondGraph) -> CausalGraph:
     # 1. sources: fixed causality. A conflicting source is set aside so that every
     #    conflict in the model is found and reported together.
     conflicts: list[CausalityError] = []
-    for name, el in els.items():
+    # the mechanism's own fixed causalities first, so that a model element that
+    # contradicts them (a flow source on a port) is the one reported
+    user = graph.model.elements if graph.model is not None else els
+    for name, el in sorted(els.items(), key=lambda item: item[0] in user):
         if el.kind in _FIXED or el.kind in ("EJS", "M0") or one_way(el):
             saved = list(s.effort_in), list(s.forced_by)
             try:

@@ -23,6 +23,7 @@ dimension (rule C1), nothing is left unbonded.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -35,7 +36,7 @@ from bgc.mechanics import exact
 from bgc.mechanics import joints as jmodels
 from bgc.methods.base import ConstraintMethod
 from bgc.model import symbols
-from bgc.model.model import KINDS, TWO_PORTS, Body, Bond, Element, Joint, Model
+from bgc.model.model import KINDS, TWO_PORTS, Body, Bond, Element, Joint, Model, Port
 
 AXES = symbols.AXES
 
@@ -90,6 +91,8 @@ class _Expander:
         self.constraints: list = []         # bondgraph.Constraint, added by the method
         self.elements: dict[str, Element] = dict(model.elements)
         self.bonds: list[Bond] = list(model.bonds)
+        self.ported = {(p.joint, p.direction) for p in model.ports.values() if p.joint}
+        self.port_junction: dict[str, str] = {}     # port name -> its 1-junction
 
     def add(self, name, kind, loc, initial=None, orthogonal=False, **fields) -> str:
         self.elements[name] = Element(name, kind, loc, fields=fields, initial=initial,
@@ -169,7 +172,8 @@ class _Expander:
         dirs = jmodels.directions(j.kind, geo, j.frame, j.pitch)
         for d in dirs:
             fun = j.functional.get(d.label)
-            if not d.blocked and (fun is None or fun.empty):
+            ported = (j.name, d.label) in self.ported
+            if not d.blocked and (fun is None or fun.empty) and not ported:
                 continue
             zero = self.add(f"{j.name}__{d.label}", "0", j.loc)
             for key, row in d.rows.items():
@@ -186,6 +190,8 @@ class _Expander:
                 self.bond(mtf, zero, j.loc, dim=1)
             if d.blocked:       # the constraint element L: what the method makes of it
                 parts = self.method.constraint_element(self, j, d, zero)
+            elif fun is None:   # a port only
+                parts = []
             else:
                 parts = []
                 def p(role, d=d, fun=fun):     # a number: its joint parameter
@@ -205,14 +211,43 @@ class _Expander:
                 if fun.actuator is not None:
                     parts.append(self.add(f"{zero}__actuator", "MSe", j.loc,
                                           effort=-fun.actuator))
-            if len(parts) == 1:
+            if len(parts) == 1 and not ported:
                 self.bond(zero, parts[0], j.loc, dim=1)
-            else:
+            else:       # the 1-junction of the relative velocity: where ports bond
                 one = self.add(f"{zero}__1", "1", j.loc)
                 self.bond(zero, one, j.loc, dim=1)
                 for e in parts:
                     self.bond(one, e, j.loc, dim=1)
+                if ported:
+                    self.port_junction[f"{j.name}.{d.label}"] = one
         return dirs
+
+    def point_port(self, port: Port):
+        """A port at a body's point along a direction: the point's velocity junction (R0)
+        projected by a row ``u^T`` onto a scalar 1-junction, ``u`` an R0 axis or a
+        direction fixed on the body (turned by its rotation matrix: a modulated row)."""
+        n, body = port.body, self.m.bodies[port.body]
+        r = exact.vector(body.points[port.point])     # body frame, from G (as body_refs)
+        P = self.point(n, f"{port.point}__point", r, port.loc)
+        if port.direction in "xyz":
+            u = sp.Matrix([int(port.direction == a) for a in AXES])
+        else:
+            u = rotation_matrix(n) * exact.canonical(
+                exact.matrix(body.frame).T * body.directions[port.direction])
+        one = self.add(f"{n}__{port.point}__{port.direction}", "1", port.loc)
+        mtf = self.add(f"{one}__u", "MTF", port.loc, ratio=u.T)
+        self.bond(P, mtf, port.loc)
+        self.bond(mtf, one, port.loc, dim=1)
+        self.port_junction[port.name] = one
+
+    def connect_ports(self):
+        """The bonds the model drew to ports now end on the ports' junctions."""
+        for port in self.m.ports.values():
+            if port.body is not None:
+                self.point_port(port)
+        pj = self.port_junction
+        self.bonds = [dataclasses.replace(b, src=pj.get(b.src, b.src), dst=pj.get(b.dst, b.dst))
+                      if b.src in pj or b.dst in pj else b for b in self.bonds]
 
 
 def initial_pose(model: Model) -> dict:
@@ -266,13 +301,14 @@ def _check_functional_not_blocked(model: Model, joint_dirs: dict, subs: dict):
             rank = np.linalg.matrix_rank(B, tol=1e-9)
             for d in dirs:
                 fun = j.functional.get(d.label)
-                if d.blocked or fun is None or fun.empty:
+                ported = f"{name}.{d.label}" in model.ports
+                if d.blocked or ((fun is None or fun.empty) and not ported):
                     continue
                 f = twist_row(model, j, d, col, subs, width)
                 if np.linalg.matrix_rank(np.vstack([B, f]), tol=1e-9) == rank:
                     others = sorted({o for o, _ in blocked})
                     raise ModelError(
-                        f"the spring/damper/actuator on direction {d.label} of joint "
+                        f"the spring/damper/actuator/port on direction {d.label} of joint "
                         f"'{name}' acts on a motion that joint {', '.join(others)} blocks "
                         "between the same bodies; its parasitic spring would take the load",
                         loc=j.loc, key=f"joints.{name}",
@@ -334,6 +370,7 @@ def expand(model: Model, method: str = methods.DEFAULT) -> BondGraph:
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}
+    ex.connect_ports()
     pose = initial_pose(model)
     _check_functional_not_blocked(model, joint_dirs, pose)
     _check_massless(model, joint_dirs, pose, ex.method)
@@ -345,6 +382,7 @@ def expand(model: Model, method: str = methods.DEFAULT) -> BondGraph:
     graph = BondGraph(model, elements, bonds, ports, dict(model.bodies), method=method,
                       constraints=ex.constraints)
     graph.joints = {name: dirs for name, (j, dirs) in joint_dirs.items()}
+    graph.port_junctions = {jn: port for port, jn in ex.port_junction.items()}
     for name, el in elements.items():
         _check_element(graph, name, el)
     return graph

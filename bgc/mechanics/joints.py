@@ -83,7 +83,9 @@ class Direction:
     blocked: bool
     rotational: bool
     rows: dict          # "v1" | "w1" | "v2" | "w2" -> 3x1 Matrix (R0), absent = zero
-    g: sp.Expr | None   # geometric deflection of a blocked direction (None: integrate)
+    # geometric deflection of a blocked direction, displacement of a free translation
+    # (None: integrate its rate)
+    g: sp.Expr | None
 
 
 class Geometry:
@@ -111,7 +113,7 @@ def _dist(geo, label, u, blocked=True, in_r0=False):
     u1 = exact.vector(u) if in_r0 else geo.vec(1, u)
     d = geo.pos[2] - geo.pos[1]
     rows = {"v1": -u1, "v2": u1} if in_r0 else {"v1": -u1, "v2": u1, "w1": u1.cross(d)}
-    return Direction(label, blocked, False, rows, u1.dot(d) if blocked else None)
+    return Direction(label, blocked, False, rows, u1.dot(d))
 
 
 def _perp(geo, label, u2, w1, sign=1):

@@ -87,7 +87,8 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
                  tables=tables, elements=elements, bonds=bnds, outputs=outputs,
                  settings=sets, description=doc.get("description"), bodies=bods,
                  gravity=gravity, gravity_expr=gravity_expr, joints=jts, excitation=exc,
-                 static_loads=doc.get("parasitic", {}).get("loads") == "static")
+                 static_loads=doc.get("parasitic", {}).get("loads") == "static",
+                 ports=cx.ports)
 
 
 def _check_top(doc, file: str) -> str:

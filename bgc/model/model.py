@@ -162,6 +162,9 @@ class Body:
     # initial velocity of G and angular velocity (R0) given by parameters, likewise
     velocity_expr: tuple | None = None
     omega_expr: tuple | None = None
+    # named body-fixed directions (exact unit vectors, R0 at the initial pose) that a port at
+    # one of its points may act along: ``body.point.direction`` in a bond
+    directions: dict = field(default_factory=dict)
 
     # attributes a model expression may read: body.<attr>
     ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "wx_R0", "wy_R0", "wz_R0",
@@ -221,6 +224,27 @@ class Joint:
     # of the blocked translational/rotational deflection (the parasitic modelling error)
     ATTRS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz",
              "Fx_R0", "Fy_R0", "Fz_R0", "Mx_R0", "My_R0", "Mz_R0", "gap", "tilt")
+    # of a free direction: joint.<direction>.<attr>: its displacement from the initial
+    # pose (m or rad) and its rate
+    DIRECTION_ATTRS = ("q", "v")
+
+
+@dataclass(frozen=True)
+class Port:
+    """A power port of the mechanism that a scalar bond may reach (``bonds:``): a joint's
+    free direction ``joint.tx`` (effort: the force or torque along it on body 2, and its
+    reaction on body 1; flow: the relative velocity), or a body's named point along a
+    direction ``body.point.z`` (effort: the force along it on the point; flow: the point's
+    velocity along it). ``direction`` is a joint direction label (tx ... rz) or, for a
+    point, x, y, z (fixed in R0) or a name from the body's ``directions`` (turning with
+    the body)."""
+    name: str
+    loc: Loc
+    direction: str
+    joint: str | None = None
+    body: str | None = None
+    point: str | None = None
+    rotational: bool = False
 
 
 @dataclass
@@ -288,6 +312,7 @@ class Model:
     # parasitic: the initial state is a static equilibrium, so each blocked direction's
     # parasitic spring starts carrying its static joint load (``parasitic: {loads: static}``)
     static_loads: bool = False
+    ports: dict[str, Port] = field(default_factory=dict)   # name as written -> Port
 
     def param_values(self) -> dict[sp.Symbol, float]:
         from bgc.model import symbols

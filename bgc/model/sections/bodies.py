@@ -16,7 +16,11 @@ from bgc.model.model import Body
 from bgc.model.sections.context import Context
 from bgc.model.values import IDENT, check_keys, fail, kind_of, mapping, number, vector
 
-BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "velocity", "omega", "description")
+BODY_KEYS = ("mass", "com", "inertia", "frame", "points", "directions", "velocity", "omega",
+             "description")
+# a point port's directions fixed in R0 (``body.point.z``); a body's ``directions`` turn
+# with it
+R0_DIRECTIONS = ("x", "y", "z")
 
 
 def gravity(cx: Context, doc: YMap, params=()) -> tuple:
@@ -91,13 +95,27 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
                 pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
                 points[pn] = exact.floats(frame_.T * (pos - com))
                 cx.point_r0[(name, pn)] = pos
+        dirs = _directions(v["directions"], *at("directions")) if "directions" in v else {}
         vel, vel_expr = _parametric_vector(cx, v, "velocity", key, pnames)
         omg, omg_expr = _parametric_vector(cx, v, "omega", key, pnames)
         out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
                          exact.floats(frame_), exact.floats(com), points,
                          tuple(float(x) for x in vel), tuple(float(x) for x in omg),
-                         mass_expr, inertia_expr, vel_expr, omg_expr)
+                         mass_expr, inertia_expr, vel_expr, omg_expr, dirs)
     cx.bodies = out
+    return out
+
+
+def _directions(v, loc, key) -> dict:
+    """``directions: {name: [x, y, z]}``: body-fixed unit vectors (R0 at the initial pose)
+    that a port at one of the body's points may act along."""
+    dirs = mapping(v, loc, key, "a mapping {name: [x, y, z]}")
+    out = {}
+    for dn, dv in dirs.items():
+        if not isinstance(dn, str) or not IDENT.match(dn) or dn in R0_DIRECTIONS:
+            fail(f"{dn!r} is not a valid direction name", dirs.key_locs[dn], key,
+                 "an identifier other than x, y, z (which are R0's axes)")
+        out[dn] = unit_vector(dv, dirs.val_locs[dn], f"{key}.{dn}")     # exact
     return out
 
 

@@ -25,6 +25,7 @@ class Context:
         self.bodies: dict[str, Body] = {}
         self.point_r0: dict[tuple[str, str], sp.Matrix] = {}   # (body, point) -> exact R0
         self.joints: dict[str, Joint] = {}
+        self.ports: dict = {}               # ports the bonds reach: name -> model.Port
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
         self.pvals: dict = {}               # parameter symbol -> value, once parsed
         self.overridden: set = set()        # parameters given by -p (``loads`` overrides)
@@ -65,6 +66,8 @@ class Context:
         """The symbol of a reference ``target.attr`` in an expression: a body's or a
         point's coordinate, a joint's, a bond's or an element's variable (``kinds``: the
         elements' kinds by name; ``bond_names``: the bonds')."""
+        if "." in target and target.split(".")[0] in self.joints:    # joint.direction.attr
+            return self._direction_ref(target, attr, key, loc)
         if "." in target:                      # body.point.attr
             return self._point_ref(target, attr, key, loc)
         if target in self.joints:
@@ -89,6 +92,20 @@ class Context:
             fail(f"'{target}.{attr}' names no element or bond", loc, key,
                  "write element.e, element.f, C.q, I.p or bond.e, bond.f")
         return self._element_ref(target, attr, kinds[target], vector, key, loc)
+
+    def _direction_ref(self, target, attr, key, loc):
+        """``joint.direction.q`` (displacement from the initial pose: m or rad) and
+        ``.v`` (rate) of a joint's free direction: its sensors."""
+        from bgc.mechanics.joints import JOINT_KINDS
+        joint, label = target.split(".", 1)
+        free = JOINT_KINDS[self.joints[joint].kind].free
+        if label not in free:
+            fail(f"'{target}' is not a free direction of joint '{joint}'", loc, key,
+                 "free directions: " + (", ".join(f"{joint}.{d}" for d in free) or "none"))
+        if attr not in Joint.DIRECTION_ATTRS:
+            fail(f"joint direction '{target}' has no '.{attr}'", loc, key,
+                 "valid: " + ", ".join(f"{target}.{a}" for a in Joint.DIRECTION_ATTRS))
+        return symbols.ref(f"{joint}__{label}", attr)
 
     def _point_ref(self, target, attr, key, loc):
         body, pt = target.split(".", 1)

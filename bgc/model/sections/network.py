@@ -10,7 +10,8 @@ import sympy as sp
 
 from bgc.model import symbols
 from bgc.model.document import YList, YMap
-from bgc.model.model import KINDS, Bond, Element, Output
+from bgc.model.model import KINDS, Bond, Element, Output, Port
+from bgc.model.sections.bodies import R0_DIRECTIONS
 from bgc.model.sections.context import Context
 from bgc.model.values import check_keys, fail, kind_of, mapping
 
@@ -35,7 +36,8 @@ def element_headers(cx: Context, sec: YMap) -> dict[str, tuple[str, YMap]]:
 
 def bonds(cx: Context, sec: YList, elements) -> list[Bond]:
     """Each bond, ``[from, to]`` or ``{name, from, to, dim}``, between two declared
-    ``elements``; unnamed ones are b1, b2, ... by position."""
+    ``elements`` or ports of the mechanism (``port``); unnamed ones are b1, b2, ... by
+    position."""
     out, seen_pairs = [], {}
     for i, v in enumerate(sec):
         loc, key = sec.item_locs[i], f"bonds[{i}]"
@@ -66,9 +68,16 @@ def bonds(cx: Context, sec: YList, elements) -> list[Bond]:
                      f"{cx.names[name][0]}", loc, key, "give this bond a name:")
             cx.names[name] = (f"bond '{name}'", loc)
         for end in (src, dst):
-            if not isinstance(end, str) or end not in elements:
+            if isinstance(end, str) and "." in end:
+                port(cx, end, loc, key)
+                if dim != 1:
+                    fail(f"bond to port '{end}' has dim {dim}", loc, key,
+                         "a port of the mechanism is scalar: dim 1")
+            elif not isinstance(end, str) or end not in elements:
                 fail(f"bond connects unknown element {end!r}", loc, key,
-                     "declared elements: " + ", ".join(elements))
+                     "declared elements: " + ", ".join(elements) + (
+                         "; or a port: joint.direction, body.point.direction"
+                         if cx.bodies else ""))
         if src == dst:
             fail(f"bond connects '{src}' to itself", loc, key)
         pair = frozenset((src, dst))
@@ -78,6 +87,49 @@ def bonds(cx: Context, sec: YList, elements) -> list[Bond]:
         seen_pairs[pair] = loc
         out.append(Bond(name, src, dst, loc, dim))
     return out
+
+
+def port(cx: Context, name: str, loc, key) -> Port:
+    """The port a bond end ``joint.direction`` or ``body.point.direction`` names (kept in
+    ``cx.ports``): a free direction of the joint, or a point of the body along x, y, z
+    (R0) or one of the body's ``directions``."""
+    from bgc.mechanics.joints import JOINT_KINDS
+    if name in cx.ports:
+        return cx.ports[name]
+    parts = name.split(".")
+    if len(parts) == 2 and parts[0] in cx.joints:
+        j = cx.joints[parts[0]]
+        spec = JOINT_KINDS[j.kind]
+        free = ", ".join(spec.free) or "none"
+        if parts[1] in spec.blocked:
+            fail(f"port '{name}': a {j.kind} joint blocks {parts[1]}", loc, key,
+                 f"a port is on a free direction; free directions of '{j.name}': {free}")
+        if parts[1] not in spec.free:
+            fail(f"port '{name}': joint '{j.name}' has no direction '{parts[1]}'", loc, key,
+                 f"free directions of this {j.kind} joint: {free}")
+        p = Port(name, loc, parts[1], joint=j.name, rotational=parts[1].startswith("r"))
+    elif len(parts) == 3 and parts[0] in cx.bodies:
+        b = cx.bodies[parts[0]]
+        if parts[1] not in b.points:
+            fail(f"port '{name}': body '{b.name}' has no point '{parts[1]}'", loc, key,
+                 "its points: " + (", ".join(b.points) or "none (add 'points:' to it)"))
+        valid = R0_DIRECTIONS + tuple(b.directions)
+        if parts[2] not in valid:
+            fail(f"port '{name}': no direction '{parts[2]}' at a point of '{b.name}'", loc,
+                 key, "x, y, z (R0) or one of the body's 'directions:'"
+                 + (f" ({', '.join(b.directions)})" if b.directions else ""))
+        p = Port(name, loc, parts[2], body=b.name, point=parts[1])
+    else:
+        what = ("joint" if parts[0] in cx.joints else "body" if parts[0] in cx.bodies
+                else None)
+        form = {"joint": "joint.direction (e.g. slide.tx)",
+                "body": "body.point.direction (e.g. box.P.z)"}.get(what)
+        fail(f"bond connects unknown element or port {name!r}", loc, key,
+             f"write {form}" if form else
+             "a port is joint.direction or body.point.direction; joints: "
+             + (", ".join(cx.joints) or "none") + "; bodies: " + (", ".join(cx.bodies) or "none"))
+    cx.ports[name] = p
+    return p
 
 
 def element_fields(cx: Context, headers, params, signals, bonds) -> dict[str, Element]:

@@ -24,7 +24,7 @@ import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
 from bgc import methods
-from bgc.codegen import elements
+from bgc.codegen import blocks, elements
 from bgc.codegen.elements import Dt, State, matmul
 from bgc.codegen.forward_mode import directional, propagate, trivial
 from bgc.errors import EquationError
@@ -245,6 +245,7 @@ class Builder:
         for name, el in self.g.elements.items():
             elements.RULES[el.kind](self, name, el)
         self.kinematics()
+        blocks.build(self)
 
     def port(self, name):
         """A one-port element's bond, the sign of its power, its effort and flow."""
@@ -402,6 +403,7 @@ class Builder:
                 b, s, E, F = self.port(name)
                 out.update(self._refs(name, "e", E))
                 out.update(self._refs(name, "f", s * F))
+        out.update(blocks.refs(self.m, want))
         for st in self.states:
             if want(st.element):
                 out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
@@ -614,13 +616,14 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
     kind = "derivative" if any(symbols.kind(v) == "rate" for v in comp) else "algebraic"
     loop = Loop(kind, [b.display.get(v, v.name) for v in comp], bonds, elements,
                 [b.display.get(v, v.name) for v in tears])
-    where = b.g.elements[elements[0]] if elements else None
+    placed = [e for e in elements if e in b.g.elements]     # not a control block
+    where = b.g.elements[placed[0]] if placed else None
 
     def refuse(why, hint):
         return EquationError(f"{why}: {loop.kind} loop through elements "
                              f"{', '.join(elements)} and bonds {', '.join(bonds)}",
                              loc=where.loc if where else None,
-                             key=f"elements.{elements[0]}" if elements else None, hint=hint)
+                             key=f"elements.{placed[0]}" if placed else None, hint=hint)
 
     if multipliers and set(tears) == set(multipliers):
         loop.kind = "constraint"

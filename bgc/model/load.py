@@ -30,14 +30,15 @@ from bgc.model.document import (  # noqa: F401  (MAX_*, read_source: bgc's limit
     read_source,
 )
 from bgc.model.model import Model, Parasitic, Table
-from bgc.model.sections import bodies, excitation, joints, network, parameters
+from bgc.model.sections import blocks, bodies, excitation, joints, network, parameters
 from bgc.model.sections.context import Context
 from bgc.model.sections.joints import joint_params  # noqa: F401  (scene.reduce's)
 from bgc.model.sections.settings import settings
 from bgc.model.values import check_keys, fail, kind_of
 
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
-            "parasitic", "excitation", "elements", "bonds", "outputs", "simulation")
+            "parasitic", "excitation", "elements", "bonds", "blocks", "outputs",
+            "simulation")
 
 
 def loads(text: str, file: str = "<string>", overrides: dict | None = None) -> Model:
@@ -81,14 +82,16 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
     exc = excitation.excitation(cx, section("excitation"), params, sigs, tables)
     headers = network.element_headers(cx, section("elements"))
     bnds = network.bonds(cx, section("bonds", YList), headers)
+    block_heads = blocks.headers(cx, section("blocks"))     # an MSe may read ctrl.y
     elements = network.element_fields(cx, headers, params, sigs, bnds)
+    blks = blocks.blocks(cx, block_heads, params, sigs, elements, bnds)
     outputs = network.outputs(cx, section("outputs"), params, sigs, elements, bnds)
     return Model(name=name, file=file, digest=digest(doc), parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bnds, outputs=outputs,
                  settings=sets, description=doc.get("description"), bodies=bods,
                  gravity=gravity, gravity_expr=gravity_expr, joints=jts, excitation=exc,
                  static_loads=doc.get("parasitic", {}).get("loads") == "static",
-                 ports=cx.ports)
+                 ports=cx.ports, blocks=blks)
 
 
 def _check_top(doc, file: str) -> str:

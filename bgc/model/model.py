@@ -125,6 +125,52 @@ class Output:
     loc: Loc
 
 
+@dataclass(frozen=True)
+class BlockSpec:
+    """What a control block kind takes: the gains and time constants it needs and those
+    with a default (all expressions of parameters), its initial-value key, and whether
+    its output reads its input directly (feedthrough: a cycle of such blocks is an
+    algebraic loop)."""
+    required: tuple[str, ...]
+    optional: dict
+    initial: str | None
+    feedthrough: bool
+    doc: str
+
+
+BLOCK_KINDS: dict[str, BlockSpec] = {
+    "gain": BlockSpec(("k",), {}, None, True, "y = k u"),
+    "sum": BlockSpec((), {}, None, True, "y = the sum of its inputs"),
+    "integrator": BlockSpec((), {"k": 1}, "y0", False,
+                            "y' = k u, held within its limits (a clamping integrator)"),
+    "lag": BlockSpec(("T",), {"k": 1}, "y0", False, "first-order lag T y' = k u - y"),
+    "PI": BlockSpec(("kp", "ki"), {"tt": None}, "x0", True,
+                    "y = kp u + ki integral(u), anti-windup by back-calculation"),
+    "PID": BlockSpec(("kp", "ki", "kd"), {"n": 10, "tt": None}, "x0", True,
+                     "y = kp u + ki integral(u) + kd s/(1 + s Td/n) u, Td = kd/kp"),
+}
+
+
+@dataclass(frozen=True)
+class Block:
+    """A signal-flow control block (``blocks:``). Its input ``u`` is an expression like
+    an MSe's effort (a sum's inputs added); its gains and time constants (``values``)
+    and limits are expressions of parameters, read as they are by the generated code so
+    that ``-p`` retunes them. Its output ``name.y`` (saturated to ``limits``) may
+    modulate MSe, MSf, MTF, MGY and be an output."""
+    name: str
+    kind: str                               # a key of BLOCK_KINDS
+    loc: Loc
+    input: sp.Expr
+    values: dict = field(default_factory=dict)     # k, kp, ki, kd, n, T, tt -> expression
+    limits: tuple | None = None             # (lo, hi), expressions of parameters
+    initial: sp.Expr | int = 0              # y0 (integrator, lag) or x0 (PI, PID)
+    anti_windup: bool = True                # PI, PID with limits: back-calculation
+    description: str | None = None
+
+    ATTRS = ("y", "u")      # what a model expression may read: block.y, block.u
+
+
 # At most this many output times (--points, simulation.points, a scene's time.points):
 # the result is a points x (states + outputs) float array; 10 million rows of a
 # 50-column model is 4 GB.
@@ -313,6 +359,8 @@ class Model:
     # parasitic spring starts carrying its static joint load (``parasitic: {loads: static}``)
     static_loads: bool = False
     ports: dict[str, Port] = field(default_factory=dict)   # name as written -> Port
+    # control blocks (``blocks:``), in the order the file gives them
+    blocks: dict[str, Block] = field(default_factory=dict)
 
     def param_values(self) -> dict[sp.Symbol, float]:
         from bgc.model import symbols

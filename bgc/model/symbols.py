@@ -87,11 +87,17 @@ def output(name: str) -> sp.Symbol:
     return _sym(f"Y_{name}")
 
 
+def block(name: str, attr: str) -> sp.Symbol:
+    """A control block's signal: its input ``u``, output ``y``, unsaturated output ``v``."""
+    return _sym(f"BLK_{name}__{attr}")
+
+
 # What a symbol stands for, from the prefix this module gave it: the one inverse of the
 # naming above, so that no other stage reads meaning into a symbol's name.
 _KINDS = {"DX_": "rate", "X_": "state", "LAM_": "multiplier", "ACC_": "acceleration",
           "W_": "unknown", "P_": "parameter", "U_": "signal", "REF_": "reference",
-          "E_": "effort", "F_": "flow", "V_": "algebraic", "Y_": "output", "ROT_": "rotation"}
+          "E_": "effort", "F_": "flow", "V_": "algebraic", "Y_": "output", "ROT_": "rotation",
+          "BLK_": "block"}
 
 
 def kind(s: sp.Symbol) -> str | None:

@@ -12,7 +12,7 @@ import sympy as sp
 from bgc.errors import Loc
 from bgc.model import expr as bexpr
 from bgc.model import symbols
-from bgc.model.model import KINDS, Body, Joint, Settings
+from bgc.model.model import KINDS, Block, Body, Joint, Settings
 from bgc.model.values import IDENT, fail
 
 
@@ -26,6 +26,7 @@ class Context:
         self.point_r0: dict[tuple[str, str], sp.Matrix] = {}   # (body, point) -> exact R0
         self.joints: dict[str, Joint] = {}
         self.ports: dict = {}               # ports the bonds reach: name -> model.Port
+        self.blocks: dict[str, str] = {}    # control blocks' kinds, once their names are read
         self.multibond: set[str] = set()    # bonds and elements on bonds of dimension > 1
         self.pvals: dict = {}               # parameter symbol -> value, once parsed
         self.overridden: set = set()        # parameters given by -p (``loads`` overrides)
@@ -64,12 +65,18 @@ class Context:
 
     def resolve_ref(self, target, attr, kinds, bond_names, key, loc):
         """The symbol of a reference ``target.attr`` in an expression: a body's or a
-        point's coordinate, a joint's, a bond's or an element's variable (``kinds``: the
-        elements' kinds by name; ``bond_names``: the bonds')."""
+        point's coordinate, a joint's or a joint direction's, a bond's or an element's
+        variable, a control block's output or input (``kinds``: the elements' kinds by
+        name; ``bond_names``: the bonds')."""
         if "." in target and target.split(".")[0] in self.joints:    # joint.direction.attr
             return self._direction_ref(target, attr, key, loc)
         if "." in target:                      # body.point.attr
             return self._point_ref(target, attr, key, loc)
+        if target in self.blocks:
+            if attr not in Block.ATTRS:
+                fail(f"block '{target}' has no '.{attr}'", loc, key,
+                     f"valid: {target}.y (its output), {target}.u (its input)")
+            return symbols.ref(target, attr)
         if target in self.joints:
             if attr not in Joint.ATTRS:
                 fail(f"joint '{target}' has no '.{attr}'", loc, key,
@@ -90,7 +97,7 @@ class Context:
             return symbols.ref(target, attr)
         if target not in kinds:
             fail(f"'{target}.{attr}' names no element or bond", loc, key,
-                 "write element.e, element.f, C.q, I.p or bond.e, bond.f")
+                 "write element.e, element.f, C.q, I.p, bond.e, bond.f or block.y")
         return self._element_ref(target, attr, kinds[target], vector, key, loc)
 
     def _direction_ref(self, target, attr, key, loc):

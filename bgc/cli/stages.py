@@ -75,6 +75,7 @@ def load_view(model) -> dict:
                        for p in model.parameters.values()},
         "signals": {s.name: s.kind for s in model.signals.values()},
         "elements": {e.name: e.kind for e in model.elements.values()},
+        "blocks": {b.name: b.kind for b in model.blocks.values()},
         "bonds": [{"bond": b.name, "from": b.src, "to": b.dst, "dim": b.dim}
                   for b in model.bonds],
         "bodies": {b.name: {"mass": b.mass, "inertia": list(b.inertia)}
@@ -182,6 +183,7 @@ def _load_lines(r: dict) -> list[str]:
             for n, p in r["parameters"].items()]
     out += [f"  signal {n}: {kind}" for n, kind in r["signals"].items()]
     out += [f"  element {n}: {kind}" for n, kind in r["elements"].items()]
+    out += [f"  block {n}: {kind}" for n, kind in r["blocks"].items()]
     out += [f"  bond {b['bond']}: {b['from']} -> {b['to']}"
             + (f" (dim {b['dim']})" if b["dim"] != 1 else "") for b in r["bonds"]]
     out += [f"  body {n}: mass {b['mass']:g}, inertia {_names(f'{v:g}' for v in b['inertia'])}"

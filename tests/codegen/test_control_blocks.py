@@ -12,8 +12,9 @@ from helpers import fd_jacobian
 from scipy.integrate import solve_ivp
 
 from bgc.cli.options import check_overrides, parse_params
-from bgc.errors import BgcError
-from bgc.pipeline import ensure_module
+from bgc.errors import BgcError, EquationError
+from bgc.model.load import loads
+from bgc.pipeline import build, ensure_module
 from bgc.simulate import simulate
 
 MOTOR = """\
@@ -180,3 +181,30 @@ def test_minus_p_retunes_the_controller_without_recompiling(motor):
     assert np.abs(r.column("theta") - base.column("theta")).max() > 1e-2
     with pytest.raises(BgcError, match="T = 0"):
         check_overrides(path, [("T_s", 0.0)])
+
+
+LOOP = """\
+name: loop
+elements:
+  drive: {{type: MSe, effort: "1 + g.y"}}
+  R: {{type: R, R: 2.0}}
+  node: {{type: "1"}}
+  L: {{type: I, I: 1.0}}
+bonds:
+  - [drive, node]
+  - [node, R]
+  - [node, L]
+blocks:
+  g: {{type: gain, input: L.e, k: 0.5{limits}}}
+"""
+
+
+def test_an_algebraic_loop_through_the_graph_and_a_block():
+    """drive.e = 1 + g.y, g.y = 0.5 L.e, L.e = drive.e - R.e: linear, solved; saturated,
+    refused as a nonlinear loop naming the block (the equations stage's rule)."""
+    c = build(loads(LOOP.format(limits=""), "loop.yaml"))
+    (loop,) = c.system.loops
+    assert "g" in loop.elements and "drive" in loop.elements
+    with pytest.raises(EquationError, match="nonlinear algebraic loop: .*drive, g") as e:
+        build(loads(LOOP.format(limits=", limits: [-1, 1]"), "loop.yaml"))
+    assert e.value.key == "elements.drive" and e.value.loc.line == 3

@@ -105,14 +105,21 @@ def _pi(bld: Builder, blk: Block, u):
         v = _signal(bld, blk, "v", v)
         y = _signal(bld, blk, "y", _saturated(blk, v))
         if blk.anti_windup:
-            inv_tt = (1 / val["tt"] if "tt" in val else val["ki"] / val["kp"]
-                      if blk.kind == "PI" else sp.sqrt(val["ki"] / val["kd"]))
-            rate += (y - v) * inv_tt
+            rate += (y - v) * _inverse_tracking_time(blk)
     else:
         _signal(bld, blk, "y", v)
     _state(bld, blk, "xi", rate, blk.initial)
     if blk.kind == "PID":       # the filter starts at 0: a kick if u(0) is not 0
         _state(bld, blk, "xd", (u - xd) / tf, 0)
+
+def _inverse_tracking_time(blk: Block):
+    """1/Tt of back-calculation: 1/tt, or 1/Ti = ki/kp (PI), 1/sqrt(Ti Td) = sqrt(ki/kd)
+    (PID); written so that ki = 0 (no integral action) gives 0, not a division by 0."""
+    val = blk.values
+    if "tt" in val:
+        return 1 / val["tt"]
+    return val["ki"] / val["kp"] if blk.kind == "PI" else sp.sqrt(val["ki"] / val["kd"])
+
 
 RULES = {"gain": _gain, "sum": _sum, "integrator": _integrator, "lag": _lag, "PI": _pi,
          "PID": _pi}

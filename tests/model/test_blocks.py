@@ -105,9 +105,11 @@ def test_unmodulated_elements_refuse_a_block(kind, key):
     ("  c: {type: gain, k: 2}", "blocks.c", "missing 'input'", "input:"),
     ("  c: {type: sum}", "blocks.c", "missing 'inputs'", "inputs:"),
     ("  c: {type: gain, input: x_set}", "blocks.c", "missing 'k'", "needs k"),
-    ("  c: {type: gain, input: nope.y, k: 1}", "blocks.c", "'nope.y' names no element",
+    ("  c: {type: gain, input: nope.y, k: 1}", "blocks.c.input", "'nope.y' names no element",
      "block.y"),
-    ("  c: {type: gain, input: ctrl.x, k: 1}", "blocks.c", "block 'ctrl' has no '.x'",
+    ("  c: {type: sum, inputs: [x_set, -nope.y]}", "blocks.c.inputs[1]",
+     "'nope.y' names no element", "block.y"),
+    ("  c: {type: gain, input: ctrl.x, k: 1}", "blocks.c.input", "block 'ctrl' has no '.x'",
      "ctrl.y"),
     ("  c: {type: gain, input: x_set, k: 1, gain: 2}", "blocks.c.gain", "unknown key 'gain'",
      "valid keys"),
@@ -157,3 +159,10 @@ def test_minus_p_values_are_checked_as_the_file_s():
     err = _refused(CTRL + "\n  lp: {type: lag, input: x_set, T: T_f}", T_f=0.0)
     assert err.key == "blocks.lp.T"
     assert _refused(CTRL, U=-1.0).key == "blocks.ctrl.limits"
+
+
+def test_a_clamping_integrator_starts_within_its_limits():
+    ok = "\n  i1: {type: integrator, input: x_set, limits: [-1, 1], y0: 0.5}"
+    assert _load(CTRL + ok).blocks["i1"].initial == 0.5
+    err = _refused(CTRL + ok.replace("y0: 0.5", "y0: 2"))
+    assert err.key == "blocks.i1.y0" and "outside the limits" in err.message

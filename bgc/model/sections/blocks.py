@@ -46,50 +46,58 @@ def blocks(cx: Context, heads, params, signals, elements, bonds) -> dict[str, Bl
     ``headers``); a cycle of feedthrough blocks is refused with their names."""
     kinds = {n: e.kind for n, e in elements.items()}
     bond_names = {b.name for b in bonds}
+
+    def resolver(key, loc):
+        def resolve(target, attr):
+            return cx.resolve_ref(target, attr, kinds, bond_names, key, loc)
+        return resolve
+
     names = cx.expr_names(params, signals)
     pnames = {n: symbols.param(n) for n in params}
-    out = {}
-    for name, (kind, v) in heads.items():
-        spec, key = BLOCK_KINDS[kind], f"blocks.{name}"
-        allowed = ("type", "description", "inputs" if kind == "sum" else "input",
-                   "limits") + spec.required + tuple(spec.optional)
-        if kind == "sum":
-            allowed += ("input",)
-        if kind in ("PI", "PID"):
-            allowed += ("anti_windup",)
-        check_keys(v, allowed + ((spec.initial,) if spec.initial else ()), key)
-
-        def resolve(target, attr, key=key, loc=v.loc):
-            return cx.resolve_ref(target, attr, kinds, bond_names, key, loc)
-
-        u = _input(cx, v, kind, key, names, resolve)
-        values = {}
-        for k in spec.required + tuple(spec.optional):
-            if k in v:
-                values[k] = _value(cx, v[k], v.val_locs[k], f"{key}.{k}", pnames)
-            elif k in spec.required:
-                fail(f"missing '{k}'", v.loc, key, f"a {kind} block needs "
-                     + ", ".join(spec.required) + f": {spec.doc}")
-            elif spec.optional[k] is not None:
-                values[k] = sp.sympify(spec.optional[k])
-        limits = _limits(cx, v, key, pnames) if "limits" in v else None
-        aw = v.get("anti_windup", "back_calculation")
-        if aw not in ANTI_WINDUP:
-            fail(f"unknown anti_windup {aw!r}", v.val_locs["anti_windup"],
-                 f"{key}.anti_windup", "valid: " + ", ".join(ANTI_WINDUP))
-        blk = Block(name, kind, v.loc, u, values, limits,
-                    _value(cx, v[spec.initial], v.val_locs[spec.initial],
-                           f"{key}.{spec.initial}", pnames)
-                    if spec.initial in v else sp.S.Zero,
-                    aw != "none", v.get("description"))
-        _check_values(cx, blk, v, key)
-        out[name] = blk
+    out = {name: _block(cx, name, kind, v, names, pnames, resolver)
+           for name, (kind, v) in heads.items()}
     _check_cycles(out, heads)
     return out
 
 
-def _input(cx: Context, v: YMap, kind, key, names, resolve) -> sp.Expr:
+def _block(cx: Context, name, kind, v: YMap, names, pnames, resolver) -> Block:
+    """One block from its mapping ``v``: keys, input, values (a kind's defaults where
+    not given), limits, anti-windup and initial value, checked."""
+    spec, key = BLOCK_KINDS[kind], f"blocks.{name}"
+    allowed = (("type", "description", "input", "limits") + (("inputs",) if kind == "sum"
+                                                            else ())
+               + spec.required + tuple(spec.optional)
+               + (("anti_windup",) if kind in ("PI", "PID") else ())
+               + ((spec.initial,) if spec.initial else ()))
+    check_keys(v, allowed, key)
+    u = _input(cx, v, kind, key, names, resolver)
+    values = {}
+    for k in spec.required + tuple(spec.optional):
+        if k in v:
+            values[k] = _value(cx, v[k], v.val_locs[k], f"{key}.{k}", pnames)
+        elif k in spec.required:
+            fail(f"missing '{k}'", v.loc, key, f"a {kind} block needs "
+                 + ", ".join(spec.required) + f": {spec.doc}")
+        elif spec.optional[k] is not None:
+            values[k] = sp.sympify(spec.optional[k])
+    limits = _limits(cx, v, key, pnames) if "limits" in v else None
+    aw = v.get("anti_windup", "back_calculation")
+    if aw not in ANTI_WINDUP:
+        fail(f"unknown anti_windup {aw!r}", v.val_locs["anti_windup"],
+             f"{key}.anti_windup", "valid: " + ", ".join(ANTI_WINDUP))
+    initial = (_value(cx, v[spec.initial], v.val_locs[spec.initial],
+                      f"{key}.{spec.initial}", pnames) if spec.initial in v else sp.S.Zero)
+    blk = Block(name, kind, v.loc, u, values, limits, initial, aw != "none",
+                v.get("description"))
+    _check_values(cx, blk, v, key)
+    return blk
+
+
+def _input(cx: Context, v: YMap, kind, key, names, resolver) -> sp.Expr:
     """The block's input: ``input`` (an expression), or a sum's ``inputs`` added."""
+    def parse(text, loc, k):
+        return cx.parse(text, loc=loc, key=k, names=names, resolve_ref=resolver(k, loc))
+
     if kind == "sum" and "inputs" in v:
         if "input" in v:
             fail("a sum takes 'inputs' or 'input', not both", v.val_locs["input"],
@@ -98,15 +106,13 @@ def _input(cx: Context, v: YMap, kind, key, names, resolve) -> sp.Expr:
         if not isinstance(items, YList) or not items:
             fail("'inputs' is a list of expressions", v.val_locs["inputs"], f"{key}.inputs",
                  "write inputs: [x_set, -mass.x]")
-        return sp.Add(*[cx.parse(x, loc=items.item_locs[i], key=f"{key}.inputs[{i}]",
-                                 names=names, resolve_ref=resolve)
+        return sp.Add(*[parse(x, items.item_locs[i], f"{key}.inputs[{i}]")
                         for i, x in enumerate(items)])
     if "input" not in v:
         fail(f"missing '{'inputs' if kind == 'sum' else 'input'}'", v.loc, key,
              "inputs: [a, -b]" if kind == "sum" else "input: an expression such as "
              "\"x_set - mass.x\"")
-    return cx.parse(v["input"], loc=v.val_locs["input"], key=f"{key}.input", names=names,
-                    resolve_ref=resolve)
+    return parse(v["input"], v.val_locs["input"], f"{key}.input")
 
 
 def _value(cx: Context, text, loc, key, pnames) -> sp.Expr:
@@ -136,9 +142,10 @@ def _at(cx: Context, e: sp.Expr) -> float:
 
 
 def _check_values(cx: Context, blk: Block, v: YMap, key):
-    """Time constants > 0 (T = 0 is no lag); PID's derivative filter time kd/(kp n) > 0;
-    the default tracking time of back-calculation (Ti = kp/ki for PI, sqrt(Ti Td) for
-    PID) defined where the output is limited."""
+    """Time constants > 0 (T = 0 is no lag); a clamping integrator's y0 within its
+    limits; PID's derivative filter time kd/(kp n) > 0; the default tracking time of
+    back-calculation (Ti = kp/ki for PI, sqrt(Ti Td) for PID) defined where the output
+    is limited."""
     for k, what in _POSITIVE.items():
         if k in blk.values and k in v:
             val = _at(cx, blk.values[k])
@@ -146,6 +153,10 @@ def _check_values(cx: Context, blk: Block, v: YMap, key):
                 fail(f"{k} = {val:g}: {what} must be > 0", v.val_locs[k], f"{key}.{k}",
                      "use a gain block for no lag" if k == "T" and val == 0 else
                      "write a positive value")
+    if blk.kind == "integrator" and blk.limits and "y0" in v and not (
+            _at(cx, blk.limits[0]) <= _at(cx, blk.initial) <= _at(cx, blk.limits[1])):
+        fail(f"y0 = {_at(cx, blk.initial):g} is outside the limits", v.val_locs["y0"],
+             f"{key}.y0", "a clamping integrator starts within [lo, hi]")
     p = {k: _at(cx, e) for k, e in blk.values.items()}
     if blk.kind == "PID" and not (p["kp"] * p["n"] != 0 and p["kd"] / (p["kp"] * p["n"]) > 0):
         fail(f"the derivative filter's time constant kd/(kp n) = {p['kd']:g}/"

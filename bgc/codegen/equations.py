@@ -281,12 +281,14 @@ class Builder:
             F0 = exact.matrix(body.frame)
             C = cardan.rotation(*ang)
             self.define(rotation_matrix(n), C if F0 == sp.eye(3) else matmul(F0, C), n)
+            shift = body.offset_expr or (0, 0, 0)    # a joint's initial displacement
             for k in range(3):
                 for x, rate, x0, label in ((pos[k], v[k], body.com[k], AXES[k]),
                                            (ang[k], rates[k], 0.0, f"a{AXES[k]}")):
                     dx = symbols.dstate(n, label)
                     self.define(dx, rate, n)
-                    self.states.append(State(f"{n}.{label}", x, dx, exact.rational(x0), n))
+                    x0 = exact.rational(x0) + (shift[k] if label in AXES else 0)
+                    self.states.append(State(f"{n}.{label}", x, dx, x0, n))
                     self.display[x], self.display[dx] = f"{n}.{label}", f"d({n}.{label})/dt"
 
     # --- references, derivatives --------------------------------------------------------

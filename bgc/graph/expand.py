@@ -202,7 +202,7 @@ class _Expander:
                     q = symbols.LOCAL["q"]
                     parts.append(self.add(f"{zero}__spring", "C", j.loc,
                                           effort=p("k") * q - p("preload"),
-                                          initial=sp.S.Zero))
+                                          initial=j.initial.get(d.label, sp.S.Zero)))
                 elif fun.preload != 0:
                     parts.append(self.add(f"{zero}__preload", "Se", j.loc,
                                           effort=-p("preload")))

@@ -211,6 +211,10 @@ class Body:
     # named body-fixed directions (exact unit vectors, R0 at the initial pose) that a port at
     # one of its points may act along: ``body.point.direction`` in a bond
     directions: dict = field(default_factory=dict)
+    # where G starts, relative to ``com`` (R0; expressions of parameters): set by a
+    # joint's ``initial`` displacement of this body along a free translation. The
+    # geometry (points, joints) is given at ``com``; only the initial state moves.
+    offset_expr: tuple | None = None
 
     # attributes a model expression may read: body.<attr>
     ATTRS = ("x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "wx_R0", "wy_R0", "wz_R0",
@@ -264,6 +268,9 @@ class Joint:
     functional: dict = field(default_factory=dict)    # direction label -> Functional
     pitch: float = 0.0                                # screw: translation per turn
     output_frame: tuple | None = None   # frame of the force outputs (default: joint frame)
+    # free translations body 2 starts displaced along (``initial: {tx: x_set}``): label
+    # -> expression of parameters
+    initial: dict = field(default_factory=dict)
 
     # attributes a model expression may read: joint.<attr>
     # F/M: force and moment on body 2 from body 1 (output frame, or _R0); gap/tilt: size

@@ -202,3 +202,51 @@ def test_gravity_by_a_parameter_swings_the_pendulum_as_the_number_does(tmp_path)
 def test_a_negative_gravity_by_parameters_is_refused():
     with pytest.raises(ModelError, match="gravity = -g_acc is -9.81"):
         loads(PENDULUM.format(name="pend", g="-g_acc"), "pend.yaml")
+
+
+INITIAL = """\
+name: {name}
+parameters: {{x0: 0.01}}
+bodies:
+  cart: {{mass: 2.0, com: [0, 0, 0], inertia: [1, 1, 1]}}
+  {extra}
+joints:
+  rail: {{type: prismatic, between: [fixed_frame, cart], at: [0, 0, 0], axis: [0.6, 0.8, 0],
+         spring: {{k: 50, c: 0}}, initial: {initial}}}
+  {joint}
+outputs:
+  xs: rail.tx.q
+simulation: {{t_end: 1.0}}
+"""
+
+
+def _initial(initial="{tx: x0}", extra="", joint="", name="rail_start"):
+    return loads(INITIAL.format(name=name, initial=initial, extra=extra, joint=joint),
+                 "rail.yaml")
+
+
+def test_a_joint_starts_displaced_by_a_parameter(tmp_path):
+    """initial: {tx: x0} starts body 2 at x0 along the axis with the spring stretched by
+    it: x = x0 cos(5 t) (k 50, m 2), and -p x0 moves the start without recompiling."""
+    _, path = compile_model(_initial(), tmp_path)
+    mod = import_module(path)
+    for x0 in (0.01, -0.03):
+        p = mod.PARAMS.copy()
+        p[list(mod.PARAM_NAMES).index("x0")] = x0
+        r = simulate(mod, t_end=1.0, rtol=1e-11, atol=1e-13, params=p, points=101)
+        t = r.t
+        assert np.abs(r.column("xs") - x0 * np.cos(5 * t)).max() < 1e-10
+        # the body moved along the axis (0.6, 0.8, 0): cart.x is 0.6 of it
+        assert np.abs(r.column("cart.x") - 0.6 * r.column("xs")).max() < 1e-12
+
+
+@pytest.mark.parametrize("initial, extra, joint, msg", [
+    ("{ty: x0}", "", "", "'ty' is not a free translation of a prismatic joint"),
+    ("{tx: t}", "", "", "unknown name 't'"),
+    ("{tx: x0}", "other: {mass: 1, com: [1, 0, 0], inertia: [1, 1, 1]}",
+     "tie: {type: spherical, between: [cart, other], at: [0.5, 0, 0]}",
+     "body 'cart' is also held by joint tie"),
+])
+def test_a_start_that_cannot_be_is_refused(initial, extra, joint, msg):
+    with pytest.raises(ModelError, match=msg):
+        _initial(initial, extra, joint)

@@ -4,6 +4,7 @@ actuators in its free directions."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import sympy as sp
@@ -18,7 +19,7 @@ from bgc.model.sections.context import Context
 from bgc.model.values import check_keys, fail, mapping, number
 
 JOINT_KEYS = ("type", "between", "at", "axis", "axis2", "frame", "pitch", "spring", "actuator",
-              "directions", "parasitic", "description")
+              "directions", "parasitic", "initial", "description")
 PARASITIC_KEYS = ("stiffness", "damping", "rot_stiffness", "rot_damping")
 
 
@@ -56,7 +57,53 @@ def joints(cx: Context, sec: YMap, params, signals, base: Parasitic) -> dict[str
         joint_params(j, params)
         out[name] = j
     cx.joints = out
+    for j in out.values():
+        if j.initial:
+            _start_displaced(cx, j, sec[j.name])
     return out
+
+
+def _initial(cx: Context, v: YMap, kind, key, names) -> dict:
+    """``initial: {tx: x0}``: how far body 2 starts along free translations of the joint
+    (numbers or expressions of parameters, so ``-p`` moves the start)."""
+    spec = JOINT_KINDS[kind]
+    m = mapping(v["initial"], v.val_locs["initial"], f"{key}.initial",
+                "a mapping {direction: displacement}")
+    pnames = {n: s for n, s in names.items() if symbols.kind(s) == "parameter"}
+    out = {}
+    for lab, x in m.items():
+        kk = f"{key}.initial.{lab}"
+        free = [d for d in spec.free if d.startswith("t")]
+        if lab not in free:
+            fail(f"'{lab}' is not a free translation of a {kind} joint", m.key_locs[lab], kk,
+                 "an initial displacement is along one of: " + (", ".join(free) or "none"))
+        e = cx.parse(x, loc=m.val_locs[lab], key=kk, names=pnames)
+        if not math.isfinite(float(e.xreplace(cx.pvals))):
+            fail(f"initial displacement {x} is not finite at the parameters' values",
+                 m.val_locs[lab], kk)
+        out[lab] = e
+    return out
+
+
+def _start_displaced(cx: Context, j: Joint, v: YMap):
+    """Body 2 of ``j`` starts at ``com + sum(x0 * axis)`` (R0). Only a body that no
+    other joint holds can start displaced this way: the rest of the mechanism stays at
+    its given pose, so the joint's blocked directions stay closed."""
+    loc, key = v.val_locs["initial"], f"joints.{j.name}.initial"
+    others = [o.name for o in cx.joints.values()
+              if o.name != j.name and j.body2 in (o.body1, o.body2)]
+    if j.body2 is None or others or cx.bodies[j.body2].mass == 0:
+        why = ("body 2 is the fixed frame" if j.body2 is None else
+               f"body '{j.body2}' is also held by joint {', '.join(others)}" if others else
+               f"body '{j.body2}' has negligible mass")
+        fail(f"joint '{j.name}' cannot start displaced: {why}", loc, key,
+             "an initial displacement moves body 2 alone: a body with mass that only "
+             "this joint holds")
+    axes = exact.matrix(j.frame)
+    shift = sum((axes[:, "xyz".index(lab[1])] * x for lab, x in j.initial.items()),
+                sp.zeros(3, 1))
+    body = cx.bodies[j.body2]
+    cx.bodies[j.body2] = dataclasses.replace(body, offset_expr=tuple(shift))
 
 
 def _joint(cx: Context, name, v: YMap, key, names, base: Parasitic) -> Joint:
@@ -88,9 +135,10 @@ def _joint(cx: Context, name, v: YMap, key, names, base: Parasitic) -> Joint:
     elif "pitch" in v:
         fail("'pitch' belongs to screw joints", *at("pitch"))
     functional = _functionals(cx, v, kind, key, at, names)
+    initial = _initial(cx, v, kind, key, names) if "initial" in v else {}
     para = parasitic(v["parasitic"], *at("parasitic"), base) if "parasitic" in v else base
     return Joint(name, v.loc, kind, bodies[0], bodies[1], exact.floats(point),
-                 exact.floats(axes), para, functional, pitch, out_frame)
+                 exact.floats(axes), para, functional, pitch, out_frame, initial)
 
 
 def _placement(cx: Context, v: YMap, kind, key, at) -> tuple[sp.Matrix, sp.Matrix]:

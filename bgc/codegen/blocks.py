@@ -112,6 +112,7 @@ def _pi(bld: Builder, blk: Block, u):
     if blk.kind == "PID":       # the filter starts at 0: a kick if u(0) is not 0
         _state(bld, blk, "xd", (u - xd) / tf, 0)
 
+
 def _inverse_tracking_time(blk: Block):
     """1/Tt of back-calculation: 1/tt, or 1/Ti = ki/kp (PI), 1/sqrt(Ti Td) = sqrt(ki/kd)
     (PID); written so that ki = 0 (no integral action) gives 0, not a division by 0."""

@@ -638,8 +638,11 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
         loop.kind = "constraint"
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
                         f"({len(multipliers)} Lagrange multipliers)"]
+        # the constraints' rank at run time, plus the other tears (a storage in
+        # derivative causality on the mechanism's ports), which are never redundant
+        regular = sum(symbols.kind(v) != "multiplier" for v in tears)
         block = _reduced_block(b, tears, order, block_index, refuse,
-                               rank=symbols.param(RANK_PARAM))
+                               rank=symbols.param(RANK_PARAM) + regular)
         return [block] + [(v, eqs[v]) for v in order], loop
     if dependent:
         loop.kind = "imposed-flow"

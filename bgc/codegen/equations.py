@@ -650,6 +650,13 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
                         "ZCP: velocities imposed by the flow sources)"]
         block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
+    if kind == "derivative" and any(e.split("__")[0] in b.g.bodies for e in elements):
+        # a storage geared rigidly to the mechanism through a port: its loop runs through
+        # the bodies' modulated transformers, whose substituted residual would swell
+        # (and expanding it take most of a compile); solved numerically in its tears
+        loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
+        block = _reduced_block(b, tears, order, block_index, refuse)
+        return [block] + [(v, eqs[v]) for v in order], loop
     if any(symbols.kind(v) == "unknown" for v in comp):
         loop.kind = "negligible-mass"
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]

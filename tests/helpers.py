@@ -20,7 +20,7 @@ MODELS = ROOT / "models"
 # models whose numba compilation and runs take minutes: their tests are marked slow (the
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
 # CI scale)
-SLOW_MODELS = {"sarib", "sarib_one_leg"}
+SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive"}
 
 
 def model_params(names=None):

@@ -122,3 +122,16 @@ def test_direction_sensors():
                      ("slide.tx.e", "joint direction 'slide.tx' has no '.e'")):
         with pytest.raises(ModelError, match=msg):
             cart(extra=f"outputs:\n  y: {bad}\n")
+
+
+@pytest.mark.parametrize("sensor, message", [
+    ("nothing.tx.q", "'nothing.tx' names no point of a body nor a joint's direction"),
+    ("cart.Q.x", "'cart.Q' names no point of a body nor a joint's direction"),
+    ("hinge.ry.q", "'hinge.ry' is not a free direction of joint 'hinge'"),
+    ("hinge.rx.f", "joint direction 'hinge.rx' has no '.f'"),
+])
+def test_a_sensor_of_nothing_is_refused_at_its_line(sensor, message):
+    with pytest.raises(ModelError) as e:
+        cart(extra=f"outputs:\n  y: {sensor}\n")
+    assert message in str(e.value)
+    assert e.value.key == "outputs.y" and e.value.loc.line == len(CART.splitlines()) + 2

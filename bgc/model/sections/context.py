@@ -117,8 +117,9 @@ class Context:
     def _point_ref(self, target, attr, key, loc):
         body, pt = target.split(".", 1)
         if body not in self.bodies or pt not in self.bodies[body].points:
-            fail(f"'{target}' names no point of a body", loc, key,
-                 "write body.point.attr with a point from the body's 'points:'")
+            fail(f"'{target}' names no point of a body nor a joint's direction", loc, key,
+                 "write body.point.attr (a point from the body's 'points:') or "
+                 "joint.direction.q / .v")
         valid = Body.POINT_ATTRS if self.bodies[body].mass > 0 else Body.POINT_ATTRS[:6]
         if attr not in valid:
             fail(f"point '{target}' has no '.{attr}'", loc, key,

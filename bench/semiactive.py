@@ -74,26 +74,31 @@ def amplitude(t, y, f, t0, t1) -> float:
 
 def main(out: Path):
     out.mkdir(parents=True, exist_ok=True)
-    rows, runs, notes = [], {}, []
+    rows, runs, notes, built = [], {}, [], {}
     for method in METHODS:
         t0 = time.perf_counter()
-        mod, model, _ = ensure_module(MODEL, out / "build", method)
+        mod, model, _ = built[method] = ensure_module(MODEL, out / "build", method)
         f = [antiresonance(mod, model, x / 1000) for x in SETPOINTS_MM]
         slope = np.polyfit(SETPOINTS_MM, f, 1)[0]
         x_a = brentq(lambda x: antiresonance(mod, model, x) - F_A, -0.015, 0.015, xtol=1e-7)
         x_b = brentq(lambda x: antiresonance(mod, model, x) - F_B, -0.015, 0.015, xtol=1e-7)
         rows += [(method, x, fx) for x, fx in zip(SETPOINTS_MM, f)]
-        runs[method] = retune(mod, model, x_a, x_b)
-        if method == "parasitic":
-            runs["held"] = retune(mod, model, x_a, x_b, follow=False)
         notes.append((method, f, slope, x_a, x_b, time.perf_counter() - t0))
         print(f"{method}: {', '.join(f'{v:.3f}' for v in f)} Hz; {slope:.4f} Hz/mm; "
               f"x(17.5 Hz) = {x_a * 1e3:.3f} mm, x(18.5 Hz) = {x_b * 1e3:.3f} mm",
               file=sys.stderr)
+    # every method runs the reference's (lagrange's) schedule, so that the runs differ
+    # by the methods only
+    _, _, _, x_a, x_b, _ = notes[METHODS.index("lagrange")]
+    for method in METHODS:
+        mod, model, _ = built[method]
+        runs[method] = retune(mod, model, x_a, x_b)
+        if method == "parasitic":
+            runs["held"] = retune(mod, model, x_a, x_b, follow=False)
     write_table(out / "frf.csv", ["x_set_mm"] + [f"{m}_hz" for m in METHODS],
                 [SETPOINTS_MM] + [[f for mm, _, f in rows if mm == m] for m in METHODS])
     _tables(out, runs)
-    _figures(out, runs, rows)
+    _figures(out, runs, rows, built["lagrange"])
     _summary(out, runs, notes)
 
 
@@ -106,15 +111,25 @@ def _tables(out: Path, runs):
     write_table(out / "retune.csv", names, cols)
 
 
-def _figures(out: Path, runs, rows):
-    fig, ax = panels(1, 3.5)
+def _figures(out: Path, runs, rows, reference):
+    fig, ax = panels(2, 3.2, sharex=False)
+    ax = ax[:, 0]
     for method in METHODS:
         pts = [(x, f) for m, x, f in rows if m == method]
         ax[0].plot(*zip(*pts), "o-", label=method)
-    ax[0].set(xlabel="x_set [mm]", ylabel="pumping anti-resonance of a_OF_z [Hz]")
+    ax[0].set(xlabel="x_set [mm]", ylabel="anti-resonance [Hz]")
     ax[0].legend()
-    save_figure(fig, out / "frf.png", "semi-active SARIB: anti-resonance against setpoint")
+    mod, model, _ = reference
+    for x in (-10.0, 0.0, 10.0):
+        lin = frf.linearize(mod, model, "pumping", params(mod, x_set=x / 1000))
+        f, h = frf.sweep(lin, "a_OF_z", *BAND)
+        ax[1].semilogy(f, np.abs(h), label=f"x_set = {x:g} mm")
+    ax[1].set(xlabel="f [Hz]", ylabel="|a_OF_z / F_pumping| [m/s^2/N]")
+    ax[1].legend()
+    save_figure(fig, out / "frf.png", "semi-active SARIB: the pumping anti-resonance of "
+                "a_OF_z against the setpoint (lagrange's |H| below)")
     fig, ax = panels(3, 2.6)
+    ax = ax[:, 0]
     r, held = runs["parasitic"], runs["held"]
     ax[0].plot(held.t, held.column("a_OF_z"), lw=0.5, color="0.6", label="setpoint held")
     ax[0].plot(r.t, r.column("a_OF_z"), lw=0.5, label="retuned")
@@ -145,7 +160,8 @@ def _summary(out: Path, runs, notes):
     for method, f, slope, x_a, x_b, sec in notes:
         lines.append(f"| {method} | {', '.join(f'{v:.3f}' for v in f)} | {slope:.4f} | "
                      f"{x_a * 1e3:.3f} | {x_b * 1e3:.3f} | {sec:.0f} |")
-    lines += ["", f"Frequency step {F_A} -> {F_B} Hz at {T_STEP} s (rtol "
+    lines += ["", f"Frequency step {F_A} -> {F_B} Hz at {T_STEP} s, the setpoint moved "
+              "from lagrange's x_set for 17.5 Hz to its x_set for 18.5 Hz over 0.5 s (rtol "
               f"{RUN['rtol']:g}), amplitude of a_OF_z at the rotor frequency:", "",
               "| run | 1-2 s at 17.5 Hz | 5-6 s at 18.5 Hz |", "|---|---|---|"]
     for key in ("held", "parasitic", "lagrange", "zcp"):

@@ -228,7 +228,9 @@ class _Expander:
         direction fixed on the body (turned by its rotation matrix: a modulated row)."""
         n, body = port.body, self.m.bodies[port.body]
         r = exact.vector(body.points[port.point])     # body frame, from G (as body_refs)
-        P = self.point(n, f"{port.point}__point", r, port.loc)
+        # two segments after the point (a direction's name is one): no port's name can
+        # fall on the velocity junction's
+        P = self.point(n, f"{port.point}__point__v", r, port.loc)
         if port.direction in "xyz":
             u = sp.Matrix([int(port.direction == a) for a in AXES])
         else:

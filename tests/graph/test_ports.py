@@ -135,3 +135,22 @@ def test_a_sensor_of_nothing_is_refused_at_its_line(sensor, message):
         cart(extra=f"outputs:\n  y: {sensor}\n")
     assert message in str(e.value)
     assert e.value.key == "outputs.y" and e.value.loc.line == len(CART.splitlines()) + 2
+
+
+def test_two_ports_at_one_point_and_a_direction_named_like_bgcs_parts():
+    """A direction called 'point' or 'v' is the model's to name: its port's junction is
+    not the point's velocity junction; names with '__' are refused."""
+    text = CART.replace("directions: {d: [1, 1, 0]}",
+                        "directions: {point: [1, 1, 0], v: [0, 0, 1]}").replace(
+        "  - [cart.P.d, k]", "  - [cart.P.point, k]\n  - [cart.P.v, d2]").replace(
+        "  d: {type: R, R: 0.5}", "  d: {type: R, R: 0.5}\n  d2: {type: R, R: 0.2}")
+    g = expand(loads(text, "cart.yaml"))
+    junctions = {port: j for j, port in g.port_junctions.items()}
+    assert len({junctions["cart.P.point"], junctions["cart.P.v"]}) == 2
+    for j in ("cart.P.point", "cart.P.v"):
+        assert g.elements[junctions[j]].kind == "1" and len(g.ports[junctions[j]]) == 2
+    causality.assign(g)
+    for good, bad in (("directions: {d: [1, 1, 0]}", "directions: {a__b: [1, 0, 0]}"),
+                      ("points: {P: [0.1, 0, 0]}", "points: {P__Q: [0.1, 0, 0]}")):
+        with pytest.raises(ModelError, match="is not a valid (direction|point) name"):
+            cart((good, bad))

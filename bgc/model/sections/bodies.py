@@ -89,9 +89,10 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
         if "points" in v:
             pts = mapping(v["points"], *at("points"))
             for pn, pv in pts.items():
-                if not isinstance(pn, str) or not IDENT.match(pn):
+                if not isinstance(pn, str) or not IDENT.match(pn) or "__" in pn:
                     fail(f"'{pn}' is not a valid point name", pts.key_locs[pn],
-                         f"{key}.points")
+                         f"{key}.points", "letters, digits and single '_' ('__' is kept "
+                         "for the names bgc generates)")
                 pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
                 points[pn] = exact.floats(frame_.T * (pos - com))
                 cx.point_r0[(name, pn)] = pos
@@ -112,9 +113,10 @@ def _directions(v, loc, key) -> dict:
     dirs = mapping(v, loc, key, "a mapping {name: [x, y, z]}")
     out = {}
     for dn, dv in dirs.items():
-        if not isinstance(dn, str) or not IDENT.match(dn) or dn in R0_DIRECTIONS:
+        if not isinstance(dn, str) or not IDENT.match(dn) or dn in R0_DIRECTIONS \
+                or "__" in dn:
             fail(f"{dn!r} is not a valid direction name", dirs.key_locs[dn], key,
-                 "an identifier other than x, y, z (which are R0's axes)")
+                 "an identifier without '__', other than x, y, z (which are R0's axes)")
         out[dn] = unit_vector(dv, dirs.val_locs[dn], f"{key}.{dn}")     # exact
     return out
 

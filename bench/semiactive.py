@@ -126,8 +126,7 @@ def _figures(out: Path, runs, rows, reference):
         ax[1].semilogy(f, np.abs(h), label=f"x_set = {x:g} mm")
     ax[1].set(xlabel="f [Hz]", ylabel="|a_OF_z / F_pumping| [m/s^2/N]")
     ax[1].legend()
-    save_figure(fig, out / "frf.png", "semi-active SARIB: the pumping anti-resonance of "
-                "a_OF_z against the setpoint (lagrange's |H| below)")
+    save_figure(fig, out / "frf.png", "semi-active SARIB: pumping anti-resonance of a_OF_z")
     fig, ax = panels(3, 2.6)
     ax = ax[:, 0]
     r, held = runs["parasitic"], runs["held"]

@@ -32,8 +32,10 @@ class NativeSolver(Solver):
     compiled once for every model, that calls the module's rhs, Jacobian and guards
     through their C entry points without returning to Python per step. Guards are
     checked in the loop; other events (the rank monitor, Python functions) and rk4's
-    stability limit are checked while the loop pauses every so many steps, an event
-    located by bisection, re-integrating from the last pause."""
+    stability limit are checked while the loop pauses every so many steps. An event
+    that changed sign is located by bisection, re-integrating from the last pause,
+    unless it ``settle``s where the loop paused (the rank monitor, whose minor alone
+    went singular, re-picks another there): then the loop goes on with its step size."""
     STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
 
     def __init__(self, name: str, loop: str, description: str):
@@ -142,6 +144,11 @@ class NativeSolver(Solver):
                 after = [e(t_r, x_r) for _, e in watched]
                 hit = [j for j in range(len(watched))
                        if np.sign(after[j]) != np.sign(before[j]) and before[j] != 0]
+                for j in list(hit):     # an event that settles where the loop paused
+                    settle = getattr(watched[j][1], "settle", None)
+                    if settle is not None and settle(t_r, x_r):
+                        hit.remove(j)
+                        after[j] = watched[j][1](t_r, x_r)
                 if hit:
                     xs.pop()
                     j = hit[0]

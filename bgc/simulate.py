@@ -282,7 +282,7 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
 # CLI, the benchmarks, the tests and docs/generated-modules.md pass them, by name; a
 # settings object would only move the same names into every caller)
 def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
-             solver: str = "bdf", points: int = 1001, params=None, x0=None,
+             solver: str = "native", points: int = 1001, params=None, x0=None,
              step: float | None = None, mass=None, check_stability: bool = True,
              t_start: float = 0.0, check_drift: bool = True,
              redundancy: bool = True, check_index: bool = True,

@@ -100,7 +100,7 @@ def _points(st: Settings, t_end: float | None) -> int:
 @click.option("--t-end", type=POSITIVE, help="end time [s] (default: the model's)")
 @click.option("--rtol", type=POSITIVE, help="relative tolerance (default: the model's or 1e-6)")
 @click.option("--atol", type=POSITIVE, help="absolute tolerance (default: the model's or 1e-8)")
-@click.option("--solver", help="integrator (default: the model's, else bdf): "
+@click.option("--solver", help="integrator (default: the model's, else native): "
               + "; ".join(f"{name}: {s.description}" for name, s in SOLVERS.items()))
 @click.option("--step", type=POSITIVE, help="fixed-step solvers (rk4): the step [s]")
 @click.option("--points", type=POINTS,

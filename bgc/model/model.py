@@ -183,7 +183,7 @@ class Settings:
     t_end: float = 1.0
     rtol: float = 1e-6
     atol: float = 1e-8
-    solver: str = "bdf"
+    solver: str = "native"      # bgc's Radau IIA: every model's unless it says why not
     points: int = 1001
 
 

@@ -76,9 +76,9 @@ def test_simulate_reports_stages_quiet_silences_them_json_times_them(tmp_path):
     assert r.exit_code == 0, r.output
     got = stages(r.stderr)
     assert list(got) == ["load", "integrate"], got
-    assert re.fullmatch(r"bdf, \d+ steps to t = 0\.01 s, \d+\.\d+ s of it JIT/cache load",
+    assert re.fullmatch(r"native, \d+ steps to t = 0\.01 s, \d+\.\d+ s of it JIT/cache load",
                         got["integrate"]), got["integrate"]
-    assert "bgc:" not in r.stdout and "bdf to t = 0.01 s" in r.stdout
+    assert "bgc:" not in r.stdout and "native to t = 0.01 s" in r.stdout
 
     (tmp_path / "rlc.py").unlink()              # recompile, quietly
     out = ["-o", tmp_path]

@@ -82,9 +82,10 @@ class NativeSolver(Solver):
         """Every count is the loop's own (rk4: no factorizations, no rejected steps)."""
         return Stats(rejected_steps=0)
 
-    def _run(self, problem, t0, t1, x0, t_eval, stats, h_start=0.0, max_steps=0):
+    def _run(self, problem, t0, t1, x0, t_eval, stats, h_start=0.0, max_steps=0, keep=None):
         """One call of the loop from (t0, x0) towards t1 (a ``native.Outcome``), pausing
-        after ``max_steps`` steps (0: none); its counts added to ``stats``."""
+        after ``max_steps`` steps (0: none); its counts added to ``stats``. ``keep``
+        (``radau5.Carry``): the loop's state across pauses (None: a fresh start)."""
         model = native.Model(*problem.module.native_entry_points(),
                              len(problem.module.GUARD_NAMES), problem.p)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
@@ -104,7 +105,8 @@ class NativeSolver(Solver):
             settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
                                        GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))
-            res = radau5.radau5(system, settings, t0, t1, x0, t_eval, counts, self.diag)
+            res = radau5.radau5(system, settings, t0, t1, x0, t_eval, counts, self.diag,
+                                keep if keep is not None else radau5.carry(len(x0)))
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
@@ -123,6 +125,10 @@ class NativeSolver(Solver):
         t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
         t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
         xs, done = [], 0
+        keep = None
+        if self.loop == "radau5":      # and its Jacobian, factors and predictor
+            from bgc.solvers import radau5
+            keep = radau5.carry(len(x))
         before = [e(t0, x) for _, e in watched]
         while True:
             sel = t_eval[done:]
@@ -135,7 +141,7 @@ class NativeSolver(Solver):
             if left is not None:
                 pause = min(pause, left) if pause else left
             out, k, t_r, x_r, status, guard, h = self._run(
-                problem, t, t1, x, sel, stats, h, pause)
+                problem, t, t1, x, sel, stats, h, pause, keep)
             xs.append(out[:k])
             if status == native.INTERRUPTED:
                 return Segment(np.vstack(xs), np.array(x_r), float(t_r), False, "interrupted",

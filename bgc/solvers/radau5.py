@@ -95,6 +95,29 @@ class Settings(NamedTuple):
     stop: np.ndarray
 
 
+class Carry(NamedTuple):
+    """What the loop keeps across a pause (``Settings.max_steps``), so that going on from
+    there costs no restart: the Jacobian, the Newton matrices' factors, the last step's
+    collocation polynomial (``Q``, ``y_old``) and, in ``state``: [paused here (1.0), t
+    paused at, t_old, h_last, h_abs_old, err_old, have_lu, lu_kind, current_jac,
+    have_sol]. A call from (t0, x0) that is not where the last one paused starts fresh."""
+    J: np.ndarray
+    lu_real: np.ndarray
+    lu_complex: np.ndarray
+    piv_real: np.ndarray
+    piv_complex: np.ndarray
+    Q: np.ndarray
+    y_old: np.ndarray
+    state: np.ndarray
+
+
+def carry(n: int) -> Carry:
+    """An empty ``Carry`` for n states (a fresh start)."""
+    return Carry(np.empty((n, n)), np.empty((n, n)), np.empty((n, n), dtype=np.complex128),
+                 np.empty(n, dtype=F_INT_nptype), np.empty(n, dtype=F_INT_nptype),
+                 np.zeros((n, 3)), np.empty(n), np.zeros(10))
+
+
 # LU factors with partial pivoting from LAPACK's getrf, through the binding numba itself
 # uses for np.linalg (scipy's LAPACK, resolved by symbol name, so the loop is cacheable).
 # numba offers no factor/solve pair: inverting the Newton matrices instead cost 2.3x the
@@ -380,7 +403,7 @@ def _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p, guard_tol, kg
 # rows) as functions, 11.9 s against 11.2 s (+6%). Grouping the arguments (``System``,
 # ``Settings``) and the result (``native.Outcome``) costs nothing measurable.
 @njit(cache=True)
-def radau5(system, settings, t0, t1, x0, t_eval, stats, diag):
+def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     """Integrate ``system`` (``M dx/dt = rhs(t, x, p)``, ``System``) from t0 to t1 as
     ``settings`` (``Settings``) ask; ``index2`` states have their error tolerances scaled
     by 1/h, as RADAU5 does for index-2 DAEs. States at ``t_eval`` come from the
@@ -394,7 +417,9 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag):
     go on from there, INTERRUPTED as soon as the ``stop`` flag is set. ``stats`` counts
     the work (``native.ST_*``); ``diag`` (length n) holds each state's share of the last
     rejected step's error (error over its scale; inf where the stages were not finite),
-    to name the states that made a step size collapse (STEP_TOO_SMALL)."""
+    to name the states that made a step size collapse (STEP_TOO_SMALL). ``keep`` (a
+    ``Carry``) holds the loop's own state across a pause: a call that starts where the
+    last one paused goes on as if it had not (same Jacobian, factors and predictor)."""
     rhs, jac, guards, n_guards, p = system.model
     M, index2, plan = system.mass, system.index2, system.plan
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
@@ -416,26 +441,35 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag):
         for i in range(n):
             diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
         return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_start)
-    if h_start > 0.0:
-        h_abs = h_start
-    else:
-        h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
-    h_abs = min(h_abs, t1 - t0, max_step)
-    h_abs_old, err_old = -1.0, -1.0
+    J, lu_real, lu_complex, piv_real, piv_complex, Q = (
+        keep.J, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex, keep.Q)
+    kept = keep.state
     newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
-    J = np.empty((n, n))
-    call_entry(jac, t, y, p, J)
-    stats[ST_JAC] += 1
-    current_jac = True
-    lu_real = np.empty((n, n))
-    lu_complex = np.empty((n, n), dtype=np.complex128)
-    piv_real = np.empty(n, dtype=F_INT_nptype)
-    piv_complex = np.empty(n, dtype=F_INT_nptype)
-    have_lu = False
-    lu_kind = NO_LU
-    Q = np.zeros((n, 3))
-    have_sol = False
-    t_old, h_last, y_old = t, 0.0, y.copy()
+    if kept[0] == 1.0 and kept[1] == t0 and h_start > 0.0:     # going on from a pause
+        h_abs = min(h_start, t1 - t0, max_step)
+        t_old, h_last, h_abs_old, err_old = kept[2], kept[3], kept[4], kept[5]
+        have_lu, lu_kind = kept[6] == 1.0, int(kept[7])
+        current_jac, have_sol = kept[8] == 1.0, kept[9] == 1.0
+        y_old = keep.y_old.copy()
+        if h_abs != h_start:
+            have_lu = False
+    else:
+        if h_start > 0.0:
+            h_abs = h_start
+        else:
+            h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
+        h_abs = min(h_abs, t1 - t0, max_step)
+        h_abs_old, err_old = -1.0, -1.0
+        call_entry(jac, t, y, p, J)
+        stats[ST_JAC] += 1
+        current_jac = True
+        have_lu = False
+        lu_kind = NO_LU
+        for i in range(n):
+            Q[i, 0] = Q[i, 1] = Q[i, 2] = 0.0
+        have_sol = False
+        t_old, h_last, y_old = t, 0.0, y.copy()
+    kept[0] = 0.0
     # work arrays: the stages, their predictor, the transformed variables and Newton
     # increments, the stages' rhs, the error scale and estimate
     Z = np.zeros((3, n))
@@ -590,6 +624,12 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag):
         k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:
+            kept[0], kept[1], kept[2], kept[3] = 1.0, t, t_old, h_last
+            kept[4], kept[5] = h_abs_old, err_old
+            kept[6], kept[7] = 1.0 if have_lu else 0.0, float(lu_kind)
+            kept[8], kept[9] = 1.0 if current_jac else 0.0, 1.0 if have_sol else 0.0
+            for i in range(n):
+                keep.y_old[i] = y_old[i]
             return Outcome(out, k_out, t, y, PAUSED, -1, h_abs)
     return Outcome(out, k_out, t, y, REACHED, -1, h_abs)
 
@@ -608,4 +648,5 @@ def compile_loop():
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
                     sparse_lu.DENSE)
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
-           0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n))
+           0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
+           carry(n))

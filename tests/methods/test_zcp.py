@@ -104,7 +104,7 @@ def test_class4_loop_kept_closed_is_an_index2_dae_for_native_radau_only(compiled
     algebraic states (0 = dg/dt + alpha g), an index-2 DAE. Native Radau (index-2 error
     scaling) matches the opened loops; a solver that does not take index 2 is refused
     naming the loop, and, let through, fails (IDA at t = 0; Radau without the scaling
-    soon after); nothing is written. A planar loop in 3D (the slider-crank) repeats its
+    takes three times the steps); nothing is written. A planar loop in 3D (the slider-crank) repeats its
     constraints: refused, naming the dependent ones."""
     _, rep = _check("four_bar", "--keep-loops")
     (loop,) = [z for z in rep["zcp_paths"] if z["class"] == 4]
@@ -126,9 +126,14 @@ def test_class4_loop_kept_closed_is_an_index2_dae_for_native_radau_only(compiled
         simulate(closed, t_end=0.5, solver="ida")
     with pytest.raises(SimulationError, match="ida failed at t = 0"):
         simulate(closed, t_end=0.5, solver="ida", check_index=False)
-    with pytest.raises(SimulationError, match=r"the step size collapsed to .* s at t = "
-                       r"[0-9.]+; largest error in ball_B\.t[xyz]\.lambda"):
-        simulate(closed, t_end=0.5, rtol=1e-6, atol=1e-8, solver="native", check_index=False)
+    # without the index-2 error scaling Radau's error estimate of the break variables is
+    # an order too large: it gets there (the loop keeps its state across pauses; when
+    # every pause restarted it, from a fresh step estimate, it collapsed) in 3x the steps
+    scaled = simulate(closed, t_end=0.5, rtol=1e-6, atol=1e-8, solver="native", points=51)
+    plain = simulate(closed, t_end=0.5, rtol=1e-6, atol=1e-8, solver="native",
+                     check_index=False, points=51)
+    assert plain.stats.steps > 2 * scaled.stats.steps
+    assert rel_err(plain.column("rocker_angle"), ref.column("rocker_angle")) < 1e-6
     sc, _, _ = ensure_module(MODELS / "slider_crank.yaml", tmp_path, "zcp", open_loops=False)
     with pytest.raises(SimulationError, match="5 algebraic equations of rank 2") as err:
         simulate(sc, t_end=0.5, solver="native")

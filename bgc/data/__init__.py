@@ -36,3 +36,14 @@ def path(folder_name: str, name: str) -> Path:
 def names(folder_name: str) -> list[str]:
     """The shipped YAML files of ``folder_name``, by name (``sarib.yaml``, ...)."""
     return sorted(p.name for p in folder(folder_name).glob("*.yaml"))
+
+
+def find(folder_name: str, given: str | Path) -> Path:
+    """``given`` if that file exists, else the shipped file of ``folder_name`` it names
+    (``pumping_chirp`` or ``pumping_chirp.yaml``), else ``given`` as is (for its reader to
+    report missing): so that ``bgc run pumping_chirp`` runs from any directory."""
+    p = Path(given)
+    if p.exists() or p.parent != Path("."):
+        return p
+    name = p.name if p.suffix == ".yaml" else p.name + ".yaml"
+    return path(folder_name, name) if name in names(folder_name) else p

@@ -79,8 +79,8 @@ def test_an_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path):
     env_dir = tmp_path / "venv"
     venv.create(env_dir, system_site_packages=True, with_pip=True)   # its dependencies
     py = env_dir / "bin" / "python"
-    subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", wheel], check=True,
-                   timeout=300)
+    subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", "--ignore-installed",
+                    wheel], check=True, timeout=300)    # not the bgc of the system's site
     work = tmp_path / "empty"
     work.mkdir()
     r = subprocess.run([env_dir / "bin" / "bgc", "simulate", "--excitation", "chirp",
@@ -97,3 +97,13 @@ def test_an_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path):
                            cwd=work, capture_output=True, text=True, check=True,
                            env=dict(os.environ, PYTHONPATH=""))
     assert Path(where.stdout.strip()).is_relative_to(env_dir)     # the wheel's, not ROOT's
+
+
+def test_a_scene_name_is_the_shipped_scene_where_no_such_file_is(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    shipped = data.path("scenes", "pumping_chirp.yaml")
+    assert data.find("scenes", "pumping_chirp") == data.find("scenes", shipped.name) == shipped
+    assert data.find("scenes", "sub/pumping_chirp") == Path("sub/pumping_chirp")
+    assert data.find("scenes", "no_such_scene") == Path("no_such_scene")
+    (tmp_path / "pumping_chirp.yaml").write_text("model: mine.yaml\n")
+    assert data.find("scenes", "pumping_chirp.yaml") == Path("pumping_chirp.yaml")   # own file

@@ -25,9 +25,11 @@ from bgc.fileio import check_writable
 @progress_option
 def run_cmd(scene, out_dir, gen_dir, params, as_json):
     """Run a scene: build its reduced model (once), simulate, write CSV, PNG and a JSON
-    summary."""
+    summary. SCENE: a scene file, or the name of a scene bgc ships (pumping_chirp,
+    roll_sine, ...: the repository's scenes/) where no such file is."""
+    from bgc import data
     from bgc.scene import scenes as bscene
-    sc = bscene.load_scene(scene)
+    sc = bscene.load_scene(data.find("scenes", scene))
     values = {}
     for name, value in params:
         if name not in sc.expose:

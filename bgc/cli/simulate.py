@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
 from bgc import progress
 from bgc.cli.app import main, user_errors
@@ -38,6 +39,15 @@ from bgc.methods.parasitic import SEPARATION
 from bgc.model.model import MAX_POINTS, Settings
 from bgc.pipeline import ensure_module
 from bgc.simulate import SOLVERS
+
+# The main job, `make run`, what `bgc simulate` runs without MODEL: the SARIB shipped with
+# bgc (bgc.data) under its chirp along pumping, with native Radau; the CSV (outputs only),
+# the PNG, the envelopes and a zoom on the anti-resonance in results/ under the current
+# directory. tests/cli/test_main_job.py checks this is the run the Makefile's `run` makes.
+MAIN_MODEL = "sarib.yaml"
+MAIN_JOB = {"exc_kind": "chirp", "exc_dir": "pumping", "solver": "native"}
+MAIN_ZOOM = (17.8, 18.2)
+MAIN_RESULTS = "results/sarib_{direction}_{kind}"
 
 
 @dataclass(frozen=True)
@@ -96,7 +106,7 @@ def _points(st: Settings, t_end: float | None) -> int:
 
 
 @main.command()
-@click.argument("model", type=click.Path())
+@click.argument("model", type=click.Path(), required=False)
 @click.option("--t-end", type=POSITIVE, help="end time [s] (default: the model's)")
 @click.option("--rtol", type=POSITIVE, help="relative tolerance (default: the model's or 1e-6)")
 @click.option("--atol", type=POSITIVE, help="absolute tolerance (default: the model's or 1e-8)")
@@ -112,7 +122,8 @@ def _points(st: Settings, t_end: float | None) -> int:
 @click.option("--out", type=click.Path(dir_okay=False), help="CSV of t, states, outputs")
 @click.option("--plot", type=click.Path(dir_okay=False), help="PNG of the outputs")
 @click.option("--states/--no-states", default=True, show_default=True,
-              help="whether the CSV holds the states besides t and the outputs")
+              help="whether the CSV holds the states besides t and the outputs (without "
+                   "MODEL: --no-states)")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
 @click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
@@ -136,14 +147,40 @@ def _points(st: Settings, t_end: float | None) -> int:
 @user_errors
 @progress_option
 def simulate(**options):
-    """Compile MODEL if needed and integrate it; print solver statistics."""
-    o = SimulateOptions(**options)
+    """Compile MODEL if needed and integrate it; print solver statistics.
+
+    Without MODEL: the main job, the run `make run` makes, from any directory: the SARIB
+    shipped with bgc under its chirp along pumping (--excitation and --direction choose
+    others: roll, pitch; sine, constant), native Radau; it writes
+    results/sarib_<direction>_<kind>.csv (outputs only), .png, _envelope.png and
+    _zoom.png (17.8..18.2 s, when the run reaches it) under the current directory, and the
+    module to generated/. --out, --plot, --zoom, --states, --solver and the other options
+    override those choices.
+    """
+    o = resolve(options, click.get_current_context())
     _check_options(o)
     run = _prepare(o)
     _choose_parameters(o, run)
     _integrate(o, run)
     _write_files(o, run)
     _report(o, run)
+
+
+def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
+    """The run's options: ``options`` (click's values by name) and, without MODEL, the
+    main job's (``MAIN_JOB``) where the command line (``ctx``) gives none."""
+    o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)})
+    if o.model is not None:
+        return o
+    given = {k for k in options if ctx.get_parameter_source(k) is not ParameterSource.DEFAULT}
+    from bgc import data
+    job = {k: getattr(o, k) if getattr(o, k) is not None else v for k, v in MAIN_JOB.items()}
+    stem = MAIN_RESULTS.format(direction=job["exc_dir"], kind=job["exc_kind"])
+    reaches = o.t_end is None or o.t_end >= MAIN_ZOOM[1]    # the model's t_end: 28 s
+    return replace(o, model=str(data.path("models", MAIN_MODEL)), **job,
+                   out=o.out or stem + ".csv", plot=o.plot or stem + ".png",
+                   states=o.states if "states" in given else False,
+                   zoom=o.zoom or (MAIN_ZOOM if reaches else None))
 
 
 def _check_options(o: SimulateOptions) -> None:

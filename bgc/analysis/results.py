@@ -83,15 +83,15 @@ def axis_label(name: str, unit: str | None) -> str:
     return f"{name} [{unit}]" if unit else name
 
 
-def noise_panel(ax, peaks: dict, unit: str | None, floor: float) -> None:
-    """A panel whose outputs (``peaks``: name -> peak |y|) are numerical noise
-    (``bgc.analysis.noise``): what they are, in words, over a zero line and the band
+def noise_panel(ax, peaks: dict, unit: str | None, floor: float, what: str = "peak") -> None:
+    """A panel whose outputs (``peaks``: name -> largest value, the ``what``) are numerical
+    noise (``bgc.analysis.noise``): what they are, in words, over a zero line and the band
     +-``floor`` the run resolves, instead of the noise drawn as a signal."""
     u = f" {unit}" if unit else ""
     ax.axhline(0.0, color="0.5", lw=0.8)
     if floor > 0:
         ax.set_ylim(-floor, floor)
-    lines = [f"{n}: numerical noise, peak {p:.2g}{u}" for n, p in peaks.items()]
+    lines = [f"{n}: numerical noise, {what} {p:.2g}{u}" for n, p in peaks.items()]
     lines.append(f"(below {floor:.2g}{u}, rtol times the largest{u} output: not resolved)")
     ax.text(0.5, 0.5, "\n".join(lines), transform=ax.transAxes, ha="center", va="center",
             fontsize=9, bbox=dict(boxstyle="round", fc="white", ec="0.7"))
@@ -170,7 +170,8 @@ def plot_envelopes(curves: dict, path: str | Path, title: str = "",
     fig, axes = panels(len(curves), 2.2)
     for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
         if name in floor and not a.max(initial=0.0) >= floor[name]:
-            noise_panel(ax, {name: float(a.max(initial=0.0))}, units.get(name), floor[name])
+            noise_panel(ax, {name: float(a.max(initial=0.0))}, units.get(name), floor[name],
+                        "envelope at most")
         else:
             ax.semilogy(f, a, lw=1.2)
             mark_minima(ax, mins)

@@ -70,9 +70,9 @@ def test_noise_panels_say_so_and_every_axis_has_its_unit(tmp_path, figures):
     assert time["ylabels"] == ["F_z [N]", "F_y [N]", "a_z [m/s^2]", "free"]
     assert time["xlabel"] == "t [s]" and "[Hz]" in env["xlabel"]
     assert env["ylabels"][:3] == ["|F_z| [N]", "|F_y| [N]", "|a_z| [m/s^2]"]
-    for fig in (time, env):
+    for fig, what in ((time, "peak"), (env, "envelope at most")):
         [note] = fig["texts"][1]
-        assert "F_y: numerical noise, peak" in note and " N" in note
+        assert f"F_y: numerical noise, {what} " in note and " N" in note
         assert fig["lines"][1] == 1                 # the zero line only, no noise drawn
     assert env["texts"][0] and all("Hz" in t for t in env["texts"][0])
 

@@ -58,3 +58,23 @@ def compiled(gen_dir):
             cache[name, method] = mod
         return cache[name, method]
     return get
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """What each figure the plot functions save holds (per axes: y label, lines, texts;
+    the x label), read from the figure object before it is written: what tests inspect
+    instead of pixels."""
+    kept = []
+    from bgc.analysis import results
+    save = results.save_figure
+
+    def keep(fig, path, title):
+        fig.canvas.draw()
+        kept.append({"ylabels": [ax.get_ylabel() for ax in fig.axes],
+                     "xlabel": fig.axes[-1].get_xlabel(),
+                     "lines": [len(ax.get_lines()) for ax in fig.axes],
+                     "texts": [[t.get_text() for t in ax.texts] for ax in fig.axes]})
+        return save(fig, path, title)
+    monkeypatch.setattr(results, "save_figure", keep)
+    return kept

@@ -47,22 +47,26 @@ def minima(freq, amp, separation: float = 0.5) -> list[float]:
     return out
 
 
-def analyse(result, chirp: dict, skip=("g",)) -> dict:
-    """Every output's envelope over the sweep and its minima: name -> (freq, amp, minima)."""
+def analyse(result, chirp: dict, skip=("g",), floor: dict | None = None) -> dict:
+    """Every output's envelope over the sweep and its minima: name -> (freq, amp, minima).
+    An output whose envelope stays below its ``floor`` (``noise.floors``) is numerical
+    noise: its minima are those of the noise, no anti-resonance, so it has none."""
     out = {}
     for name in result.output_names:
         if name in skip:
             continue
         f, a = envelope(result.t, result.column(name), chirp)
-        out[name] = (f, a, minima(f, a))
+        quiet = name in (floor or {}) and not a.max(initial=0.0) >= floor[name]
+        out[name] = (f, a, [] if quiet else minima(f, a))
     return out
 
 
-def chirp_sweep(excitation, selected: dict | None, result) -> dict | None:
+def chirp_sweep(excitation, selected: dict | None, result,
+                floor: dict | None = None) -> dict | None:
     """``analyse`` of a run whose selected excitation (``selected``: {kind, direction,
     ...}, a kind of the model's ``excitation``) is a chirp, once the run has covered a
-    tenth of the sweep [t2, t3]; None for any other run. What ``bgc simulate`` and a
-    scene's run report."""
+    tenth of the sweep [t2, t3], the outputs below their noise ``floor`` without minima;
+    None for any other run. What ``bgc simulate`` and a scene's run report."""
     if not selected:
         return None
     signal = excitation.kinds[selected["kind"]]
@@ -71,7 +75,7 @@ def chirp_sweep(excitation, selected: dict | None, result) -> dict | None:
     chirp = signal.numbers
     if not result.t[-1] > chirp["t2"] + 0.1 * (chirp["t3"] - chirp["t2"]):   # some sweep
         return None
-    return analyse(result, chirp)
+    return analyse(result, chirp, floor=floor)
 
 
 def minima_hz(curves: dict | None, digits: int) -> dict | None:

@@ -71,43 +71,111 @@ def save_figure(fig, path: str | Path, title: str) -> Path:
         plt.close(fig)
 
 
+def output_units(module) -> dict[str, str]:
+    """name -> unit of a generated module's outputs (``OUTPUT_UNITS``; a module written
+    before units has none): the units the model declares, for labels and noise floors."""
+    units = getattr(module, "OUTPUT_UNITS", ())
+    return {n: u for n, u in zip(module.OUTPUT_NAMES, units) if u}
+
+
+def axis_label(name: str, unit: str | None) -> str:
+    """``name [unit]``; the name alone where the model declares no unit."""
+    return f"{name} [{unit}]" if unit else name
+
+
+def noise_panel(ax, peaks: dict, unit: str | None, floor: float, what: str = "peak") -> None:
+    """A panel whose outputs (``peaks``: name -> largest value, the ``what``) are numerical
+    noise (``bgc.analysis.noise``): what they are, in words, over a zero line and the band
+    +-``floor`` the run resolves, instead of the noise drawn as a signal."""
+    u = f" {unit}" if unit else ""
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    if floor > 0:
+        ax.set_ylim(-floor, floor)
+    lines = [f"{n}: numerical noise, {what} {p:.2g}{u}" for n, p in peaks.items()]
+    lines.append(f"(below {floor:.2g}{u}, rtol times the largest{u} output: not resolved)")
+    ax.text(0.5, 0.5, "\n".join(lines), transform=ax.transAxes, ha="center", va="center",
+            fontsize=9, bbox=dict(boxstyle="round", fc="white", ec="0.7"))
+
+
 def plot(result: Result, path: str | Path, title: str = "", window=None,
-         overlay: bool = False) -> Path:
+         overlay: bool = False, units: dict | None = None, floor: dict | None = None) -> Path:
     """One panel per output (per state if the model names no outputs), against time;
-    over ``window`` (t0, t1) only; with ``overlay``, outputs whose names differ only by
-    their numbers (F_A1_z, F_A2_z) share a panel, so phase shifts show."""
+    over ``window`` (t0, t1) only; with ``overlay``, outputs of one unit whose names differ
+    only by their numbers (F_A1_z, F_A2_z) share a panel, so phase shifts show. Each y
+    label carries the output's unit (``units``: name -> unit); an output below its noise
+    ``floor`` (``noise.floors``, over the whole run) is stated, not drawn."""
     import re
 
+    from bgc.analysis.noise import noisy
+    units, floor = units or {}, floor or {}
     names = result.output_names or result.state_names
-    groups: dict[str, list[str]] = {}
+    quiet = noisy(result.output_names, result.y, floor) if result.output_names else {}
+    groups: dict[tuple, list[str]] = {}
     for name in names:
-        groups.setdefault(re.sub(r"\d+", "#", name) if overlay else name, []).append(name)
+        key = re.sub(r"\d+", "#", name) if overlay else name
+        groups.setdefault((key, units.get(name)), []).append(name)
     sel = np.ones(len(result.t), dtype=bool)
     if window is not None:
         sel = (result.t >= window[0]) & (result.t <= window[1])
     fig, axes = panels(len(groups), 1.9)
-    for ax, (label, members) in zip(axes[:, 0], groups.items()):
-        for name in members:
+    for ax, ((label, unit), members) in zip(axes[:, 0], groups.items()):
+        shown = [n for n in members if n not in quiet]
+        for name in shown:
             ax.plot(result.t[sel], result.column(name)[sel], lw=1.2, label=name)
-        ax.set_ylabel(label if len(members) == 1 else label.replace("#", "i"))
-        if len(members) > 1:
+        noise = {n: quiet[n] for n in members if n in quiet}
+        if noise and not shown:
+            noise_panel(ax, noise, unit, max(floor[n] for n in noise))
+        elif noise:
+            ax.text(0.01, 0.97, "; ".join(f"{n}: numerical noise, peak {p:.2g}"
+                                          for n, p in noise.items()),
+                    transform=ax.transAxes, va="top", fontsize=8)
+        ax.set_ylabel(axis_label(label if len(members) == 1 else label.replace("#", "i"),
+                                 unit))
+        if len(shown) > 1:
             ax.legend(fontsize=8, loc="upper right")
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("t [s]")
     return save_figure(fig, path, title)
 
 
-def plot_envelopes(curves: dict, path: str | Path, title: str = "") -> Path:
+def mark_minima(ax, mins) -> list:
+    """Dashed lines at the envelope's two deepest minima (the deepest red), each labelled
+    beside its line near the bottom, one row per minimum in order of frequency (rows 13 pt
+    apart, text 8 pt high), so two labels cannot overlap however close the minima: the
+    lower frequency's to the left of its line and the higher's to the right, unless that
+    would leave the axes (a minimum near an end of the sweep). The annotations."""
+    from matplotlib.transforms import blended_transform_factory
+    trans = blended_transform_factory(ax.transData, ax.transAxes)
+    marked = sorted(enumerate(mins[:2]), key=lambda km: km[1])
+    x0, x1 = ax.get_xlim()
+    out = []
+    for row, (k, fm) in enumerate(marked):
+        colour = "C3" if k == 0 else "C1"
+        ax.axvline(fm, color=colour, lw=0.8, ls="--")
+        at = (fm - x0) / (x1 - x0) if x1 > x0 else 0.5
+        left = at > 0.85 or (row == 0 and len(marked) > 1 and at > 0.15)
+        out.append(ax.annotate(f"{fm:.2f} Hz", (fm, 0.0), xycoords=trans,
+                               xytext=(-4 if left else 4, 4 + 13 * row),
+                               textcoords="offset points", ha="right" if left else "left",
+                               va="bottom", fontsize=8, color=colour))
+    return out
+
+
+def plot_envelopes(curves: dict, path: str | Path, title: str = "",
+                   units: dict | None = None, floor: dict | None = None) -> Path:
     """One panel per output: its envelope over a chirp against the instantaneous
-    frequency, the minima marked (``curves``: name -> (freq, amplitude, minima))."""
+    frequency, the minima marked (``curves``: name -> (freq, amplitude, minima)); an
+    envelope below its noise ``floor`` is stated, not drawn, and has no minima."""
+    units, floor = units or {}, floor or {}
     fig, axes = panels(len(curves), 2.2)
     for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
-        ax.semilogy(f, a, lw=1.2)
-        for k, fm in enumerate(mins[:2]):
-            ax.axvline(fm, color="C3" if k == 0 else "C1", lw=0.8, ls="--")
-            ax.annotate(f"{fm:.2f} Hz", (fm, a.min()), xytext=(4, 4),
-                        textcoords="offset points", fontsize=8)
-        ax.set_ylabel(f"|{name}|")
+        if name in floor and not a.max(initial=0.0) >= floor[name]:
+            noise_panel(ax, {name: float(a.max(initial=0.0))}, units.get(name), floor[name],
+                        "envelope at most")
+        else:
+            ax.semilogy(f, a, lw=1.2)
+            mark_minima(ax, mins)
+        ax.set_ylabel(axis_label(f"|{name}|", units.get(name)))
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel("instantaneous excitation frequency [Hz]")
     return save_figure(fig, path, title)

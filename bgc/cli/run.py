@@ -59,8 +59,12 @@ def _print_summary(sc, summary: dict) -> None:
     for r in summary["passes"]:
         click.echo(f"  {r['pass']:16s} states {r['states_before']} -> "
                    f"{r['states_after']}")
+    for name, peak in summary["noise_outputs"].items():
+        click.echo(f"  {name}: numerical noise (peak {peak:.2g}), no minima, stated in "
+                   f"the plot")
     for name, fs in (summary["envelope_minima_hz"] or {}).items():
-        click.echo(f"  envelope minima of {name}: "
-                   f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
+        if name not in summary["noise_outputs"]:
+            click.echo(f"  envelope minima of {name}: "
+                       f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
     for kind, f in summary["files"].items():
         click.echo(f"  {kind}: {f}")

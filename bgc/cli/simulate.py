@@ -94,6 +94,8 @@ class _Run:
     result: object = None
     files: dict = field(default_factory=dict)
     minima: dict | None = None      # envelope minima [Hz] per output, under a chirp
+    noise: dict = field(default_factory=dict)   # name -> peak of outputs that are noise
+    units: dict = field(default_factory=dict)   # name -> unit the model declares
 
 
 def _points(st: Settings, t_end: float | None) -> int:
@@ -297,29 +299,33 @@ def _integrate(o: SimulateOptions, run: _Run) -> None:
 
 def _write_files(o: SimulateOptions, run: _Run) -> None:
     """--out's CSV, --plot's PNG and beside it, under a chirp, the envelopes against the
-    instantaneous frequency (and their minima) and, with --zoom, a window."""
+    instantaneous frequency (and their minima) and, with --zoom, a window. Outputs below
+    their noise floor (``bgc.analysis.noise``) are named, not drawn, and have no minima."""
+    from bgc.analysis import noise
+    from bgc.analysis.results import output_units, write_csv
     from bgc.analysis.results import plot as plot_png
-    from bgc.analysis.results import write_csv
     result, exc, files = run.result, run.excitation, run.files
+    units = run.units = output_units(run.module)
+    floor, run.noise = noise.of_result(result, units, o.rtol or run.settings.rtol)
     if o.out:
         files["csv"] = str(write_csv(result, o.out, o.states))
     title = f"{run.module.MODEL_NAME} ({result.solver}" + (
         f", {exc['kind']} {exc['direction']}" if exc else "") + ")"
     if o.plot:
-        files["png"] = str(plot_png(result, o.plot, title=title))
+        files["png"] = str(plot_png(result, o.plot, title=title, units=units, floor=floor))
     if exc:         # the Model is loaded (need_model)
         from bgc.analysis.envelope import chirp_sweep, minima_hz
         from bgc.analysis.results import plot_envelopes
-        curves = chirp_sweep(run.model.excitation, exc, result)
+        curves = chirp_sweep(run.model.excitation, exc, result, floor)
         run.minima = minima_hz(curves, 2)
         if curves is not None and o.plot:
             path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
-            files["envelope_png"] = str(plot_envelopes(curves, path, title))
+            files["envelope_png"] = str(plot_envelopes(curves, path, title, units, floor))
     if o.zoom and o.plot:
         t0, t1 = o.zoom
         path = Path(o.plot).with_name(Path(o.plot).stem + "_zoom.png")
         files["zoom_png"] = str(plot_png(result, path, title=title, window=(t0, t1),
-                                         overlay=True))
+                                         overlay=True, units=units, floor=floor))
 
 
 def _report(o: SimulateOptions, run: _Run) -> None:
@@ -335,6 +341,7 @@ def _report(o: SimulateOptions, run: _Run) -> None:
                                "parasitic": choice.to_dict() if choice else None,
                                "excitation": run.excitation,
                                "envelope_minima_hz": run.minima,
+                               "noise_outputs": run.noise,
                                "compiled": run.compiled is not None, "stages": run.stages,
                                "files": run.files}, indent=2))
         return
@@ -351,8 +358,12 @@ def _report(o: SimulateOptions, run: _Run) -> None:
     if stats["drift_position"] is not None:
         click.echo(f"  constraint drift: position {stats['drift_position']:.3g}, velocity "
                    f"{stats['drift_velocity']:.3g}")
+    for name, peak in run.noise.items():
+        click.echo(f"  {name}: numerical noise (peak {peak:.2g} {run.units[name]}), no "
+                   f"minima, stated in the plots")
     for name, fs in (run.minima or {}).items():
-        click.echo(f"  envelope minima of {name} over the chirp: "
-                   f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
+        if name not in run.noise:
+            click.echo(f"  envelope minima of {name} over the chirp: "
+                       f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
     for kind, f in run.files.items():
         click.echo(f"  {kind}: {f}")

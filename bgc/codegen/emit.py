@@ -210,6 +210,7 @@ def render(system: EquationSystem) -> str:
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ir_straight = kern.ir_straight.replace(kernels.PLACEHOLDER, prefix)
     x0_symbols = set().union(*(st.initial.free_symbols for st in system.states))
+    units = {o.name: o.unit for o in m.outputs}
     ctx = dict(
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         settings=[(f.name, _literal(getattr(m.settings, f.name))) for f in fields(m.settings)],
@@ -226,6 +227,7 @@ def render(system: EquationSystem) -> str:
         state_names=[st.name for st in system.states],
         param_names=[name for _, name, _ in system.params],
         output_names=[name for name, _ in system.outputs],
+        output_units=[units.get(name) or "" for name, _ in system.outputs],
         x0_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)
                    if sy in x0_symbols],
         freq_params=[f"{sy.name} = p[{i}]" for i, (sy, _, _) in enumerate(system.params)

@@ -123,6 +123,7 @@ class Output:
     name: str
     expr: sp.Expr
     loc: Loc
+    unit: str | None = None     # for labels (plots): text of values.UNIT, not converted
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,21 @@ def string(v, loc, key, what="a name") -> str:
     return v
 
 
+# an output's unit (``outputs: {a: {expr: ..., unit: m/s^2}}``) goes into generated code and
+# into plot labels: a short text of letters, digits and a few signs, nothing that a string
+# literal, a docstring or matplotlib's mathtext ($, \\) would read as syntax
+UNIT = re.compile(r"[A-Za-z0-9 /*^.()%+_-]{1,32}")
+
+
+def unit(v, loc, key) -> str:
+    """An output's unit: ``UNIT`` text, e.g. m/s^2, N m, kg m^2, "1" (dimensionless)."""
+    text = string(v, loc, key, "a unit text")
+    if not UNIT.fullmatch(text) or not text.strip():
+        fail(f"unit {text[:40]!r} is not a unit text", loc, key,
+             "up to 32 letters, digits, spaces and / * ^ . ( ) % + _ -, e.g. m/s^2, N m, 1")
+    return text.strip()
+
+
 def strings(v, loc, key, what="names") -> list[str]:
     """A list of plain strings."""
     if not isinstance(v, YList):

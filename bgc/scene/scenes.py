@@ -280,7 +280,8 @@ def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generate
 
     import numpy as np
 
-    from bgc.analysis.results import plot, write_csv
+    from bgc.analysis import noise
+    from bgc.analysis.results import output_units, plot, write_csv
     from bgc.errors import SimulationError
     from bgc.simulate import simulate
     t0 = time.perf_counter()
@@ -303,22 +304,25 @@ def run_scene(scene: Scene, out_dir: str | Path, gen_dir: str | Path = "generate
         if exc.result is None:
             raise
         result, error = exc.result, str(exc)
+    units = output_units(module)
+    floor, quiet = noise.of_result(result, units, scene.rtol)
     files = {"csv": str(write_csv(result, out_dir / f"{scene.name}.csv", states=False)),
              "png": str(plot(result, out_dir / f"{scene.name}.png",
                              title=f"{scene.name}: {model.name} ({scene.method}, "
-                                   f"{result.solver})"))}
+                                   f"{result.solver})", units=units, floor=floor))}
     minima = None
     if error is None:
         from bgc.analysis.envelope import chirp_sweep, minima_hz
-        minima = minima_hz(chirp_sweep(model.excitation, scene.excitation, result), 3)
+        minima = minima_hz(chirp_sweep(model.excitation, scene.excitation, result, floor),
+                           3)
     summary = {"scene": scene.name, "file": scene.file, "model": model.name,
                "method": scene.method, "solver": result.solver,
                "excitation": scene.excitation, "outputs": scene.outputs,
                "states": len(module.STATE_NAMES), "passes": reports,
                "t_end": float(result.t[-1]) if len(result.t) else scene.t_start,
                "build_s": build_s, "stats": result.stats.to_dict(),
-               "envelope_minima_hz": minima, "ok": error is None, "error": error,
-               "files": files}
+               "envelope_minima_hz": minima, "noise_outputs": quiet, "ok": error is None,
+               "error": error, "files": files}
     path = out_dir / f"{scene.name}.json"
     atomic_write(path, json.dumps(summary, indent=2, default=str) + "\n")
     summary["files"]["json"] = str(path)

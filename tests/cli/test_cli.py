@@ -46,7 +46,7 @@ def test_compile_writes_module(tmp_path):
                                     "machine code"}
 
 
-def test_simulate_writes_csv_png_and_statistics(tmp_path):
+def test_simulate_writes_csv_png_and_statistics(tmp_path, figures):
     csv, png = tmp_path / "out.csv", tmp_path / "out.png"
     r = run("simulate", MODELS / "rlc.yaml", "--t-end", "0.02", "--solver", "radau",
             "--rtol", "1e-8", "--atol", "1e-10", "--out", csv, "--plot", png,
@@ -57,6 +57,9 @@ def test_simulate_writes_csv_png_and_statistics(tmp_path):
     assert names == ["t", "inductor.p", "capacitor.q", "current", "v_C", "v_R"]
     assert data[0, 0] == 0 and abs(data[-1, 0] - 0.02) < 1e-12
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    [fig] = figures        # every axis carries its unit (models/rlc.yaml declares them)
+    assert fig["ylabels"] == ["current [A]", "v_C [V]", "v_R [V]"]
+    assert fig["xlabel"] == "t [s]"
     # the capacitor's charge over C is its voltage
     assert np.allclose(data[:, 2] / 2e-5, data[:, 4])
 

@@ -174,3 +174,10 @@ def test_fourteen_body_model_stays_lean(tmp_path):
     densest = np.bincount([i for i, _, _ in jt.pattern]).max()
     assert jt.n_colours <= densest + 5, (jt.n_colours, densest)
     assert len(jt.pattern) < 0.25 * n * n           # the Jacobian is sparse
+
+
+def test_a_module_carries_its_outputs_units(compiled):
+    """OUTPUT_UNITS beside OUTPUT_NAMES (issue 27), as models/rlc.yaml declares them."""
+    m = compiled("rlc")
+    assert m.OUTPUT_NAMES == ("current", "v_C", "v_R")
+    assert m.OUTPUT_UNITS == ("A", "V", "V")

@@ -173,3 +173,29 @@ def test_geometry_readers_are_exact():
     base = Parasitic(stiffness=5.0)
     assert joints.parasitic(document.from_text("{damping: 1}", "j.yaml"), None, "j",
                             base) == Parasitic(stiffness=5.0, damping=1.0)
+
+
+def test_an_output_may_declare_its_unit():
+    """``outputs: {name: {expr, unit}}`` beside the plain form (issue 27): the unit is kept
+    for labels; a unit outside the safe characters, a number, an unknown key or a missing
+    expr is refused at its line and key."""
+    text = RLC.replace("  i: l.f\n", "  i: {expr: l.f, unit: A}\n").replace(
+        "  v_c: c.e\n", "  v_c: {expr: c.e, unit: \"1\"}\n  charge: c.q\n")
+    m = load.loads(text, "u.yaml")
+    assert [(o.name, o.unit, str(o.expr)) for o in m.outputs] == [
+        ("i", "A", "REF_l__f"), ("v_c", "1", "REF_c__e"), ("charge", None, "REF_c__q")]
+    line = text.splitlines().index("  i: {expr: l.f, unit: A}") + 1
+    for form, key, says in [
+            ("{expr: l.f, unit: \"A$\\\\x$\"}", "outputs.i.unit", "not a unit text"),
+            ("{expr: l.f, unit: 'A\"); import os; (\"'}", "outputs.i.unit", "not a unit text"),
+            ("{expr: l.f, unit: \"\\u00b5A\"}", "outputs.i.unit", "not a unit text"),
+            ("{expr: l.f, unit: " + "m" * 33 + "}", "outputs.i.unit", "not a unit text"),
+            ("{expr: l.f, unit: 3}", "outputs.i.unit", "expected a unit text"),
+            ("{expr: l.f, units: A}", "outputs.i.units", "unknown key 'units'"),
+            ("{unit: A}", "outputs.i", "missing 'expr'"),
+            ("{expr: l.nope, unit: A}", "outputs.i.expr", "nope")]:
+        bad = text.replace("{expr: l.f, unit: A}", form)
+        with pytest.raises(ModelError) as e:
+            load.loads(bad, "u.yaml")
+        assert (e.value.key, e.value.loc.line) == (key, line), (form, e.value)
+        assert says in e.value.message, (form, e.value.message)

@@ -13,7 +13,7 @@ from bgc.model.document import YList, YMap
 from bgc.model.model import KINDS, Bond, Element, Output, Port
 from bgc.model.sections.bodies import R0_DIRECTIONS
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail, kind_of, mapping
+from bgc.model.values import check_keys, fail, kind_of, mapping, unit
 
 
 def element_headers(cx: Context, sec: YMap) -> dict[str, tuple[str, YMap]]:
@@ -279,7 +279,8 @@ def check_physical(cx: Context, el, key, e, pvals, params, loc, kk):
 
 def outputs(cx: Context, sec: YMap, params, signals, elements, bonds) -> list[Output]:
     """Each output: an expression in parameters, signals, t and references to the
-    model's variables (``element.e``, ``body.x``, ``joint.q``, ...)."""
+    model's variables (``element.e``, ``body.x``, ``joint.q``, ...), written as is or as
+    ``{expr: ..., unit: ...}`` (the unit labels plots; ``values.unit``)."""
     kinds = {n: e.kind for n, e in elements.items()}
     bond_names = {b.name for b in bonds}
     names = cx.expr_names(params, signals)
@@ -287,7 +288,15 @@ def outputs(cx: Context, sec: YMap, params, signals, elements, bonds) -> list[Ou
     for name, v in sec.items():
         key, loc = f"outputs.{name}", sec.val_locs[name]
         cx.declare(name, f"output '{name}'", sec.key_locs[name], key)
+        unit_text = None
+        if isinstance(v, YMap):
+            check_keys(v, ("expr", "unit"), key)
+            if "expr" not in v:
+                fail("missing 'expr'", v.loc, key, "write {expr: body.x, unit: m}")
+            if "unit" in v:
+                unit_text = unit(v["unit"], v.val_locs["unit"], f"{key}.unit")
+            key, loc, v = f"{key}.expr", v.val_locs["expr"], v["expr"]
         e = cx.parse(v, loc=loc, key=key, names=names, resolve_ref=lambda tg, at, key=key,
                      loc=loc: cx.resolve_ref(tg, at, kinds, bond_names, key, loc))
-        out.append(Output(name, e, loc))
+        out.append(Output(name, e, loc, unit_text))
     return out

@@ -46,6 +46,8 @@ class Choice:
     parasitic_hz: dict[str, float] = field(default_factory=dict)  # joint -> slowest mode
     # min chosen / max functional joint stiffness of the same kind (N/m, N m/rad)
     stiffness_ratio: float | None = None
+    # the stiffnesses left as the model gave them (stiffer than the separation asks)
+    kept: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -57,6 +59,9 @@ class Choice:
                f"(separation {self.separation:g})")
         if self.stiffness_ratio is not None:
             out += f"; stiffness ratio parasitic/functional {self.stiffness_ratio:.3g}"
+        if self.kept:
+            out += (f"; {len(self.kept)} stiffness(es) kept as given, already stiffer "
+                    "(never made softer: the compliance is the modelling error)")
         return out
 
 
@@ -127,9 +132,12 @@ def auto(module, model, x, p, separation: float = SEPARATION) -> tuple[np.ndarra
     for (jn, _, m), ks, cs in zip(roles, stiff, damp):
         k = target ** 2 * m
         c = 2 * DAMPING_RATIO * np.sqrt(k * m)
+        if out[ks] >= k:    # the model's joint is stiffer already: never made softer (the
+            choice.kept.append(names[ks])    # compliance is the modelling error), as given
+            k, c = out[ks], out[cs]
         out[ks], out[cs] = k, c
         choice.values[names[ks]], choice.values[names[cs]] = k, c
-        hz = target / (2 * np.pi)
+        hz = np.sqrt(k / m) / (2 * np.pi)
         choice.parasitic_hz[jn] = min(choice.parasitic_hz.get(jn, hz), hz)
     ratios = []
     for rot in (False, True):

@@ -160,10 +160,12 @@ def test_parasitic_auto_separates_the_frequencies_and_reports_the_ratio(tmp_path
     path.write_text(_SPRUNG)
     c, mod_path = compile_model(path, tmp_path)
     mod = import_module(mod_path)
-    p, choice = parasitic.auto(mod, c.model, mod.X0, mod.PARAMS, separation=30.0)
+    names = list(mod.PARAM_NAMES)
+    soft = _soft(mod)
+    p, choice = parasitic.auto(mod, c.model, mod.X0, soft, separation=30.0)
     # the functional mode is the block on its spring, sqrt(k/m) = 10 rad/s
     assert choice.functional_hz == pytest.approx(10 / (2 * np.pi), rel=1e-3)
-    names = list(mod.PARAM_NAMES)
+    assert not choice.kept
     k = p[names.index("rail__stiffness")]
     assert k == pytest.approx((30 * 10) ** 2 * 2.0, rel=1e-3)     # m_eff = the mass
     assert p[names.index("rail__damping")] == pytest.approx(2 * np.sqrt(k * 2.0), rel=1e-6)
@@ -172,6 +174,26 @@ def test_parasitic_auto_separates_the_frequencies_and_reports_the_ratio(tmp_path
     # the chosen parasitic modes are where they were asked to be
     lam = np.linalg.eigvals(mod.jac(0.0, mod.X0, p))
     assert np.abs(lam).max() > 0.5 * 300
+    # never softer than the model's joints: the default 1e7 N/m is stiffer than the
+    # 1.8e5 the separation asks, so it stays, with its damping, and the report says so
+    # (the rotational one too)
+    given = np.array(mod.PARAMS)
+    p, choice = parasitic.auto(mod, c.model, mod.X0, given, separation=30.0)
+    for role in ("stiffness", "damping"):
+        i = names.index(f"rail__{role}")
+        assert p[i] == given[i]
+    assert "rail__stiffness" in choice.kept and "kept as given" in choice.describe()
+    assert choice.parasitic_hz["rail"] > 300 / (2 * np.pi)    # above the separation asked
+
+
+def _soft(mod) -> np.ndarray:
+    """The module's parameters with every joint's parasitic stiffness at 1 (N/m, N m/rad):
+    softer than any choice of ``parasitic.auto``, so that it decides them all."""
+    p = np.array(mod.PARAMS)
+    for i, n in enumerate(mod.PARAM_NAMES):
+        if n.endswith("__stiffness") or n.endswith("__rot_stiffness"):
+            p[i] = 1.0
+    return p
 
 
 def test_parasitic_auto_error_falls_with_the_separation(compiled, gen_dir):
@@ -182,7 +204,7 @@ def test_parasitic_auto_error_falls_with_the_separation(compiled, gen_dir):
     model = load.load(MODELS / "double_pendulum.yaml")
     errs = []
     for sep in (100.0, 1000.0):
-        p, choice = parasitic.auto(mod, model, mod.X0, mod.PARAMS, sep)
+        p, choice = parasitic.auto(mod, model, mod.X0, _soft(mod), sep)
         assert set(choice.parasitic_hz) == {"shoulder", "elbow"}
         r = simulate(mod, t_end=2.0, rtol=1e-9, atol=1e-11, solver="radau", params=p)
         errs.append(np.abs(r.column("y2") - ref.column("y2")).max())

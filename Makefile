@@ -29,7 +29,7 @@ semiactive: install
 
 # Fast suite (slow SARIB runs are marked `slow` and left to test-all).
 test:
-	$(PYTHON) -m pytest -q -n 2
+	$(PYTHON) -m pytest -q -n 2 --dist worksteal
 
 test-all:
 	$(PYTHON) -m pytest -q -n 2 -m ""

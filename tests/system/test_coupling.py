@@ -182,7 +182,7 @@ outputs:
 """
 
 
-@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+@pytest.mark.parametrize("method", ["lagrange", pytest.param("zcp", marks=pytest.mark.slow)])
 def test_energy_balance_of_a_motor_driving_a_3d_mechanism(tmp_path, method):
     """With ideal joints (no parasitic storage), from rest but for the bob's spin:
     E_in(t) = E_kin + E_pot + E_drive - their initial values + E_loss, to the

@@ -46,6 +46,7 @@ def build_wheel(tmp_path: Path) -> Path:
     return next((tmp_path / "wheel").glob("bgc-*.whl"))
 
 
+@pytest.mark.slow      # building the wheel: 4 s; `make test-all`
 def test_the_wheel_carries_every_module_model_and_scene(tmp_path):
     with zipfile.ZipFile(build_wheel(tmp_path)) as z:
         names = set(z.namelist())

@@ -36,10 +36,18 @@ def envelope(t, y, chirp: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def minima(freq, amp, separation: float = 0.5) -> list[float]:
     """The frequencies of the envelope's local minima, deepest first: each the lowest
-    point within ``separation`` Hz on either side and 5 % below the highest there."""
+    point within ``separation`` Hz on either side and 5 % below the highest there. A
+    point closer than ``separation`` to an end of the sweep has no such window, and the
+    envelope falling towards the end is no minimum: none is reported there (the roll
+    chirp's a_OF_z 'minima' at 5.10 and 24.97 Hz were its ends)."""
     freq, amp = np.asarray(freq), np.asarray(amp)
+    if not freq.size:
+        return []
+    lo, hi = freq.min() + separation, freq.max() - separation
     out = []
     for i in np.argsort(amp):
+        if not lo <= freq[i] <= hi:
+            continue
         near = np.abs(freq - freq[i]) <= separation
         if (amp[i] <= amp[near].min() and amp[near].max() > amp[i] * 1.05
                 and all(abs(freq[i] - f) > separation for f in out)):

@@ -51,3 +51,18 @@ def test_no_envelope_without_a_chirp_or_its_sweep():
     assert chirp_sweep(exc, {"kind": "sweep", "direction": "push"}, _response(1.9)) is None
     assert chirp_sweep(exc, {"kind": "sweep", "direction": "push"}, _response(2.1))
     assert minima_hz(None, 2) is None
+
+
+def test_the_ends_of_the_sweep_are_no_minima():
+    """An envelope that falls towards both ends of the sweep (as the roll chirp's a_OF_z
+    does) has its lowest points there; they are no anti-resonance: only the dip inside,
+    a window of 0.5 Hz on either side, is reported."""
+    from bgc.analysis.envelope import minima
+    f = np.linspace(5.0, 25.0, 401)
+    amp = (1.5 - 0.5 * np.exp(-(f - 5.0) / 0.4) - 0.5 * np.exp(-(25.0 - f) / 0.4)
+           - 0.8 * np.exp(-((f - 17.0) / 0.2) ** 2))
+    assert amp[0] < amp[20] and amp[-1] < amp[-30]       # falls towards both ends
+    found = minima(f, amp)
+    assert found == [pytest.approx(17.0, abs=0.06)]
+    assert minima(f[::-1], amp[::-1]) == found            # a downward sweep alike
+    assert minima(np.empty(0), np.empty(0)) == []

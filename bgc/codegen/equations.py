@@ -292,6 +292,12 @@ class Builder:
                     self.display[x], self.display[dx] = f"{n}.{label}", f"d({n}.{label})/dt"
 
     # --- references, derivatives --------------------------------------------------------
+    def point_velocity(self, n: str, r) -> sp.Matrix:
+        """Velocity (R0) of the point of body ``n`` at body-frame offset ``r`` from G:
+        v_G + R (omega x r)."""
+        w = self.common_flow(body_junction(n, "w"))
+        return self.common_flow(body_junction(n, "v")) + rotation_matrix(n) * w.cross(r)
+
     def body_refs(self, n: str, body) -> dict:
         """body.x ... body.accz, and body.point.x ... body.point.accz (R0)."""
         out = {}
@@ -317,7 +323,7 @@ class Builder:
         for pt, r in body.points.items():
             r = exact.vector(r)
             target = f"{n}__{pt}"
-            xp, vp = x + R * r, v + R * w.cross(r)
+            xp, vp = x + R * r, self.point_velocity(n, r)
             if massive:
                 ap = acc + R * (wdot.cross(r) + w.cross(w.cross(r)))
             for k, a in enumerate(AXES):
@@ -368,11 +374,9 @@ class Builder:
         for side, n in ((1, j.body1), (2, j.body2)):
             if n is None:
                 continue
-            R = rotation_matrix(n)
-            v = self.common_flow(body_junction(n, "v"))
-            w = self.common_flow(body_junction(n, "w"))
             r = joint_offset(self.m.bodies[n], j.at)
-            for key, vec in ((f"v{side}", v + R * w.cross(r)), (f"w{side}", R * w)):
+            w = rotation_matrix(n) * self.common_flow(body_junction(n, "w"))
+            for key, vec in ((f"v{side}", self.point_velocity(n, r)), (f"w{side}", w)):
                 if key in d.rows:
                     rate += (d.rows[key].T * vec)[0]
         target = f"{name}__{d.label}"
@@ -650,10 +654,12 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
                         "ZCP: velocities imposed by the flow sources)"]
         block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
         return [block] + [(v, eqs[v]) for v in order], loop
-    if kind == "derivative" and any(e.split("__")[0] in b.g.bodies for e in elements):
+    if kind == "derivative" and any(b.g.elements[e].kind == "XTF" or b.g.elements[e].orthogonal
+                                    for e in placed):
         # a storage geared rigidly to the mechanism through a port: its loop runs through
-        # the bodies' modulated transformers, whose substituted residual would swell
-        # (and expanding it take most of a compile); solved numerically in its tears
+        # the bodies' rotations (orthogonal MTFs, cross-product TFs), whose substituted
+        # residual would swell (and expanding it take most of a compile); solved
+        # numerically in its tears
         loop.tearing = [f"numeric LU of {len(tears)} tearing variables"]
         block = _reduced_block(b, tears, order, block_index, refuse)
         return [block] + [(v, eqs[v]) for v in order], loop

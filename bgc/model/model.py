@@ -298,7 +298,11 @@ class Port:
     joint: str | None = None
     body: str | None = None
     point: str | None = None
-    rotational: bool = False
+
+    @property
+    def rotational(self) -> bool:
+        """A joint's rotation (rx, ry, rz): its effort a torque."""
+        return self.joint is not None and self.direction.startswith("r")
 
 
 @dataclass

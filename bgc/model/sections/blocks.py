@@ -16,7 +16,7 @@ from bgc.model import symbols
 from bgc.model.document import YList, YMap
 from bgc.model.model import BLOCK_KINDS, Block
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail, mapping
+from bgc.model.values import check_keys, fail
 
 ANTI_WINDUP = ("back_calculation", "none")
 # the values that must be > 0 at the parameters' values: key -> what it is
@@ -27,16 +27,7 @@ _POSITIVE = {"T": "a time constant", "tt": "a tracking time constant",
 def headers(cx: Context, sec: YMap) -> dict[str, tuple[str, YMap]]:
     """Each block's name and kind: name -> (kind, its mapping). The blocks are known to
     ``cx`` from here on, so element laws and outputs may read ``name.y``."""
-    out = {}
-    for name, v in sec.items():
-        key = f"blocks.{name}"
-        cx.declare(name, f"block '{name}'", sec.key_locs[name], key)
-        v = mapping(v, sec.val_locs[name], key, "a mapping with type and input")
-        kind = v.get("type")
-        if not isinstance(kind, str) or kind not in BLOCK_KINDS:
-            fail(f"unknown block type {kind!r}", v.val_locs.get("type", v.loc), f"{key}.type",
-                 "valid types: " + ", ".join(BLOCK_KINDS))
-        out[name] = (kind, v)
+    out = cx.typed(sec, "blocks", "block", list(BLOCK_KINDS), "a mapping with type and input")
     cx.blocks = {n: k for n, (k, _) in out.items()}
     return out
 

@@ -13,7 +13,7 @@ from bgc.errors import Loc
 from bgc.model import expr as bexpr
 from bgc.model import symbols
 from bgc.model.model import KINDS, Block, Body, Joint, Settings
-from bgc.model.values import IDENT, fail
+from bgc.model.values import IDENT, fail, mapping
 
 
 class Context:
@@ -99,6 +99,24 @@ class Context:
             fail(f"'{target}.{attr}' names no element or bond", loc, key,
                  "write element.e, element.f, C.q, I.p, bond.e, bond.f or block.y")
         return self._element_ref(target, attr, kinds[target], vector, key, loc)
+
+    def typed(self, sec, section: str, what: str, valid, expect: str) -> dict:
+        """The entries of a section of ``name: {type: KIND, ...}`` (elements, blocks):
+        each name declared (``what`` it is), its mapping and its kind, one of ``valid``
+        (a YAML integer such as the junction ``0`` read as its name): name -> (kind,
+        mapping)."""
+        out = {}
+        for name, v in sec.items():
+            key = f"{section}.{name}"
+            self.declare(name, f"{what} '{name}'", sec.key_locs[name], key)
+            v = mapping(v, sec.val_locs[name], key, expect)
+            kind = v.get("type")
+            kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
+            if not isinstance(kind, str) or kind not in valid:
+                fail(f"unknown {what} type {v.get('type')!r}", v.val_locs.get("type", v.loc),
+                     f"{key}.type", "valid types: " + ", ".join(valid))
+            out[name] = (kind, v)
+        return out
 
     def _direction_ref(self, target, attr, key, loc):
         """``joint.direction.q`` (displacement from the initial pose: m or rad) and

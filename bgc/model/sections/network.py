@@ -13,25 +13,14 @@ from bgc.model.document import YList, YMap
 from bgc.model.model import KINDS, Bond, Element, Output, Port
 from bgc.model.sections.bodies import R0_DIRECTIONS
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail, kind_of, mapping, unit
+from bgc.model.values import check_keys, fail, kind_of, unit
 
 
 def element_headers(cx: Context, sec: YMap) -> dict[str, tuple[str, YMap]]:
     """Each element's name and kind: name -> (kind, its mapping), for the bonds and for
     ``element_fields``."""
-    out = {}
-    for name, v in sec.items():
-        key = f"elements.{name}"
-        cx.declare(name, f"element '{name}'", sec.key_locs[name], key)
-        v = mapping(v, sec.val_locs[name], key, "a mapping with 'type'")
-        kind = v.get("type")
-        kind = str(kind) if isinstance(kind, int) and not isinstance(kind, bool) else kind
-        if not isinstance(kind, str) or kind not in KINDS or not KINDS[kind].user:
-            fail(f"unknown element type {v.get('type')!r}",
-                 v.val_locs.get("type", v.loc), f"{key}.type",
-                 "valid types: " + ", ".join(k for k in KINDS if KINDS[k].user))
-        out[name] = (kind, v)
-    return out
+    return cx.typed(sec, "elements", "element", [k for k in KINDS if KINDS[k].user],
+                    "a mapping with 'type'")
 
 
 def bonds(cx: Context, sec: YList, elements) -> list[Bond]:
@@ -107,7 +96,7 @@ def port(cx: Context, name: str, loc, key) -> Port:
         if parts[1] not in spec.free:
             fail(f"port '{name}': joint '{j.name}' has no direction '{parts[1]}'", loc, key,
                  f"free directions of this {j.kind} joint: {free}")
-        p = Port(name, loc, parts[1], joint=j.name, rotational=parts[1].startswith("r"))
+        p = Port(name, loc, parts[1], joint=j.name)
     elif len(parts) == 3 and parts[0] in cx.bodies:
         b = cx.bodies[parts[0]]
         if parts[1] not in b.points:

@@ -13,8 +13,12 @@ wraps it (``rhs``, ``jac``, ... stay numba functions a script can call or inline
   region per linear block; within a function they stay in registers. These chunks are
   a module of their own (``Kernels.ir_straight``), given only local passes.
 - **Linear blocks** (algebraic loops, constraint blocks) are solved where the causal
-  order reaches them: LU with partial pivoting, or, where the constraints' rank at run
-  time is below the block's size, least squares through LAPACK's SVD (scipy's dgesdd).
+  order reaches them, each by a function of its own (``@<prefix>_block<index>``): on the
+  block's structure by sparse LU with static pivots (``bgc.codegen.elimination``'s plan,
+  a loop over constant tables) where that pays, else (or where the pivots grow) LU with
+  partial pivoting, or, where the constraints' rank at run time is below the block's
+  size, least squares through LAPACK's SVD (scipy's dgesdd). A constraint block
+  ``A = -K B`` is formed from K's and B's non-zeros only.
 - **The Jacobian**: each assignment's partials by reverse-mode differentiation of its
   expression tree (``_Function.grad``: no symbolic derivative is ever formed), then the
   compressed forward-mode tape of ``bgc.codegen.jacobian`` as a loop over constant tables.
@@ -31,9 +35,12 @@ import re
 import struct
 from dataclasses import dataclass
 
+import numpy as np
 import sympy as sp
 
+from bgc.codegen import elimination
 from bgc.codegen.equations import LinearBlock
+from bgc.codegen.start import block_matrices
 from bgc.errors import BgcError
 from bgc.model import symbols
 from bgc.model.signals import table, table_slope
@@ -41,6 +48,9 @@ from bgc.model.signals import table, table_slope
 # the functions' prefix while the IR is built (emit replaces it by the module's own)
 PLACEHOLDER = "bgc_kernel_prefix"
 CHUNK = 300          # assignments (or stores) per IR function
+# a block is solved on its structure from this size, where elimination in the plan's
+# order takes at most this share of dense LU's multiply-adds
+SPARSE_MIN, SPARSE_WORK = 24, 0.5
 # and at most about this many instructions: LLVM's passes cost more than linearly in a
 # function's size, and a zcp chain's eliminated expressions make a few assignments long
 CHUNK_OPS = 2000
@@ -75,7 +85,8 @@ def double(v: float) -> str:
 class Block:
     """Where linear block ``index`` lives in the workspace: A (n x n, row-major), b (n),
     u (n, the unknowns' slots), the rank's slot (-1: full rank, LU) and, for a block
-    ``A = -K B``, K (n x d) and B (d x n)."""
+    ``A = -K B``, K (n x d) and B (d x n), only their non-zeros written (``k_at``, ``b_at``:
+    their positions); ``plan``: sparse LU's (None: dense)."""
     index: int
     n: int
     a: int
@@ -85,8 +96,36 @@ class Block:
     d: int = 0
     k: int = 0
     kb: int = 0
-    lu: int = 0         # room for its LU factors
+    lu: int = 0         # room for its LU factors (and a column, sparse)
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
+    k_at: tuple = ()
+    b_at: tuple = ()
+    plan: elimination.Plan | None = None
+
+    def touched(self) -> set:
+        """The entries (row, column) of A that sparse LU reads: A's and its fill's."""
+        pl = self.plan
+        out = set(zip(*np.nonzero(self.pattern(None))))
+        if pl is not None:
+            for k in range(self.n):
+                out.add((pl.rows[k], pl.cols[k]))
+                out |= {(pl.rows[i], pl.cols[k]) for i in pl.lidx[pl.lptr[k]:pl.lptr[k + 1]]}
+                out |= {(pl.rows[k], pl.cols[j]) for j in pl.uidx[pl.uptr[k]:pl.uptr[k + 1]]}
+        return {(int(r), int(c)) for r, c in out}
+
+    def pattern(self, item: LinearBlock):
+        """A's structure: K B's, or the entries the block stores."""
+        a = np.zeros((self.n, self.n), dtype=bool)
+        if self.d:
+            k = np.zeros((self.n, self.d), dtype=np.int64)
+            b = np.zeros((self.d, self.n), dtype=np.int64)
+            k[tuple(np.array(self.k_at).T)] = 1
+            b[tuple(np.array(self.b_at).T)] = 1
+            a = (k @ b) != 0
+        else:
+            for i, j, _ in item.A:
+                a[i, j] = True
+        return a
 
 
 @dataclass
@@ -121,6 +160,7 @@ class Layout:
                     self._take(v)
             else:
                 self._take(item[0])
+        start = None
         for item in system.assignments:
             if isinstance(item, LinearBlock):
                 n = len(item.unknowns)
@@ -131,7 +171,13 @@ class Layout:
                 if item.factors is not None:
                     blk.d = d = item.factors[0]
                     blk.k, blk.kb = self._region(n * d), self._region(d * n)
-                blk.lu = self._region(n * n)
+                    blk.k_at = tuple((i, j) for i, j, _ in item.factors[1])
+                    blk.b_at = tuple((i, j) for i, j, _ in item.factors[2])
+                if n >= SPARSE_MIN:
+                    start = start if start is not None else block_matrices(system)
+                    blk.plan = elimination.analyse(blk.pattern(item), SPARSE_WORK,
+                                                   start.get(item.index))
+                blk.lu = self._region(n * n + (n if blk.plan is not None else 0))
                 if item.rank is not None:
                     blk.ls = self._region(lstsq_work(n, columns))
                 self.blocks[item.index] = blk
@@ -479,10 +525,8 @@ def _steps(items, outputs, layout: Layout):
         n = blk.n
         for v, e in item.pre:
             yield ("set", v, e)
-        if item.factors is not None:        # A = -K B, formed by the numba side
+        if item.factors is not None:        # A = -K B, formed from their non-zeros
             _, K, B = item.factors
-            yield ("zero", blk.k, n * blk.d)
-            yield ("zero", blk.kb, blk.d * n)
             for i, j, e in K:
                 yield ("store", blk.k + i * blk.d + j, e)
             for i, j, e in B:
@@ -1122,31 +1166,166 @@ def lstsq_work(n: int, m: int) -> int:
     return 3 * n * n + n + n * m + (7 * n * n + 12 * n) + 4 * n
 
 
+def _index(a: _Asm, base: str, i: str) -> str:
+    """``base[i]`` of an i64 table."""
+    return a.op(f"load i64, i64* {a.at(base, i, 'i64')}, align 8")
+
+
 def _assemble_ir(P: str) -> str:
-    """``@<P>_assemble(n, d, A, K, B)``: A = -K B (K: n x d, B: d x n), skipping the
-    zeros of K, as the numba code before it did."""
+    """``@<P>_assemble(n, d, A, K, F, full, na, apos, ne, kpos, krow, bptr, bcol)``:
+    A = -K F (K: n x d, F: d x n) from their non-zeros: K's at ``kpos`` (flat, in rows
+    ``krow``), F's row q at columns ``bcol[bptr[q]:bptr[q+1]]``. A is zeroed first where
+    it is non-zero (``apos``), or everywhere (``full``: for a dense solve)."""
     a = _Asm(f"define void @{P}_assemble(i64 %n, i64 %d, double* noalias %A, "
-             f"double* noalias %K, double* noalias %F) nounwind {{", ["i", "j", "q"])
-    nn = a.op("mul i64 %n, %n")
-    a.loop("i", "0", nn, lambda i: a.store("0.0", "%A", i))
+             f"double* noalias %K, double* noalias %F, i1 %full, i64 %na, i64* %apos, "
+             f"i64 %ne, i64* %kpos, i64* %krow, i64* %bptr, i64* %bcol) nounwind {{",
+             ["e", "r"])
+    a("br i1 %full, label %all, label %some")
+    a.label("all")
+    nbytes = a.op(f"mul i64 {a.op('mul i64 %n, %n')}, 8")
+    a(f"call void @llvm.memset.p0i8.i64(i8* {a.op('bitcast double* %A to i8*')}, i8 0, "
+      f"i64 {nbytes}, i1 false)")
+    a("br label %sum")
+    a.label("some")
+    a.loop("e", "0", "%na", lambda e: a.store("0.0", "%A", _index(a, "%apos", e)))
+    a("br label %sum")
+    a.label("sum")
 
-    def row(i):
-        def col(j):
-            c = a.load("%K", a.op(f"add i64 {a.op(f'mul i64 {i}, %d')}, {j}"))
-            nz = a.op(f"fcmp une double {c}, 0.0")
+    def entry(e):
+        pos, i = _index(a, "%kpos", e), _index(a, "%krow", e)
+        q = a.op(f"sub i64 {pos}, {a.op(f'mul i64 {i}, %d')}")
+        c = a.load("%K", pos)
+        row, frow = a.op(f"mul i64 {i}, %n"), a.op(f"mul i64 {q}, %n")
 
-            def update():
-                def q_(q):
-                    at = a.op(f"add i64 {a.op(f'mul i64 {i}, %n')}, {q}")
-                    old = a.load("%A", at)
-                    f = a.load("%F", a.op(f"add i64 {a.op(f'mul i64 {j}, %n')}, {q}"))
-                    a.store(a.op(f"fsub double {old}, {a.op(f'fmul double {c}, {f}')}"),
-                            "%A", at)
-                a.loop("q", "0", "%n", q_)
-            a.when(nz, update)
-        a.loop("j", "0", "%d", col)
-    a.loop("i", "0", "%n", row)
+        def update(r):
+            j = _index(a, "%bcol", r)
+            at = a.op(f"add i64 {row}, {j}")
+            f = a.load("%F", a.op(f"add i64 {frow}, {j}"))
+            a.store(a.op(f"fsub double {a.load('%A', at)}, {a.op(f'fmul double {c}, {f}')}"),
+                    "%A", at)
+        a.loop("r", _index(a, "%bptr", q), _index(a, "%bptr", a.op(f"add i64 {q}, 1")),
+               update)
+    a.loop("e", "0", "%ne", entry)
     a("ret void")
+    return a.text()
+
+
+def _splu_ir(P: str) -> str:
+    """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: solve A X = B
+    (X holds B, n x m row-major; overwritten) by LU of ``A[rows][:, cols]`` on its
+    diagonal along an ``elimination.Plan``, touching only the filled structure. False,
+    X untouched, on a pivot not above 1e-13 of the largest |A| (what the dense LU calls
+    singular) or an entry grown past ``GROWTH_LIMIT`` times it: the caller then pivots.
+    LU holds n^2 + n doubles (the factors, held dense in the plan's order; a column)."""
+    a = _Asm(f"define i1 @{P}_splu(i64 %n, i64 %m, double* noalias %A, double* noalias "
+             f"%X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, i64* %lidx, "
+             f"i64* %uptr, i64* %uidx) nounwind {{", ["k", "q", "r", "c"])
+    a("%big = alloca double")
+    a("%acc = alloca double")
+    a("store double 0.0, double* %big")
+    x = a.at("%LU", a.op("mul i64 %n, %n"))
+    fabs = "call double @llvm.fabs.f64(double {})"
+
+    def at(i, j):
+        return a.op(f"add i64 {a.op(f'mul i64 {i}, %n')}, {j}")
+
+    def span(ptr, k):
+        return _index(a, ptr, k), _index(a, ptr, a.op(f"add i64 {k}, 1"))
+
+    def check(ok):                      # on to the next block, or give up
+        go = a.tmp()[1:]
+        a(f"br i1 {ok}, label %{go}, label %fail")
+        a.label(go)
+
+    def take(i, j, ri, cj):             # LU[i, j] = A[ri, cj]; track the largest
+        v = a.load("%A", at(ri, cj))
+        a.store(v, "%LU", at(i, j))
+        mag, big = a.op(fabs.format(v)), a.op("load double, double* %big")
+        more = a.op(f"fcmp ogt double {mag}, {big}")
+        a(f"store double {a.op(f'select i1 {more}, double {mag}, double {big}')}, "
+          "double* %big")
+
+    def copy(k):
+        rk, ck = _index(a, "%rows", k), _index(a, "%cols", k)
+        take(k, k, rk, ck)
+        a.loop("q", *span("%lptr", k), lambda q: (
+            lambda i: take(i, k, _index(a, "%rows", i), ck))(_index(a, "%lidx", q)))
+        a.loop("r", *span("%uptr", k), lambda r: (
+            lambda j: take(k, j, rk, _index(a, "%cols", j)))(_index(a, "%uidx", r)))
+    a.loop("k", "0", "%n", copy)
+    big = a.op("load double, double* %big")
+    limit = a.op(f"fmul double {double(elimination.GROWTH_LIMIT)}, {big}")
+    tiny = a.op(f"fmul double {double(1e-13)}, {big}")
+
+    def pivot(k):
+        rk = a.at("%LU", a.op(f"mul i64 {k}, %n"))          # row k
+        piv = a.load(rk, k)
+        mag = a.op(fabs.format(piv))
+        check(a.op(f"and i1 {a.op(f'fcmp ogt double {mag}, {tiny}')}, "
+                   f"{a.op(f'fcmp ole double {mag}, {limit}')}"))
+
+        def row(q):
+            ri = a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n"))
+            lik = a.op(f"fdiv double {a.load(ri, k)}, {piv}")
+            a.store(lik, ri, k)
+
+            def update(r):
+                j = _index(a, "%uidx", r)
+                v = a.op(f"fsub double {a.load(ri, j)}, "
+                         f"{a.op(f'fmul double {lik}, {a.load(rk, j)}')}")
+                a.store(v, ri, j)
+            a.loop("r", *span("%uptr", k), update)
+        a.loop("q", *span("%lptr", k), row)
+    a.loop("k", "0", "%n", pivot)
+
+    def grown(k):                       # the factors' entries, once (not per update)
+        rk = a.at("%LU", a.op(f"mul i64 {k}, %n"))
+
+        def bounded(v):
+            check(a.op(f"fcmp ole double {a.op(fabs.format(v))}, {limit}"))
+        a.loop("q", *span("%lptr", k), lambda q: bounded(a.load(
+            a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n")), k)))
+        a.loop("r", *span("%uptr", k), lambda r: bounded(a.load(rk, _index(a, "%uidx", r))))
+    a.loop("k", "0", "%n", grown)
+
+    def column(c):
+        def gather(i):
+            ri = _index(a, "%rows", i)
+            a.store(a.load("%X", a.op(f"add i64 {a.op(f'mul i64 {ri}, %m')}, {c}")), x, i)
+        a.loop("k", "0", "%n", gather)
+
+        def forward(k):
+            xk = a.load(x, k)
+
+            def sub(q):
+                i = _index(a, "%lidx", q)
+                lik = a.load("%LU", at(i, k))
+                a.store(a.op(f"fsub double {a.load(x, i)}, {a.op(f'fmul double {lik}, {xk}')}"),
+                        x, i)
+            a.loop("q", *span("%lptr", k), sub)
+        a.loop("k", "0", "%n", forward)
+
+        def backward(kk):
+            k = a.op(f"sub i64 {a.op('add i64 %n, -1')}, {kk}")
+            rk = a.at("%LU", a.op(f"mul i64 {k}, %n"))
+            a(f"store double {a.load(x, k)}, double* %acc")
+
+            def sub(r):
+                j = _index(a, "%uidx", r)
+                a.accumulate(a.op(f"fneg double {a.op(f'fmul double {a.load(rk, j)}, {a.load(x, j)}')}"))
+            a.loop("r", *span("%uptr", k), sub)
+            a.store(a.op(f"fdiv double {a.op('load double, double* %acc')}, "
+                         f"{a.load(rk, k)}"), x, k)
+        a.loop("k", "0", "%n", backward)
+
+        def scatter(i):
+            ci = _index(a, "%cols", i)
+            a.store(a.load(x, i), "%X", a.op(f"add i64 {a.op(f'mul i64 {ci}, %m')}, {c}"))
+        a.loop("k", "0", "%n", scatter)
+    a.loop("c", "0", "%m", column)
+    a("ret i1 true")
+    a.label("fail")
+    a("ret i1 false")
     return a.text()
 
 
@@ -1181,27 +1360,82 @@ class _Module:
                            f"{self._region(fn, to)}, i8* {self._region(fn, frm)}, "
                            f"i64 {8 * count}, i1 false)")
 
+    def block(self, blk: Block):
+        """``@<prefix>_block<index>(m, A, K, F, X, LU, assemble)``: A X = B for B (n x m)
+        in X, in place (``assemble``: first form A = -K F where A is non-zero): on the
+        block's plan, or, where it has none or its pivots grow, with partial pivoting (A
+        then formed in full)."""
+        P, n, i = self.prefix, blk.n, blk.index
+        if blk.d:
+            self._form(blk)
+        form = (f"  call void @{P}_block{i}_form(double* %A, double* %K, double* %F, i1 "
+                "{})")
+        body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
+                f"double* noalias %F, double* noalias %X, double* noalias %LU, "
+                f"i1 %assemble) nounwind {{", "entry:"]
+        if blk.d and blk.plan is not None:
+            body += ["  br i1 %assemble, label %form, label %sparse", "form:",
+                     form.format("false")]
+        body += ["  br label %sparse", "sparse:"]
+        if blk.plan is not None:
+            tables = ", ".join(self.array(f"block{i}_{k}", "i64", getattr(blk.plan, k))
+                               for k in elimination.Plan._fields)
+            body += [f"  %ok = call i1 @{P}_splu(i64 {n}, i64 %m, double* %A, double* %X, "
+                     f"double* %LU, {tables})", "  br i1 %ok, label %done, label %dense"]
+        else:
+            body += ["  br label %dense"]
+        body += ["dense:"]
+        if blk.d:           # in full (the sparse path formed only what it reads)
+            body += ["  br i1 %assemble, label %full, label %lu", "full:", form.format("true"),
+                     "  br label %lu", "lu:"] if blk.plan is None else [form.format("true")]
+        body += [f"  call void @{P}_lu(i64 {n}, i64 %m, double* %A, double* %X, double* %LU)",
+                 "  br label %done", "done:", "  ret void", "}"]
+        self.functions.append("\n".join(body))
+
+    def _form(self, blk: Block):
+        """``@<prefix>_block<index>_form(A, K, F, full)``: a constraint block's A = -K F
+        from the non-zeros of K and F (``full``: A zeroed everywhere first)."""
+        n, d, i = blk.n, blk.d, blk.index
+        apos = sorted(r * n + c for r, c in blk.touched())
+        rows = [[] for _ in range(d)]
+        for q, j in sorted(blk.b_at):
+            rows[q].append(j)
+        k_at = sorted(blk.k_at)
+        ptr = {k: self.array(f"block{i}_{k}", "i64", v) for k, v in (
+            ("apos", apos), ("kpos", [r * d + q for r, q in k_at]),
+            ("krow", [r for r, _ in k_at]),
+            ("bptr", np.cumsum([0] + [len(r) for r in rows])),
+            ("bcol", [j for r in rows for j in r]))}
+        self.functions.append("\n".join([
+            f"define void @{self.prefix}_block{i}_form(double* noalias %A, double* noalias "
+            f"%K, double* noalias %F, i1 %full) nounwind {{", "entry:",
+            f"  call void @{self.prefix}_assemble(i64 {n}, i64 {d}, double* %A, double* %K, "
+            f"double* %F, i1 %full, i64 {len(apos)}, {ptr['apos']}, i64 {len(k_at)}, "
+            f"{ptr['kpos']}, {ptr['krow']}, {ptr['bptr']}, {ptr['bcol']})", "  ret void", "}"]))
+
     def solve(self, fn: _Function, blk: Block, at: int, columns: int, assemble: bool):
         """A_blk X = B for B (n x columns) at w[at], in place (``assemble``: first form
-        A = -K B): by LU, or, for a block whose rank at run time is below its size
-        (redundant constraints), by least squares."""
+        A = -K B): by the block's function, or, for a block whose rank at run time is
+        below its size (redundant constraints), by least squares."""
         P, n = self.prefix, blk.n
         B, A = fn.ptr("%w", at), fn.ptr("%w", blk.a)
-        if assemble and blk.d:
-            fn.body.append(f"  call void @{P}_assemble(i64 {n}, i64 {blk.d}, double* {A}, "
-                           f"double* {fn.ptr('%w', blk.k)}, double* {fn.ptr('%w', blk.kb)})")
-        lu = (f"  call void @{P}_lu(i64 {n}, i64 {columns}, double* {A}, double* {B}, "
-              f"double* {fn.ptr('%w', blk.lu)})")
+        K, F = (fn.ptr("%w", blk.k), fn.ptr("%w", blk.kb)) if blk.d else (A, A)
+        call = (f"  call void @{P}_block{blk.index}(i64 {columns}, double* {A}, double* {K}, "
+                f"double* {F}, double* {B}, double* {fn.ptr('%w', blk.lu)}, "
+                f"i1 {'true' if assemble else 'false'})")
         if blk.rank < 0:
-            fn.body.append(lu)
+            fn.body.append(call)
             return
         r = fn.op(f"fptosi double {fn.load('%w', blk.rank)} to i64")
         fewer = fn.op(f"icmp slt i64 {r}, {n}")
         k = fn.n
-        fn.body += [f"  br i1 {fewer}, label %ls{k}, label %lu{k}", f"ls{k}:",
-                    f"  call void @{P}_lstsq(i64 {n}, i64 {columns}, double* {A}, "
+        fn.body += [f"  br i1 {fewer}, label %ls{k}, label %lu{k}", f"ls{k}:"]
+        if blk.d:                       # A in full, as the block's dense path forms it
+            fn.body.append(f"  call void @{P}_block{blk.index}_form(double* {A}, "
+                           f"double* {K}, double* {F}, i1 true)")
+        fn.body += [f"  call void @{P}_lstsq(i64 {n}, i64 {columns}, double* {A}, "
                     f"double* {B}, i64 {r}, double* {fn.ptr('%w', blk.ls)})",
-                    f"  br label %solved{k}", f"lu{k}:", lu, f"  br label %solved{k}",
+                    f"  br label %solved{k}", f"lu{k}:", call, f"  br label %solved{k}",
                     f"solved{k}:"]
 
     def program(self, name: str, items, outputs):
@@ -1370,7 +1604,12 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
         mod.decls |= {_MEMCPY, "declare double @llvm.fabs.f64(double)"}
         mod.functions.append(_LU.replace("{P}", prefix).replace("{TINY}", double(1e-13)))
     if any(b.d for b in blocks):
+        mod.decls.add(_MEMSET)
         mod.functions.append(_assemble_ir(prefix))
+    if any(b.plan is not None for b in blocks):
+        mod.functions.append(_splu_ir(prefix))
+    for blk in blocks:
+        mod.block(blk)
     if any(b.rank >= 0 for b in blocks):
         mod.decls.add(f"declare void @{prefix}_dgesdd(i8*, i32*, i32*, double*, i32*, "
                       "double*, double*, i32*, double*, i32*, double*, i32*, i32*, i32*)")

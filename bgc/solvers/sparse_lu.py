@@ -4,7 +4,8 @@ A multibody model's Jacobian is sparse (the SARIB's: 2031 of 23104 entries), and
 Newton matrices were most of the native integrator's work when factored dense. The
 structure is known at compile time (the generated ``JAC_I``, ``JAC_J``), so it is analysed
 once per run (``analyse``): a minimum-degree ordering of ``A + A^T`` (SuperLU's MMD, through
-scipy) and the symbolic fill of elimination in that order, as per-pivot lists of the rows
+scipy) and the symbolic fill of elimination in that order (``bgc.codegen.elimination``,
+shared with the generated kernels' sparse LU), as per-pivot lists of the rows
 of L and the columns of U. Each factorization (``factor``) then touches only those
 entries, in the ordered matrix held dense (n^2 storage, a fraction of the flops).
 
@@ -22,28 +23,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-GROWTH_LIMIT = 1e4
-# dense is as fast below this size, or when the fill leaves little to skip
+from bgc.codegen import elimination
+
+GROWTH_LIMIT = elimination.GROWTH_LIMIT
+# dense is as fast below this size, or where elimination on the structure saves less
+# than 10x dense LU's multiply-adds: LAPACK's blocked dense LU does each several times
+# faster than this loop over index lists (the SARIB's Newton matrices, factored both
+# ways: parasitic 0.026 of dense's work, 4.9x faster sparse; zcp 0.077, 1.7x; lagrange
+# 0.12, 0.94x)
 MIN_SIZE = 24
-MAX_FILL = 0.35
+MAX_WORK = 0.1
 
 _EMPTY = np.empty(0, dtype=np.int64)
 DENSE = (_EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY)
-
-
-def _fill(pattern: np.ndarray) -> np.ndarray | None:
-    """The filled pattern of elimination in the given order (boolean, n x n); None if a
-    pivot is structurally zero (no static pivot there)."""
-    f = pattern.copy()
-    n = f.shape[0]
-    for k in range(n):
-        if not f[k, k]:
-            return None
-        rows = k + 1 + np.flatnonzero(f[k + 1:, k])
-        cols = k + 1 + np.flatnonzero(f[k, k + 1:])
-        if rows.size and cols.size:
-            f[np.ix_(rows, cols)] = True
-    return f
 
 
 def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
@@ -67,20 +59,13 @@ def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
                   options={"SymmetricMode": True})
     best = None
     for perm in (np.asarray(lu.perm_c), np.argsort(lu.perm_c)):
-        f = _fill(pattern[np.ix_(perm, perm)])
+        f = elimination.fill(pattern[np.ix_(perm, perm)])
         if f is not None and (best is None or f.sum() < best[1].sum()):
             best = (perm, f)
-    if best is None or best[1].sum() > MAX_FILL * n * n:
+    if best is None or elimination.work(best[1]) > MAX_WORK * elimination.dense_work(n):
         return DENSE
     perm, f = best
-    lptr, lidx, uptr, uidx = [0], [], [0], []
-    for k in range(n):
-        lidx += list(k + 1 + np.flatnonzero(f[k + 1:, k]))
-        uidx += list(k + 1 + np.flatnonzero(f[k, k + 1:]))
-        lptr.append(len(lidx))
-        uptr.append(len(uidx))
-    as_int = lambda v: np.asarray(v, dtype=np.int64)   # noqa: E731
-    return (as_int(perm), as_int(lptr), as_int(lidx), as_int(uptr), as_int(uidx))
+    return (perm.astype(np.int64), *elimination.lists(f))
 
 
 @njit(cache=True)

@@ -65,8 +65,9 @@ def test_no_model_writes_the_main_jobs_files_in_the_current_directory(
         tmp_path, monkeypatch, gen_dir, compiled):
     compiled("sarib")           # compiled once for the session (-o gen_dir: found fresh)
     monkeypatch.chdir(tmp_path)
+    # the files, not the method: the session's parasitic module, not the main job's zcp
     r = CliRunner().invoke(main, ["simulate", "--excitation", "chirp", "--t-end", "0.02",
-                                  "-o", str(gen_dir), "--quiet"])
+                                  "--method", "parasitic", "-o", str(gen_dir), "--quiet"])
     assert r.exit_code == 0, r.output
     assert "sarib: native to t = 0.02 s" in r.output
     files = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))

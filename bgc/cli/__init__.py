@@ -12,7 +12,7 @@ generator are imported where a command needs them, so that ``bgc simulate`` on a
 module loads none of them (tests/cli/test_warm_start.py).
 """
 
-from bgc.cli import bench, check, compile, frf, run, simulate  # noqa: F401  (the commands)
+from bgc.cli import bench, check, compile, draw, frf, run, simulate  # noqa: F401  (the commands)
 from bgc.cli.app import main
 
 __all__ = ["main"]

@@ -66,6 +66,7 @@ class Diagram:
     nodes: dict[str, Node]
     edges: list[Edge]
     groups: dict[str, str]     # group -> its caption ('' for the network: no frame)
+    outside: set[str] = field(default_factory=set)    # groups --only left out
     notes: list[str] = field(default_factory=list)
 
 
@@ -147,7 +148,7 @@ def build_diagram(graph, effort_in: list, marks: dict[str, tuple[set, set]],
     used = {n.group for n in nodes.values()}
     captions = {g: _caption(graph, g, g in keep) for g in _ordered(graph) if g in used}
     return Diagram(f"{title}: {len(nodes)} elements, {len(edges)} bonds", nodes, edges,
-                   captions)
+                   captions, used - keep)
 
 
 def _ordered(graph) -> list[str]:

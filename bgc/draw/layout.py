@@ -1,12 +1,11 @@
 """``bgc draw``, second step: a ``Diagram`` -> a ``Layout``, where each element and each
 group's frame sits (in points, y up).
 
-Two levels of Sugiyama layered layout (igraph's ``layout_sugiyama``: layers along the
-bonds' power direction, crossings reduced; compiled C, 20 ms for the whole SARIB): each
-group's elements are laid out on their own, from the bonds inside the group; then the
-groups, as boxes, from the bonds between them, each layer of groups a row of boxes
-(wrapped where a row would be much wider than the drawing is tall). A body and its joints so
-stay together, and the SARIB's 738 elements read as 32 frames.
+Each group's elements are laid out on their own by igraph's Sugiyama layered layout
+(``layout_sugiyama``: layers along the bonds' power direction, crossings reduced; compiled
+C, 20 ms for the whole SARIB), from the bonds inside the group; then the groups' frames
+are packed in rows, in depth-first order over the bonds between them, so that a body's
+joints sit beside it and the SARIB's 738 elements read as 32 frames.
 """
 
 from __future__ import annotations
@@ -90,30 +89,39 @@ def _of(d: Diagram, names: list[str]) -> str:
 
 
 def _arrange(d: Diagram, size: dict[str, tuple[float, float]]) -> dict[str, tuple]:
-    """Each group's frame's lower-left corner: the groups laid out as vertices (an edge
-    for each pair a bond joins, along its power), each layer a row of frames from left to
-    right (top row first), wrapped at a width that keeps the drawing about as wide as
-    tall."""
-    groups = list(size)
-    idx = {g: i for i, g in enumerate(groups)}
-    edges = [(idx[d.nodes[e.src].group], idx[d.nodes[e.dst].group]) for e in d.edges]
-    coords = _sugiyama(len(groups), [(a, b) for a, b in edges if a != b])
+    """Each group's frame's lower-left corner: the groups in depth-first order over the
+    bonds between them (from the first group in file order: a body, then a joint of it,
+    the body across it, ...), so that a body's joints sit beside it, packed in rows from
+    left to right and top to bottom (the groups ``--only`` left out first, so that their
+    bonds come from above), wrapped at a width that keeps the drawing about as
+    wide as tall."""
+    near: dict[str, list[str]] = {g: [] for g in size}
+    for e in d.edges:
+        a, b = d.nodes[e.src].group, d.nodes[e.dst].group
+        if a != b:
+            near[a].append(b)
+            near[b].append(a)
+    rank = {g: i for i, g in enumerate(size)}
+    order: list[str] = []
+    for start in size:
+        stack = [start]
+        while stack:
+            g = stack.pop()
+            if g in order:
+                continue
+            order.append(g)
+            stack += sorted(set(near[g]) - set(order), key=rank.get, reverse=True)
+    order = sorted(order, key=lambda g: g not in d.outside)   # --only's neighbours on top
     area = sum((w + GAP) * (h + GAP) for w, h in size.values())
     limit = max(max(w for w, _ in size.values()), 1.3 * math.sqrt(area))
-    rows: list[list[str]] = []
-    for layer in sorted({y for _, y in coords}):
-        row = sorted((g for g in groups if coords[idx[g]][1] == layer),
-                     key=lambda g: coords[idx[g]][0])
-        rows.append([])
-        for g in row:
-            if rows[-1] and sum(size[h][0] + GAP for h in rows[-1]) + size[g][0] > limit:
-                rows.append([])
-            rows[-1].append(g)
-    widths = [sum(size[g][0] for g in r) + GAP * (len(r) - 1) for r in rows]
-    full = max(widths)
+    rows: list[list[str]] = [[]]
+    for g in order:
+        if rows[-1] and sum(size[h][0] + GAP for h in rows[-1]) + size[g][0] > limit:
+            rows.append([])
+        rows[-1].append(g)
     origin, top = {}, 0.0
-    for r, w in zip(rows, widths):
-        x, tall = MARGIN + (full - w) / 2, max(size[g][1] for g in r)
+    for r in rows:
+        x, tall = MARGIN, max(size[g][1] for g in r)
         for g in r:
             origin[g] = (x, -top - size[g][1])
             x += size[g][0] + GAP

@@ -37,6 +37,7 @@ BARB = (8.0, 4.5)       # the half-arrow: back along the bond, to its side (pt)
 MARK = {"loop": "#3b82c4", "zcp": "#8e44ad", "conflict": "#d62728"}
 CONSTRAINT = ("#ffd9a0", "#d9822b")
 OUTSIDE = "#8c8c8c"
+FILL = "#f6f6f2"        # a group's frame
 KEY = [("causal stroke |: at the end that receives the effort", None, None),
        ("half-arrow: power direction", None, None),
        ("double line N: multibond of dimension N", None, None),
@@ -86,8 +87,8 @@ def _frames(ax, lay: Layout) -> None:
         caption = lay.diagram.groups[g]
         if not caption:
             continue
-        outside = caption.endswith("outside --only")
-        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor="#f6f6f2",
+        outside = g in lay.diagram.outside
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=FILL,
                                edgecolor=OUTSIDE if outside else "#9a9a90", lw=0.8,
                                ls="--" if outside else "-", zorder=0, gid=f"group-{g}"))
         ax.text(x0 + 5, y1 - 4, caption, fontsize=FONT + 0.5, va="top", ha="left",
@@ -145,7 +146,7 @@ def _node(ax, lay: Layout, name: str) -> None:
     """An element's label (a junction's name small beside it), on its mark's colour."""
     node = lay.diagram.nodes[name]
     x, y = lay.pos[name]
-    box = None
+    box = dict(boxstyle="square,pad=0.1", fc=FILL, ec="none")     # hides the bonds behind
     if "conflict" in node.marks:
         box = dict(boxstyle="round,pad=0.2", fc="#ffd0d0", ec=MARK["conflict"], lw=1)
     elif "constraint" in node.marks:

@@ -211,7 +211,7 @@ def _label(name: str, kind: str, group: str) -> tuple[str, str]:
     short = short.replace("__", ".")
     if kind in ("0", "1"):
         return kind, short
-    return (f"{kind}:{short}" if short else kind), ""
+    return (f"{kind}:{short}" if short and short != kind else kind), ""
 
 
 def _caption(graph, group: str, kept: bool) -> str:

@@ -11,6 +11,7 @@ joints sit beside it and the SARIB's 738 elements read as 32 frames.
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass
 
 from bgc.draw.diagram import Diagram
@@ -34,6 +35,7 @@ class Layout:
     frames: dict[str, tuple[float, float, float, float]]   # group -> x0, y0, x1, y1
     width: float
     height: float
+    notes: list[str]                            # the diagram's notes, wrapped to the width
 
 
 def layout(d: Diagram) -> Layout:
@@ -52,9 +54,12 @@ def layout(d: Diagram) -> Layout:
         for n, (x, y) in place.items():
             pos[n] = (x0 + x, y0 + y)
     width = max((f[2] for f in frames.values()), default=0) + MARGIN
+    width = max(width, 480.0)
+    chars = int((width - 2 * MARGIN) / (0.6 * FONT))
+    notes = [line for note in d.notes for line in textwrap.wrap(note, chars)]
     height = (max((f[3] for f in frames.values()), default=0) + MARGIN + HEADER
-              + NOTE * len(d.notes))
-    return Layout(d, pos, half, frames, max(width, 480.0), height)
+              + NOTE * len(notes))
+    return Layout(d, pos, half, frames, width, height, notes)
 
 
 def _sugiyama(n: int, edges: list[tuple[int, int]]) -> list[tuple[float, float]]:

@@ -170,12 +170,12 @@ def _header(ax, lay: Layout) -> None:
     d = lay.diagram
     top = lay.height - MARGIN / 2
     ax.text(MARGIN, top, d.title, fontsize=FONT + 3, va="top", ha="left", weight="bold")
-    for i, note in enumerate(d.notes):
-        ax.text(MARGIN, top - 16 - NOTE * i, note[:400], fontsize=FONT, va="top",
-                ha="left", color=MARK["conflict"])
+    for i, note in enumerate(lay.notes):
+        ax.text(MARGIN, top - 16 - NOTE * i, note, fontsize=FONT, va="top", ha="left",
+                color=MARK["conflict"])
     marks = {m for n in d.nodes.values() for m in n.marks}
     marks |= {m for e in d.edges for m in e.marks}
-    x, y = MARGIN, top - 26 - NOTE * len(d.notes)
+    x, y = MARGIN, top - 26 - NOTE * len(lay.notes)
     for text, color, mark in KEY:
         if mark and mark not in marks:
             continue

@@ -40,7 +40,7 @@ OUTSIDE = "#8c8c8c"
 FILL = "#f6f6f2"        # a group's frame
 KEY = [("causal stroke |: at the end that receives the effort", None, None),
        ("half-arrow: power direction", None, None),
-       ("double line N: multibond of dimension N", None, None),
+       ("double line N: multibond of dimension N", None, "multibond"),
        ("constraint element L", CONSTRAINT[1], "constraint"),
        ("algebraic loop", MARK["loop"], "loop"), ("zero-order causal path", MARK["zcp"], "zcp"),
        ("causality conflict", MARK["conflict"], "conflict"),
@@ -146,7 +146,8 @@ def _node(ax, lay: Layout, name: str) -> None:
     """An element's label (a junction's name small beside it), on its mark's colour."""
     node = lay.diagram.nodes[name]
     x, y = lay.pos[name]
-    box = dict(boxstyle="square,pad=0.1", fc=FILL, ec="none")     # hides the bonds behind
+    fill = FILL if lay.diagram.groups[node.group] else "white"
+    box = dict(boxstyle="square,pad=0.1", fc=fill, ec="none")     # hides the bonds behind
     if "conflict" in node.marks:
         box = dict(boxstyle="round,pad=0.2", fc="#ffd0d0", ec=MARK["conflict"], lw=1)
     elif "constraint" in node.marks:
@@ -174,7 +175,8 @@ def _header(ax, lay: Layout) -> None:
         ax.text(MARGIN, top - 16 - NOTE * i, note, fontsize=FONT, va="top", ha="left",
                 color=MARK["conflict"])
     marks = {m for n in d.nodes.values() for m in n.marks}
-    marks |= {m for e in d.edges for m in e.marks}
+    marks |= {m for e in d.edges for m in e.marks} | {"multibond" for e in d.edges
+                                                       if e.dim > 1}
     x, y = MARGIN, top - 26 - NOTE * len(lay.notes)
     for text, color, mark in KEY:
         if mark and mark not in marks:

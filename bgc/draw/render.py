@@ -1,25 +1,27 @@
 """``bgc draw``, last step: a ``Layout`` -> an SVG, PNG or PDF file (matplotlib).
 
-Standard bond-graph notation (Karnopp, Margolis & Rosenberg, *System Dynamics*, ch. 5;
-Borutzky, *Bond Graph Methodology*, 2010, sec. 2.7):
+Standard bond-graph notation (Karnopp, Margolis & Rosenberg, *System Dynamics: Modeling,
+Simulation, and Control of Mechatronic Systems*, 5th ed., 2012, sec. 5.1, "Basic Causal
+Considerations"):
 
 - an element is its label, ``C:k``, ``I:m``, ``Se:g``, ``MTF:rx.w1``; a junction is ``0``
   or ``1`` (its name within its group, small, beside it);
 - a bond is a line with a half-arrow at the end the power flows to (``Bond.dst``);
-- the causal stroke is a short line across the bond at the end where the effort is
-  imposed on an element, that is, at the element that receives the effort as its input
-  (``CausalGraph.effort_in[b]``): ``Se |-- `` has it away from the source, an I in
-  integral causality has it at the I, a C in integral causality away from the C, a flow
-  source at the source;
+- the causal stroke is a short line across the bond at the end towards which the effort is
+  directed, the end of the element that takes the effort as its input
+  (``CausalGraph.effort_in[b]``; the other end imposes it and takes the flow back):
+  ``Se --|`` has it away from the source, ``Sf |--`` at the source; an I in integral
+  causality has it at the I (effort in, flow out), a C in integral causality away from the
+  C (flow in, effort out), an R in resistance form away from the R;
 - a multibond (dimension > 1, Breedveld's notation) is a double line with its dimension
   written beside it.
 
 Marks: constraint elements L on an orange label, algebraic loops blue under their bonds
 and labels, zero-order causal paths violet, a causality conflict red; elements outside
-``--only`` grey. Each element's label, bond, stroke, half-arrow and frame is an SVG group
-with an id, ``el-NAME``, ``bond-NAME``, ``stroke-NAME``, ``arrow-NAME``, ``dim-NAME`` (a multibond's
-dimension), ``group-NAME``, so
-that a test or a reader can find them; the SVG keeps its text as text.
+``--only`` grey. Each element's label, bond, stroke, half-arrow, multibond dimension and
+frame is an SVG group with an id (``el-NAME``, ``bond-NAME``, ``stroke-NAME``,
+``arrow-NAME``, ``dim-NAME``, ``group-NAME``) so that a test or a reader can find them; the
+SVG keeps its text as text.
 """
 
 from __future__ import annotations

@@ -98,19 +98,20 @@ def of_model(path: str, method: str, only: str | None = None,
 
 
 def _of_conflict(path, method, err: CausalityError, only, open_loops) -> Diagram:
-    """The graph SCAP refused: the elements the conflict names (``elements.NAME`` keys) and
-    the bonds its messages name, marked ``conflict``; no strokes."""
+    """The graph SCAP refused: the elements and bonds the conflict names (its keys,
+    ``elements.NAME`` or ``bonds.NAME``, and the bonds its messages name), marked
+    ``conflict``; no strokes."""
     from bgc import methods
     from bgc.graph import expand
     from bgc.model import load
     model = load.load(path)
     graph = methods.get(method).restructure(expand.expand(model, method), open_loops)
     errors = err.conflicts or [err]
-    els = {e.key.split(".", 1)[1] for e in errors
-           if e.key and e.key.startswith("elements.")}
+    keys = [e.key.split(".", 1) for e in errors if e.key and "." in e.key]
+    els = {name for section, name in keys if section == "elements"}
     text = " ".join(e.message for e in errors)
-    bonds = {bd.name for bd in graph.bonds
-             if re.search(rf"\bbond {re.escape(bd.name)}\b", text)}
+    bonds = {bd.name for bd in graph.bonds if ["bonds", bd.name] in keys
+             or re.search(rf"\bbond {re.escape(bd.name)}\b", text)}
     d = build_diagram(graph, [None] * len(graph.bonds), {"conflict": (els, bonds)}, only,
                       f"{model.name} ({method}): causality conflict")
     d.notes.append(f"causality conflict, no strokes drawn: {err.message}")

@@ -124,10 +124,10 @@ def _bond(ax, lay: Layout, e) -> None:
     p0, p1, (ux, uy), (nx, ny) = ends(lay, e.src, e.dst)
     xs, ys = (p0[0], p1[0]), (p0[1], p1[1])
     for m in sorted(e.marks):
-        ax.plot(xs, ys, color=MARK[m], lw=6, alpha=0.35, solid_capstyle="round", zorder=2)
+        _line(ax, xs, ys, color=MARK[m], lw=6, alpha=0.35, solid_capstyle="round", zorder=2)
     outside = "outside" in lay.diagram.nodes[e.src].marks | lay.diagram.nodes[e.dst].marks
     color = OUTSIDE if outside else "black"
-    line, = ax.plot(xs, ys, color=color, lw=0.8, zorder=3, gid=f"bond-{e.name}")
+    line = _line(ax, xs, ys, color=color, lw=0.8, zorder=3, gid=f"bond-{e.name}")
     if e.dim > 1:
         line.set_linewidth(2.6)
         line.set_path_effects([patheffects.Stroke(linewidth=2.6, foreground=color),
@@ -136,12 +136,19 @@ def _bond(ax, lay: Layout, e) -> None:
         ax.text(mx + 6 * nx, my + 6 * ny, str(e.dim), fontsize=FONT - 1.5, color=color,
                 ha="center", va="center", zorder=3, gid=f"dim-{e.name}")
     back, side = BARB
-    ax.plot((p1[0], p1[0] - back * ux + side * nx), (p1[1], p1[1] - back * uy + side * ny),
-            color=color, lw=0.8, zorder=3, gid=f"arrow-{e.name}")
+    _line(ax, (p1[0], p1[0] - back * ux + side * nx), (p1[1], p1[1] - back * uy + side * ny),
+          color=color, lw=0.8, zorder=3, gid=f"arrow-{e.name}")
     if e.effort_in is not None:
         cx, cy = p1 if e.effort_in == e.dst else p0
-        ax.plot((cx - STROKE * nx, cx + STROKE * nx), (cy - STROKE * ny, cy + STROKE * ny),
-                color=color, lw=1.3, zorder=3, gid=f"stroke-{e.name}")
+        _line(ax, (cx - STROKE * nx, cx + STROKE * nx), (cy - STROKE * ny, cy + STROKE * ny),
+              color=color, lw=1.3, zorder=3, gid=f"stroke-{e.name}")
+
+
+def _line(ax, xs, ys, **style):
+    """A line in data coordinates (``Line2D`` added as it is: ``ax.plot``'s argument
+    parsing and autoscaling took a third of the SARIB's drawing time)."""
+    from matplotlib.lines import Line2D
+    return ax.add_artist(Line2D(xs, ys, **style))
 
 
 def _node(ax, lay: Layout, name: str) -> None:
@@ -187,7 +194,7 @@ def _header(ax, lay: Layout) -> None:
         if x > MARGIN and x + size > lay.width - MARGIN:
             x, y = MARGIN, y - 12
         if color:
-            ax.plot((x, x + 10), (y, y), color=color, lw=5, alpha=0.6)
+            _line(ax, (x, x + 10), (y, y), color=color, lw=5, alpha=0.6)
             x += 13
         ax.text(x, y, text, fontsize=FONT - 0.5, va="center", ha="left", color="#404040")
         x += size - 13 * bool(color)

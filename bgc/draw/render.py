@@ -20,13 +20,16 @@ Marks: constraint elements L on an orange label, algebraic loops blue under thei
 and labels, zero-order causal paths violet, a causality conflict red; elements outside
 ``--only`` grey. Each element's label, bond, stroke, half-arrow, multibond dimension and
 frame is an SVG group with an id (``el-NAME``, ``bond-NAME``, ``stroke-NAME``,
-``arrow-NAME``, ``dim-NAME``, ``group-NAME``) so that a test or a reader can find them; the
-SVG keeps its text as text.
+``arrow-NAME``, ``dim-NAME``, ``group-NAME``) so that a test or a reader can find them; an
+element's and a bond's group has a ``<title>`` (a tooltip: the full name, a bond's ends and
+causality); the SVG keeps its text as text.
 """
 
 from __future__ import annotations
 
+import io
 import math
+import re
 from pathlib import Path
 
 from bgc.draw.layout import FONT, MARGIN, NOTE, Layout
@@ -76,10 +79,31 @@ def render(lay: Layout, path: str | Path) -> Path:
         for name in lay.diagram.nodes:
             _node(ax, lay, name)
         _header(ax, lay)
+        if fmt == "svg":
+            buf = io.StringIO()
+            fig.savefig(buf, format="svg", metadata={"Date": None})
+            return atomic_write(path, _titles(buf.getvalue(), lay.diagram), "drawing")
         dpi = min(150.0, 9000.0 / max(lay.width, lay.height) * 72)
-        meta = {"Date": None} if fmt == "svg" else {}
-        return atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=dpi,
-                                                          metadata=meta), "drawing")
+        return atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=dpi),
+                            "drawing")
+
+
+def _titles(svg: str, d) -> str:
+    """The SVG with a ``<title>`` (a tooltip in a browser) in each element's and bond's
+    group: the element's kind and full name; the bond's ends, dimension and the end that
+    receives the effort."""
+    from xml.sax.saxutils import escape
+    tips = {f"el-{n}": f"{node.kind} {n}" for n, node in d.nodes.items()}
+    for e in d.edges:
+        tips[f"bond-{e.name}"] = (
+            f"bond {e.name}: {e.src} -> {e.dst}" + (f", dimension {e.dim}" if e.dim > 1
+                                                    else "")
+            + (f", effort into {e.effort_in}" if e.effort_in else ", no causality"))
+
+    def add(m):
+        tip = tips.get(m.group(1))
+        return m.group(0) + (f"\n    <title>{escape(tip)}</title>" if tip else "")
+    return re.sub(r'<g id="([^"]+)">', add, svg)
 
 
 def _frames(ax, lay: Layout) -> None:

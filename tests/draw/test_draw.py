@@ -39,6 +39,7 @@ def svg_parts(path):
                 dims[name] = int(text.text)
                 continue
             els[name] = (float(text.get("x")), float(text.get("y")))
+            assert g.find(f"{SVG}title").text.endswith(f" {name}")     # its tooltip
         elif kind in ("bond", "stroke", "arrow"):
             nums = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?",
                                                  g.find(f"{SVG}path").get("d"))]

@@ -45,7 +45,7 @@ def layout(d: Diagram) -> Layout:
     members: dict[str, list[str]] = {g: [] for g in d.groups}
     for n, node in d.nodes.items():
         members[node.group].append(n)
-    local = {g: _group(names, d, half) for g, names in members.items()}
+    local = {g: _group(g, names, d, half) for g, names in members.items()}
     origin = _arrange(d, {g: size for g, (_, size) in local.items()})
     pos, frames = {}, {}
     for g, (place, (w, h)) in local.items():
@@ -70,27 +70,24 @@ def _sugiyama(n: int, edges: list[tuple[int, int]]) -> list[tuple[float, float]]
     return [(x, y) for x, y in g.layout_sugiyama(maxiter=200).coords[:n]]
 
 
-def _group(names: list[str], d: Diagram, half) -> tuple[dict, tuple[float, float]]:
-    """A group's elements placed in its frame (frame-relative), and the frame's size."""
+def _group(group: str, names: list[str], d: Diagram, half) -> tuple[dict, tuple]:
+    """A group's elements placed in its frame (frame-relative: each in the middle of its
+    column, so that a chain of elements draws straight), and the frame's size."""
     idx = {n: i for i, n in enumerate(names)}
     edges = [(idx[e.src], idx[e.dst]) for e in d.edges
              if e.src in idx and e.dst in idx and e.src != e.dst]
     coords = _sugiyama(len(names), edges)
     left = min(x for x, _ in coords)
-    coords = [(x - left, y) for x, y in coords]
-    col = max(2 * half[n][0] for n in names) + 16
+    widest = max(2 * half[n][0] for n in names)
+    tallest = max(half[n][1] for n in names)
     layers = max(y for _, y in coords)
-    place = {n: (PAD + half[n][0] + x * col, PAD + (layers - y) * LAYER + half[n][1])
-             for n, (x, y) in zip(names, coords)}
-    caption = d.groups[_of(d, names)]
+    place = {n: (PAD + widest / 2 + (x - left) * (widest + 16),
+                 PAD + (layers - y) * LAYER + tallest) for n, (x, y) in zip(names, coords)}
+    caption = d.groups[group]
     w = max(max(x + half[n][0] for n, (x, _) in place.items()) + PAD,
             len(caption) * (FONT + 0.5) * 0.6 + 12)
-    h = (layers * LAYER + 2 * FONT * 0.75) + 2 * PAD + CAPTION * bool(caption)
+    h = layers * LAYER + 2 * tallest + 2 * PAD + CAPTION * bool(caption)
     return place, (w, h)
-
-
-def _of(d: Diagram, names: list[str]) -> str:
-    return d.nodes[names[0]].group
 
 
 def _arrange(d: Diagram, size: dict[str, tuple[float, float]]) -> dict[str, tuple]:

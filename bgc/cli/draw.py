@@ -25,10 +25,10 @@ from bgc.cli.options import loops_option, method_option, progress_option
 @progress_option
 def draw(model, out, only, method, keep_loops):
     """Draw the bond graph: elements, 0- and 1-junctions, half-arrows for the power
-    direction, causal strokes, multibonds with their dimension; constraint elements, zero-
-    order causal paths and algebraic loops marked, grouped by body and joint. A causality
-    conflict is drawn (no strokes, the conflicting elements marked), then reported as
-    an error."""
+    direction, causal strokes (at the end that receives the effort), multibonds with their
+    dimension; constraint elements, zero-order causal paths and algebraic loops marked,
+    grouped by body and joint. A causality conflict is drawn (no strokes, the conflicting
+    elements marked), then reported as an error."""
     from bgc import progress
     from bgc.draw import diagram, layout, render
     from bgc.fileio import check_writable

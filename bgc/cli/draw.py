@@ -1,0 +1,46 @@
+"""``bgc draw MODEL -o FILE``: the model's bond graph as the causality stage assigned it, in
+standard notation (``bgc.draw``), to an SVG, PNG or PDF file chosen by its suffix."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from bgc.cli.app import main, user_errors
+from bgc.cli.options import loops_option, method_option, progress_option
+
+
+@main.command()
+@click.argument("model", type=click.Path())
+@click.option("-o", "--out", required=True, metavar="FILE",
+              help="the drawing: .svg, .png or .pdf")
+@click.option("--only", metavar="NAME[,NAME...]",
+              help="draw some groups: a body (with its joints), a joint, 'network' (the "
+                   "model's own elements) or a pattern such as 'beater_*'; the SARIB's leg "
+                   "1: --only beater_1,bar_1")
+@method_option
+@loops_option
+@user_errors
+@progress_option
+def draw(model, out, only, method, keep_loops):
+    """Draw the bond graph: elements, 0- and 1-junctions, half-arrows for the power
+    direction, causal strokes (at the end that receives the effort), multibonds with their
+    dimension; constraint elements, zero-order causal paths and algebraic loops marked,
+    grouped by body and joint. A causality conflict is drawn (no strokes, the conflicting
+    elements marked), then reported as an error."""
+    from bgc import progress
+    from bgc.draw import diagram, layout, render
+    from bgc.fileio import check_writable
+    render.image_format(out)
+    check_writable(out, "drawing")
+    d, conflict = diagram.of_model(model, method, only, open_loops=not keep_loops)
+    with progress.stage("draw") as st:
+        t = time.perf_counter()
+        lay = layout.layout(d)
+        laid = time.perf_counter() - t
+        path = render.render(lay, out)
+        st.done(f"{path}: {progress.count(len(d.nodes), 'element')}, "
+                f"{progress.count(len(d.edges), 'bond')} (layout {laid:.2f} s)")
+    if conflict is not None:
+        raise conflict

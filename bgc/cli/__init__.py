@@ -1,8 +1,8 @@
-"""The ``bgc`` command line: check, compile, simulate, frf, run, bench.
+"""The ``bgc`` command line: check, compile, simulate, frf, tune, run, bench.
 
-One module per command (``check``, ``compile``, ``simulate``, ``frf``, ``run``,
-``bench``), each registering itself on the group ``app.main``; ``app`` holds the group and
-the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130), ``options`` what
+One module per command (``check``, ``compile``, ``simulate``, ``frf``, ``tune``,
+``run``, ``bench``), each registering itself on the group ``app.main``; ``app`` holds the
+group and the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130), ``options`` what
 several commands share. The long stages report their progress on stderr
 (``bgc.progress``: a live display on a terminal, else one ``bgc: ...`` line per stage;
 nothing with ``--quiet``); stdout holds only the command's own output.
@@ -12,7 +12,7 @@ generator are imported where a command needs them, so that ``bgc simulate`` on a
 module loads none of them (tests/cli/test_warm_start.py).
 """
 
-from bgc.cli import bench, check, compile, frf, run, simulate  # noqa: F401  (the commands)
+from bgc.cli import bench, check, compile, frf, run, simulate, tune  # noqa: F401  (the commands)
 from bgc.cli.app import main
 
 __all__ = ["main"]

@@ -4,7 +4,8 @@ as a user would: ``make semiactive`` (or ``python bench/semiactive.py --out DIR`
 1. The pumping anti-resonance of ``a_OF_z`` against the flapping masses' setpoint
    ``x_set`` (-10 ... +10 mm), from the linearization of the whole coupled model (the
    motors, screws and PI loops included), under each constraint method: Hz per mm.
-2. The setpoints that put the anti-resonance on 17.5 and on 18.5 Hz (root finding on it).
+2. The setpoints that put the anti-resonance on 17.5 and on 18.5 Hz (``bgc tune``'s root
+   finding, bgc.analysis.tune).
 3. A run in which the rotor frequency steps from 17.5 to 18.5 Hz at 2 s while the
    setpoint follows (a 0.5 s ramp from 2 s): the absorber retunes. Beside it the same
    run with the setpoint held, and each method's run, compared with lagrange's.
@@ -20,9 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import brentq
-
-from bgc.analysis import frf
+from bgc.analysis import frf, tune
 from bgc.analysis.results import panels, save_figure, write_table
 from bgc.pipeline import ensure_module
 from bgc.simulate import simulate
@@ -80,8 +79,8 @@ def main(out: Path):
         mod, model, _ = built[method] = ensure_module(MODEL, out / "build", method)
         f = [antiresonance(mod, model, x / 1000) for x in SETPOINTS_MM]
         slope = np.polyfit(SETPOINTS_MM, f, 1)[0]
-        x_a = brentq(lambda x: antiresonance(mod, model, x) - F_A, -0.015, 0.015, xtol=1e-7)
-        x_b = brentq(lambda x: antiresonance(mod, model, x) - F_B, -0.015, 0.015, xtol=1e-7)
+        x_a, x_b = (tune.tune(mod, model, "pumping", "a_OF_z", "x_set", target, params(mod),
+                              (-0.015, 0.015), BAND).value for target in (F_A, F_B))
         rows += [(method, x, fx) for x, fx in zip(SETPOINTS_MM, f)]
         notes.append((method, f, slope, x_a, x_b, time.perf_counter() - t0))
         print(f"{method}: {', '.join(f'{v:.3f}' for v in f)} Hz; {slope:.4f} Hz/mm; "

@@ -97,10 +97,10 @@ def sweep(lin: Linearization, output: str, f_min: float, f_max: float,
 
 
 def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
-            grid=None) -> tuple[list[float], list[float]]:
+            grid=None, xatol: float = 1e-4) -> tuple[list[float], list[float]]:
     """Anti-resonances (local minima of |H|) and resonances (local maxima) in
     [f_min, f_max] (found on ``grid`` = ``sweep(...)``, computed if not given), each
-    refined to 1e-4 Hz."""
+    refined to ``xatol`` Hz (``bgc tune`` asks for more)."""
     f, h = grid if grid is not None else sweep(lin, output, f_min, f_max)
     mag = np.abs(h)
     found: dict[str, list[float]] = {"min": [], "max": []}
@@ -109,6 +109,6 @@ def extrema(lin: Linearization, output: str, f_min: float, f_max: float,
             if sign * mag[k] < sign * mag[k - 1] and sign * mag[k] <= sign * mag[k + 1]:
                 r = minimize_scalar(lambda x, s=sign: s * abs(lin.response([x], output)[0]),
                                     bounds=(f[k - 1], f[k + 1]), method="bounded",
-                                    options={"xatol": 1e-4})
+                                    options={"xatol": xatol})
                 found[kind].append(float(r.x))
     return found["min"], found["max"]

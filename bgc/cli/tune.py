@@ -1,0 +1,119 @@
+"""``bgc tune``: the value of a parameter that puts an anti-resonance of an output on a
+target frequency, and dF/dparam there (``bgc.analysis.tune``)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from bgc import progress
+from bgc.cli.app import main, user_errors
+from bgc.cli.options import (
+    NUMBER,
+    POSITIVE,
+    check_overrides,
+    json_option,
+    method_option,
+    param_items,
+    parse_params,
+    progress_option,
+)
+from bgc.errors import BgcError
+from bgc.pipeline import ensure_module
+
+
+def bracket_option(ctx, param, value):
+    """``LO:HI``, two finite numbers, LO < HI."""
+    if value is None:
+        return None
+    lo, colon, hi = value.partition(":")
+    try:
+        if not colon:
+            raise click.BadParameter("")
+        lo, hi = NUMBER.convert(lo, param, ctx), NUMBER.convert(hi, param, ctx)
+    except click.BadParameter:
+        raise click.BadParameter(f"expected LO:HI (two numbers), got {value!r}", ctx,
+                                 param) from None
+    if not lo < hi:
+        raise click.BadParameter(f"expected LO < HI, got {value!r}", ctx, param)
+    return lo, hi
+
+
+@main.command()
+@click.argument("model", type=click.Path())
+@click.option("--target-frequency", "target", type=POSITIVE, required=True, metavar="F",
+              help="where the anti-resonance must sit [Hz]")
+@click.option("--param", "name", required=True, metavar="NAME",
+              help="the parameter tuned (a module parameter: no recompilation)")
+@click.option("--input", "direction", required=True, metavar="NAME",
+              help="the excitation direction driven (e.g. pumping, roll, pitch)")
+@click.option("--output", "output", required=True, metavar="NAME", help="the model output")
+@click.option("--bracket", callback=bracket_option, metavar="LO:HI",
+              help="where the value is looked for (default: half to twice the start)")
+@click.option("--f-min", type=POSITIVE, help="the band where the anti-resonance nearest F "
+              "is picked at the start [Hz] (default: F/2)")
+@click.option("--f-max", type=POSITIVE, help="... and its end (default: 2 F)")
+@click.option("--set", "params", multiple=True, metavar="NAME=VALUE", callback=param_items,
+              help="override a parameter (the tuned one: its start value)")
+@click.option("-o", "--out-dir", default="generated", show_default=True,
+              help="where the generated module is kept")
+@method_option
+@json_option
+@user_errors
+@progress_option
+def tune(model, target, name, direction, output, bracket, f_min, f_max, params, out_dir,
+         method, as_json):
+    """Tune a parameter so that the anti-resonance of an output, for an excitation
+    direction, sits on a target frequency: root finding on the linearization about the
+    static equilibrium. Reports the value and the sensitivity dF/dparam there."""
+    # one value per option as click passes them, each read once below
+    from bgc.analysis import tune as btune
+    band = (f_min or target / 2, f_max or 2 * target)
+    if not band[0] < target < band[1]:
+        raise BgcError(f"need --f-min < F < --f-max, got {band[0]:g}, {target:g}, "
+                       f"{band[1]:g}", key="--f-min")
+    module, m, _ = ensure_module(model, out_dir, method)
+    if output not in module.OUTPUT_NAMES:
+        raise BgcError(f"unknown output '{output}'", key="--output",
+                       hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
+    if name not in module.PARAM_NAMES or name.startswith("excitation__"):
+        raise BgcError(f"'{name}' is not a parameter that can be tuned", key="--param",
+                       hint="parameters: " + ", ".join(n for n in module.PARAM_NAMES
+                                                       if not n.startswith("excitation__")))
+    check_overrides(model, params)
+    p = parse_params(module, params)
+    bracket = bracket or btune.default_bracket(p[module.PARAM_NAMES.index(name)], name)
+    _check_ends(model, params, name, bracket)
+    with progress.stage("tuning") as stage:
+        r = btune.tune(module, m, direction, output, name, target, p, bracket, band)
+        stage.done(f"{progress.count(r.linearizations, 'linearization')}")
+    unit = m.parameters[name].unit if name in m.parameters else None
+    report = {"model": m.name, "method": method, "input": direction, "output": output,
+              "param": name, "unit": unit, "target_hz": target, "value": r.value,
+              "frequency": r.frequency, "sensitivity": r.sensitivity,
+              "sensitivity_unit": f"Hz/{unit}" if unit else "Hz per unit",
+              "start": r.start, "start_frequency": r.start_frequency,
+              "bracket": list(r.bracket), "reachable_hz": list(r.reachable),
+              "linearizations": r.linearizations}
+    if as_json:
+        click.echo(json.dumps(report, indent=2))
+        return
+    u = f" {unit}" if unit else ""
+    click.echo(f"{m.name}: {name} = {r.value:.6g}{u} puts the anti-resonance of {output} / "
+               f"{direction} on {r.frequency:.6f} Hz")
+    click.echo(f"  sensitivity: {r.sensitivity:.5g} {report['sensitivity_unit']}")
+    click.echo(f"  from {r.start_frequency:.4f} Hz at {name} = {r.start:g}{u}; over "
+               f"[{r.bracket[0]:g}, {r.bracket[1]:g}]{u} it spans {r.reachable[0]:.4g} .. "
+               f"{r.reachable[1]:.4g} Hz ({r.linearizations} linearizations, method "
+               f"{method})")
+
+
+def _check_ends(model, params, name, bracket):
+    """The model's own checks for the bracket's ends (a mass or an inertia > 0, ...),
+    before any work."""
+    for end in bracket:
+        try:
+            check_overrides(model, [*params, (name, end)])
+        except BgcError as exc:
+            raise BgcError(exc.message, key="--bracket", hint=exc.hint) from None

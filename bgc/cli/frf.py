@@ -37,13 +37,18 @@ from bgc.pipeline import ensure_module
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="where the generated module is kept")
 @method_option
+@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
+              default="given", show_default=True,
+              help="method parasitic: the joints' stiffness as the model gives it, or chosen "
+                   "by bgc.methods.parasitic.auto (as bgc simulate --parasitic auto)")
 @json_option
 @user_errors
 @progress_option
-def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as_json):
+def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, parasitic_mode,
+        as_json):
     """Frequency response of an output to an excitation direction, linearized about the
     static equilibrium; its anti-resonances and resonances in the band."""
-    # ten parameters, one per option as click passes them, each read once below: a
+    # eleven parameters, one per option as click passes them, each read once below: a
     # settings object would only rename them (simulate's 22 have one, SimulateOptions)
     from bgc.analysis import frf as bfrf
     if not 0 < f_min < f_max:
@@ -54,8 +59,9 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
         raise BgcError(f"unknown output '{output}'", key="--output",
                        hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
     check_overrides(model, params)
+    p, choice = _parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
-        lin = bfrf.linearize(module, m, direction, parse_params(module, params))
+        lin = bfrf.linearize(module, m, direction, p)
         f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
         anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
         stage.done(f"{progress.count(len(f), 'frequency', 'frequencies')}, "
@@ -64,7 +70,8 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
     report = {"model": m.name, "method": method, "input": direction, "output": output,
               "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
               "antiresonances_hz": [round(f, 2) for f in anti],
-              "resonances_hz": [round(f, 2) for f in res]}
+              "resonances_hz": [round(f, 2) for f in res],
+              "parasitic": choice.to_dict() if choice else None}
     if out:
         from bgc.analysis.results import write_table
         report["files"] = {"csv": str(write_table(out, ["f_hz", "abs_H", "phase_deg"],
@@ -74,7 +81,24 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, as
         return
     click.echo(f"{m.name}: {output} / {direction} in [{f_min:g}, {f_max:g}] Hz, linearized "
                f"about the equilibrium (|dx/dt| = {lin.residual:.2g})")
+    if choice:
+        click.echo(choice.describe())
     click.echo(f"  anti-resonances: {', '.join(f'{f:.2f}' for f in anti) or 'none'} Hz")
     click.echo(f"  resonances: {', '.join(f'{f:.2f}' for f in res) or 'none'} Hz")
     if out:
         click.echo(f"  csv: {report['files']['csv']}")
+
+
+def _parameters(module, model, method, params, mode):
+    """The module's parameters with ``-p`` applied; under ``--parasitic auto`` the joints'
+    stiffness and damping chosen first (the explicit ``-p`` values still win)."""
+    p = parse_params(module, params)
+    if mode != "auto":
+        return p, None
+    from bgc import methods
+    from bgc.methods import parasitic
+    if methods.get(method).ideal:
+        raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
+                       key="--parasitic", hint="drop --parasitic or use --method parasitic")
+    p, choice = parasitic.auto(module, model, module.initial_state(p), p)
+    return parse_params(module, params, base=p), choice

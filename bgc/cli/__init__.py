@@ -13,6 +13,7 @@ module loads none of them (tests/cli/test_warm_start.py).
 """
 
 from bgc.cli import bench, check, compile, frf, run, simulate  # noqa: F401  (the commands)
+from bgc.cli import sweep  # noqa: F401  (bgc sweep)
 from bgc.cli.app import main
 
 __all__ = ["main"]

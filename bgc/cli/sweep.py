@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import time
+from contextlib import nullcontext
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -85,6 +86,9 @@ def sweep(**o):
                        hint="give --frf INPUT:OUTPUT or --metric KIND:OUTPUT[:T0:T1]")
     if o.seed is not None and o.samples is None:
         raise BgcError("--seed needs --samples", key="--seed")
+    if o.workers is not None and o.scheduler is not None:
+        raise BgcError("--workers sets the local cluster's size, not --scheduler's",
+                       key="--workers", hint="start as many workers on the scheduler")
     if frfs and not 0 < o.f_min < o.f_max:
         raise BgcError(f"need 0 < --f-min < --f-max, got {o.f_min} and {o.f_max}",
                        key="--f-min")
@@ -96,14 +100,15 @@ def sweep(**o):
     pl = splan.plan(axes, o.samples, o.seed)
     job, module = _job(o, axes, fixed, frfs, windows)
     source = Path(job.module_path).read_bytes()
-    with progress.stage("sweep", total=len(pl)) as st:
+    with progress.use(progress.Silent()) if o.as_json else nullcontext(), \
+            progress.stage("sweep", total=len(pl)) as st:
         start = time.perf_counter()
         with runner.connect(o.scheduler, o.workers) as client:
             workers = len(client.scheduler_info()["workers"])
             st.update(f"{len(pl)} points on {progress.count(workers, 'worker')}")
-            points = runner.run(client, job, pl.names, pl.values, source,
+            points = runner.run(client, job, pl.values, source,
                                 on_point=lambda _: st.advance())
-        wall = time.perf_counter() - start
+            wall = time.perf_counter() - start     # the cluster's start, not its close
         failed = sum(p.error is not None for p in points)
         st.done(f"{progress.count(len(pl), 'point')} on {progress.count(workers, 'worker')}"
                 f", {failed} with an error")
@@ -175,7 +180,7 @@ def _job(o, axes, fixed, frfs, windows):
         _await_loop(st.solver)
     metrics = Metrics(frfs, windows, o.f_min, o.f_max, run)
     job = Job(module.__file__, module.MODEL_HASH, model if frfs else None, p,
-              tuple(names.index(a.name) for a in axes), metrics)
+              tuple(a.name for a in axes), tuple(names.index(a.name) for a in axes), metrics)
     return job, module
 
 

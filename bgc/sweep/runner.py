@@ -18,6 +18,7 @@ retried (``RETRIES``); a point that fails after that is a row with its message.
 
 from __future__ import annotations
 
+import fcntl
 import logging
 import os
 import tempfile
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_worker
 
+from bgc.errors import BgcError
 from bgc.sweep.metrics import Metrics, evaluate
 
 # a task raising (not a metric failing: that is its row's error) is tried again this often
@@ -41,11 +43,13 @@ RETRIES = 2
 class Job:
     """What every point shares: the module (where the client has it and its MODEL_HASH),
     the Model for what reads it (the FRF's excitation; None otherwise), the parameter
-    vector before the swept values, where the swept values go, and the metrics."""
+    vector before the swept values, the swept parameters' names and where their values
+    go in it, and the metrics."""
     module_path: str
     module_hash: str
     model: object
     base: np.ndarray
+    names: tuple[str, ...]
     swept: tuple[int, ...]
     metrics: Metrics
 
@@ -75,6 +79,7 @@ class ShipModule(WorkerPlugin):
     def setup(self, worker=None) -> None:
         """On the worker: the module's file placed (``place``); imported at first use."""
         self.path = place(self.job, self.source)
+        self.source = None              # on disk now: not kept in the worker's memory
         self._lock = threading.Lock()
 
     def module(self):
@@ -85,35 +90,39 @@ class ShipModule(WorkerPlugin):
                 self._module = import_module(self.path)
         return self._module
 
-    def point(self, index: int, values: np.ndarray, names: tuple[str, ...]) -> Point:
+    def point(self, index: int, values: np.ndarray) -> Point:
         """The metrics at one row of swept values."""
         module = self.module()
         start = time.perf_counter()
         p = self.job.base.copy()
         p[list(self.job.swept)] = values
         metrics, error = evaluate(self.job.metrics, module, self.job.model, p)
-        return Point(index, {n: float(v) for n, v in zip(names, values)}, metrics, error,
+        return Point(index, dict(zip(self.job.names, map(float, values))), metrics, error,
                      time.perf_counter() - start)
 
 
 def place(job: Job, source: bytes) -> Path:
     """Where a worker imports the module from: the client's own file if this machine sees
     it unchanged, else a copy written once per machine (``<tmp>/bgc-sweep/<hash>/``),
-    never rewritten while it is whole (numba's cache beside it stays valid)."""
+    written by one worker while the others on the machine wait, and never rewritten
+    while it is whole (numba's cache beside it stays valid)."""
     from bgc.codegen.module_file import stored_hash
     from bgc.fileio import atomic_write
     own = Path(job.module_path)
     if stored_hash(own) == job.module_hash:
         return own
     copy = Path(tempfile.gettempdir()) / "bgc-sweep" / job.module_hash[:16] / own.name
-    if stored_hash(copy) != job.module_hash:
-        atomic_write(copy, lambda tmp: Path(tmp).write_bytes(source), "module")
+    copy.parent.mkdir(parents=True, exist_ok=True)
+    with open(copy.parent / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if stored_hash(copy) != job.module_hash:
+            atomic_write(copy, lambda tmp: Path(tmp).write_bytes(source), "module")
     return copy
 
 
-def _point(plugin: str, index: int, values: np.ndarray, names: tuple[str, ...]) -> Point:
+def _point(plugin: str, index: int, values: np.ndarray) -> Point:
     """A task: one point, on the worker, through the plugin registered as ``plugin``."""
-    return get_worker().plugins[plugin].point(index, values, names)
+    return get_worker().plugins[plugin].point(index, values)
 
 
 @contextmanager
@@ -122,7 +131,14 @@ def connect(scheduler: str | None = None, workers: int | None = None):
     a LocalCluster of ``workers`` single-threaded worker processes (default: one per
     core), its logs quiet and without a dashboard."""
     if scheduler is not None:
-        with Client(scheduler, timeout="10s") as client:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, ValueError) as exc:
+            raise BgcError(f"cannot reach the Dask scheduler at {scheduler}: {exc}",
+                           key="--scheduler", hint="start one (dask scheduler; dask worker "
+                           "tcp://HOST:PORT on each machine) or leave --scheduler out for "
+                           "the local cores") from None
+        with client:
             yield client
         return
     with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
@@ -131,17 +147,16 @@ def connect(scheduler: str | None = None, workers: int | None = None):
         yield client
 
 
-def run(client, job: Job, names: tuple[str, ...], rows: np.ndarray, source: bytes,
-        on_point=None) -> list[Point]:
-    """Every row's Point, in the rows' order; ``on_point(point)`` is called in the caller's
-    thread as each arrives (the progress bar). A point whose task failed for good (its
-    worker killed again and again, an error outside the metrics) is a row with the
-    reason."""
+def run(client, job: Job, rows: np.ndarray, source: bytes, on_point=None) -> list[Point]:
+    """Every row's Point (``rows[i]``: the values of ``job.names``), in the rows' order;
+    ``on_point(point)`` is called in the caller's thread as each arrives (the progress
+    bar). A point whose task failed for good (its worker killed again and again, an error
+    outside the metrics) is a row with the reason."""
     name = f"bgc-sweep-{uuid.uuid4().hex[:12]}"
     client.register_plugin(ShipModule(job, source), name=name)
     try:
         futures = client.map(_point, [name] * len(rows), range(len(rows)), list(rows),
-                             [names] * len(rows), retries=RETRIES, pure=False)
+                             retries=RETRIES, pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         points: list[Point | None] = [None] * len(rows)
         for fut in as_completed(futures):
@@ -149,7 +164,7 @@ def run(client, job: Job, names: tuple[str, ...], rows: np.ndarray, source: byte
             try:
                 points[i] = fut.result()
             except Exception as exc:    # noqa: BLE001 - the point is lost, not the sweep
-                points[i] = Point(i, {n: float(v) for n, v in zip(names, rows[i])},
+                points[i] = Point(i, dict(zip(job.names, map(float, rows[i]))),
                                   {label: None for label in job.metrics.labels},
                                   f"lost: {type(exc).__name__}: {exc}")
             if on_point is not None:

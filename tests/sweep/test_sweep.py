@@ -67,21 +67,72 @@ def test_the_module_is_copied_once_per_machine_where_the_workers_do_not_see_it(
     monkeypatch.setattr(runner.tempfile, "gettempdir", lambda: str(tmp_path))
     source = open(mod.__file__, "rb").read()
     job = runner.Job(str(tmp_path / "elsewhere" / "msd_forced.py"), mod.MODEL_HASH, None,
-                     mod.PARAMS, (), metrics.Metrics((), (), 1.0, 2.0, None))
+                     mod.PARAMS, (), (), metrics.Metrics((), (), 1.0, 2.0, None))
     first = runner.place(job, source)
     assert first.parent.parent == tmp_path / "bgc-sweep" and first.read_bytes() == source
     stamp = first.stat().st_mtime_ns
     assert runner.place(job, source) == first and first.stat().st_mtime_ns == stamp
-    shared = runner.Job(mod.__file__, mod.MODEL_HASH, None, mod.PARAMS, (), job.metrics)
+    shared = runner.Job(mod.__file__, mod.MODEL_HASH, None, mod.PARAMS, (), (), job.metrics)
     assert str(runner.place(shared, source)) == mod.__file__      # seen: used as it is
+
+
+def test_table_has_a_column_per_extremum_found_and_a_failed_point_keeps_its_row(tmp_path):
+    """As many anti-resonance and resonance columns as the most any point found, empty
+    where a point found fewer or failed; the CSV and (if pyarrow is importable, else
+    none) the Parquet beside it hold the same table."""
+    from bgc.sweep import write
+    ms = metrics.Metrics((metrics.Frf("push", "z"),), (metrics.parse_window("rms:z:1:2"),),
+                         5.0, 25.0, None)
+    points = [runner.Point(0, {"k": 1.0}, {"push:z": {"antiresonances_hz": [6.5, 18.0],
+                                                      "resonances_hz": [16.1]},
+                                           "rms:z:1:2": 0.5}, None),
+              runner.Point(1, {"k": 2.0}, {"push:z": None, "rms:z:1:2": None},
+                           "push:z: no equilibrium; simulation: no equilibrium")]
+    cols = write.table(points, ("k",), ms)
+    assert list(cols) == ["k", "push:z:anti_1", "push:z:anti_2", "push:z:res_1",
+                          "rms:z:1:2", "error"]
+    csv = write.write_csv(tmp_path / "t.csv", cols)
+    assert csv.read_text().splitlines() == [
+        "k,push:z:anti_1,push:z:anti_2,push:z:res_1,rms:z:1:2,error", "1,6.5,18,16.1,0.5,",
+        "2,,,,,push:z: no equilibrium; simulation: no equilibrium"]
+    parquet = write.write_parquet(csv, cols)
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        assert parquet is None
+    else:
+        rows = pq.read_table(parquet).to_pylist()
+        assert rows[0]["push:z:anti_2"] == 18.0 and rows[1]["push:z:anti_1"] is None
 
 
 def _window_job(mod, names, t_end=2.0):
     ms = (metrics.parse_window("rms:position:1:2"), metrics.parse_window("peak:velocity"))
     run = metrics.Run(t_end, 1e-6, 1e-8, "native", 201)
     swept = tuple(list(mod.PARAM_NAMES).index(n) for n in names)
-    return runner.Job(mod.__file__, mod.MODEL_HASH, None, np.array(mod.PARAMS), swept,
-                      metrics.Metrics((), ms, 5.0, 25.0, run))
+    return runner.Job(mod.__file__, mod.MODEL_HASH, None, np.array(mod.PARAMS), names,
+                      swept, metrics.Metrics((), ms, 5.0, 25.0, run))
+
+
+@pytest.mark.parametrize("args, line", [
+    (["-p", "kk=1:2:2", "--metric", "peak:position"],
+     "error: --param: unknown parameter 'kk' (hint: parameters: m, k, c, F0, f_drive)"),
+    (["-p", "k=400:800:2", "--metric", "peak:speed"],
+     "error: --metric: peak:speed: unknown output 'speed' (hint: outputs: position, "),
+    (["-p", "k=400:800:2", "--frf", "push:position"],
+     "error: --frf: push:position: 'push' is not an excitation direction of "),
+    (["-p", "k=-400:800:2", "--metric", "peak:position"],
+     "error: --param: k=-400: capacitance C of C 'spring' must be > 0"),
+    (["-p", "k=400:800:2"], "error: --frf: no metric to compute"),
+    (["-p", "k=400:800:2", "--metric", "rms:position:1:3", "--t-end", "2"],
+     "error: --metric: rms:position:1:3: the window ends after the run (t_end = 2 s)"),
+])
+def test_bad_sweeps_are_refused_before_any_worker_starts(compiled, args, line):
+    from bgc.cli import main
+    gen = os.path.dirname(compiled("msd_forced").__file__)
+    r = CliRunner().invoke(main, ["sweep", str(MODELS / "msd_forced.yaml"), "-o", gen,
+                                  "-q", *args])
+    assert r.exit_code == 2 and r.output.startswith(line), r.output
+    assert len(r.output.strip().splitlines()) == 1
 
 
 @pytest.fixture(scope="module")
@@ -162,9 +213,9 @@ def points_of(mod, t_end):
 
 def test_a_worker_killed_mid_sweep_loses_no_point(compiled, client):
     """A 2-worker LocalCluster (worker processes, each with its nanny): one worker is
-    killed (SIGKILL) while it works on a point; its points run again on the other and on
-    the worker the nanny starts in its place, which the module reaches through the
-    plugin. Every point comes back, with the values of an undisturbed sweep."""
+    killed (SIGKILL) while it works on a point; its points run again (on the other worker
+    or on the one the nanny starts in its place, which the plugin reaches too). Every
+    point comes back, with the values of an undisturbed sweep."""
     mod = compiled("msd_forced")
     pl = plan.plan([plan.parse_axis("k=400:800:6", False),
                     plan.parse_axis("c=2:8:4", False)])
@@ -183,8 +234,8 @@ def test_a_worker_killed_mid_sweep_loses_no_point(compiled, client):
             os.kill(pid, signal.SIGKILL)
             killed.append(address)
 
-    calm = runner.run(client, job, pl.names, pl.values, source)
-    hit = runner.run(client, job, pl.names, pl.values, source, on_point=kill_a_busy_worker)
+    calm = runner.run(client, job, pl.values, source)
+    hit = runner.run(client, job, pl.values, source, on_point=kill_a_busy_worker)
     assert len(killed) == 1 and killed[0] not in client.scheduler_info()["workers"]
     assert len(hit) == len(pl) == 24
     assert [p.error for p in hit] == [None] * 24

@@ -217,19 +217,21 @@ def _write(o, points, names, metrics, module) -> dict:
 def _report(o, pl, points, workers, wall, files, module) -> None:
     """The points as JSON (``{"points": [...]}`` and the run's facts), or a summary and a
     line per point (the first 20)."""
-    busy = sum(p.seconds for p in points)
+    busy, cpu = sum(p.seconds for p in points), sum(p.cpu for p in points)
+    per = max(len(points), 1)
     if o.as_json:
         click.echo(json.dumps({
             "model": module.MODEL_NAME, "plan": pl.kind, "parameters": list(pl.names),
-            "workers": workers, "wall_time": wall, "busy_time": busy,
+            "workers": workers, "wall_time": wall, "busy_time": busy, "cpu_time": cpu,
             "points": [{"index": p.index, "params": p.params, "metrics": p.values,
-                        "error": p.error, "seconds": p.seconds} for p in points],
+                        "error": p.error, "seconds": p.seconds, "cpu_seconds": p.cpu}
+                       for p in points],
             "files": files}, indent=2))
         return
     click.echo(f"{module.MODEL_NAME}: {progress.count(len(pl), 'point')} ({pl.kind} over "
                f"{', '.join(pl.names)}) on {progress.count(workers, 'worker')} in "
-               f"{progress.seconds(wall)} ({progress.seconds(busy / max(len(pl), 1))} "
-               f"of work a point)")
+               f"{progress.seconds(wall)} ({progress.seconds(busy / per)} of work a point, "
+               f"{progress.seconds(cpu / per)} of CPU)")
     for p in points[:20]:
         where = " ".join(f"{n}={v:.6g}" for n, v in p.params.items())
         click.echo(f"  {where}: " + "; ".join(

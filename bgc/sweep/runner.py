@@ -57,13 +57,15 @@ class Job:
 @dataclass
 class Point:
     """One point's result: its parameter values, its metrics (``evaluate``), the
-    failures' messages (None if none) and the seconds its worker spent on it (the
-    module's import, once per worker, not counted)."""
+    failures' messages (None if none), the seconds its worker spent on it and the CPU
+    seconds of that worker's thread (the module's import, once per worker, not counted;
+    on a shared machine the CPU time is the one that does not depend on the load)."""
     index: int
     params: dict[str, float]
     values: dict
     error: str | None
     seconds: float = 0.0
+    cpu: float = 0.0
 
 
 class ShipModule(WorkerPlugin):
@@ -93,12 +95,12 @@ class ShipModule(WorkerPlugin):
     def point(self, index: int, values: np.ndarray) -> Point:
         """The metrics at one row of swept values."""
         module = self.module()
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.thread_time()
         p = self.job.base.copy()
         p[list(self.job.swept)] = values
         metrics, error = evaluate(self.job.metrics, module, self.job.model, p)
         return Point(index, dict(zip(self.job.names, map(float, values))), metrics, error,
-                     time.perf_counter() - start)
+                     time.perf_counter() - start, time.thread_time() - cpu)
 
 
 def place(job: Job, source: bytes) -> Path:

@@ -113,6 +113,18 @@ def _window_job(mod, names, t_end=2.0):
                       swept, metrics.Metrics((), ms, 5.0, 25.0, run))
 
 
+def test_window_metrics_are_the_rms_and_the_peak_of_the_output_over_the_window(compiled):
+    from bgc.simulate import simulate
+    mod = compiled("msd_forced")
+    job = _window_job(mod, ())
+    values, error = metrics.evaluate(job.metrics, mod, None, np.array(mod.PARAMS))
+    r = simulate(mod, t_end=2.0, rtol=1e-6, atol=1e-8, points=201)
+    inside = (r.t >= 1.0) & (r.t <= 2.0)
+    assert np.count_nonzero(inside) == 101 and error is None
+    assert values == {"rms:position:1:2": np.sqrt(np.mean(r.column("position")[inside] ** 2)),
+                      "peak:velocity": np.abs(r.column("velocity")).max()}
+
+
 @pytest.mark.parametrize("args, line", [
     (["-p", "kk=1:2:2", "--metric", "peak:position"],
      "error: --param: unknown parameter 'kk' (hint: parameters: m, k, c, F0, f_drive)"),

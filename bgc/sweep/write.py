@@ -98,6 +98,6 @@ def plots(path: str | Path, cols: dict[str, list], names: tuple[str, ...],
                 ax.set_ylabel(axis_label(f"{m.kind} of {m.output}", units.get(m.output)))
             ax.set_xlabel(name)
             ax.grid(True, alpha=0.3)
-        target = path.with_name(f"{path.stem}_{slug(m.label)}{path.suffix}")
+        target = path.with_name(f"{path.stem}_{slug(m.label)}{path.suffix or '.png'}")
         out[m.label] = save_figure(fig, target, f"{title}: {m.label}")
     return out

@@ -335,6 +335,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         method.warm_up(problem, x)
         module.outputs(t_start, x, p)
         events, monitor = _events(module, x, p, t_start, projection)
+        problem.monitor = monitor
         stats.compile_time = time.perf_counter() - t0
 
         stats.max_step = max_step if np.isfinite(max_step) else None

@@ -24,10 +24,11 @@ import numpy as np
 from numba import njit, types
 from numba.np.linalg import _LAPACK, F_INT_nptype
 
-from bgc.solvers import sparse_lu
+from bgc.solvers import rank, sparse_lu
 from bgc.solvers.native import (
     GUARD,
     INTERRUPTED,
+    MINOR,
     N_STATS,
     NOT_FINITE,
     PAUSED,
@@ -73,12 +74,14 @@ MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
 class System(NamedTuple):
     """``M dx/dt = rhs(t, x, p)`` as the loop calls it: the model (``native.Model``),
     the mass matrix (empty: the identity), 1.0 where a state is an algebraic variable of
-    index 2 (empty: none) and ``sparse_lu.analyse``'s elimination plan for the Newton
-    matrices (``sparse_lu.DENSE``: dense)."""
+    index 2 (empty: none), ``sparse_lu.analyse``'s elimination plan for the Newton
+    matrices (``sparse_lu.DENSE``: dense) and the rank monitor of a constrained run
+    (``rank.Monitor``; ``rank.none()``: none)."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
     plan: tuple
+    monitor: rank.Monitor
 
 
 class Settings(NamedTuple):
@@ -419,9 +422,14 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     rejected step's error (error over its scale; inf where the stages were not finite),
     to name the states that made a step size collapse (STEP_TOO_SMALL). ``keep`` (a
     ``Carry``) holds the loop's own state across a pause: a call that starts where the
-    last one paused goes on as if it had not (same Jacobian, factors and predictor)."""
+    last one paused goes on as if it had not (same Jacobian, factors and predictor).
+
+    The rank monitor (``system.monitor``) is checked after every accepted step: where
+    its minor crossed zero another is picked there if the constraints are well
+    conditioned; else the loop returns at the start of that step with status MINOR
+    (its outputs recorded up to there, ``h`` the step that crossed)."""
     rhs, jac, guards, n_guards, p = system.model
-    M, index2, plan = system.mass, system.index2, system.plan
+    M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
                                      settings.h_start)
     guard_tol, max_steps, stop = settings.guard_tol, settings.max_steps, settings.stop
@@ -470,6 +478,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         have_sol = False
         t_old, h_last, y_old = t, 0.0, y.copy()
     kept[0] = 0.0
+    msc = rank.scratch(mon, n)
+    m_scale = rank.start(mon, msc, t, y, p) if mon.con != 0 else 0.0
     # work arrays: the stages, their predictor, the transformed variables and Newton
     # increments, the stages' rhs, the error scale and estimate
     Z = np.zeros((3, n))
@@ -621,6 +631,12 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
                 k_out = _record(out, k_out, t_eval, b, t_old, h_last, y_old, Q)
                 return Outcome(out, k_out, b, dense(t_old, h_last, y_old, Q, b), GUARD,
                                kg, h_abs)
+        # the monitored minor through zero: pick another, or hand a possibly singular
+        # configuration back from the step's start
+        if m_scale != 0.0 and rank.minor(mon, msc, t, y, p) / m_scale <= 0.0:
+            m_scale = rank.settle(mon, msc, t, y, p)
+            if m_scale == 0.0:
+                return Outcome(out, k_out, t_old, y_old.copy(), MINOR, -1, h_last)
         k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:
@@ -646,7 +662,7 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE)
+                    sparse_lu.DENSE, rank.none())
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

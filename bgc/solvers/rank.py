@@ -137,6 +137,23 @@ def minor(mon, s, t, x, p):
 
 
 @inner
+def _oriented(K, transposed):
+    """A copy of K, or of its transpose."""
+    m, k = K.shape
+    if not transposed:
+        V = np.empty((m, k))
+        for i in range(m):
+            for j in range(k):
+                V[i, j] = K[i, j]
+        return V
+    V = np.empty((k, m))
+    for i in range(m):
+        for j in range(k):
+            V[j, i] = K[i, j]
+    return V
+
+
+@inner
 def _greedy(V, r, out_row, picks):
     """Pick r columns of V greedily (the largest norm left after projecting out those
     picked, as pivoted QR), into picks[out_row] sorted; V is overwritten."""
@@ -175,7 +192,7 @@ def repick(mon, s):
     """Pick the minor anew on ``s.K`` (filled in full): rows, then columns among them."""
     m, k = s.K.shape
     r = mon.rank
-    _greedy(s.K.T.copy(), r, 0, mon.picks)
+    _greedy(_oriented(s.K, True), r, 0, mon.picks)
     V = np.empty((r, k))
     for a in range(r):
         for j in range(k):
@@ -189,7 +206,7 @@ def conditioning(K, rank):
     side; 1.0 where rank < 1, 0.0 where K has fewer)."""
     if rank < 1:
         return 1.0
-    V = K.T.copy() if K.shape[1] > K.shape[0] else K.copy()
+    V = _oriented(K, K.shape[1] > K.shape[0])
     a, b = V.shape
     if rank > b:
         return 0.0
@@ -221,7 +238,12 @@ def conditioning(K, rank):
         for k in range(a):
             q += V[k, j] * V[k, j]
         sv[j] = np.sqrt(q)
-    sv = np.sort(sv)[::-1]
+    for j in range(1, b):           # descending (insertion: numba's sort costs compile time)
+        v, i = sv[j], j
+        while i > 0 and sv[i - 1] < v:
+            sv[i] = sv[i - 1]
+            i -= 1
+        sv[i] = v
     return sv[rank - 1] / sv[0] if sv[0] > 0.0 else 0.0
 
 

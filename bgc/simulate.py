@@ -165,9 +165,11 @@ def _check_index2(module, x, p, algebraic, t):
 
 
 def _one_blas_thread():
-    """Integrate with one BLAS thread: the LU factorizations of a model's Newton matrices
-    (n ~ 150) are too small to gain from a second thread, and lose to its overhead
-    (SARIB: 0.73 ms per factorization pair with two OpenBLAS threads, 0.44 ms with one)."""
+    """Run with one BLAS thread, the set-up included: the LU factorizations of a model's
+    Newton matrices (n ~ 150) are too small to gain from a second thread, and lose to its
+    overhead (SARIB: 0.73 ms per factorization pair with two OpenBLAS threads, 0.44 ms
+    with one); the set-up's least squares (the SARIB's static loads, 152 x 74) took
+    75 ms instead of 1.5 ms on a busy machine, waking OpenBLAS's second thread."""
     return threadpool_limits(limits=1, user_api="blas")
 
 
@@ -318,29 +320,31 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
     stats = method.new_stats()
 
-    t0 = time.perf_counter()
-    _refuse_non_finite(module, x, p, t_start)
-    x, p, projection = prepare(module, x, p, t_start, redundancy)
-    check_start(module, x, p, t_start, projection)
-    if index2 is not None:
-        _check_index2(module, x, p, list(module.ALGEBRAIC), t_start)
-    max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
-    problem = Problem(module, p, step, mass, check_stability,
-                      index2 if check_index else None, max_steps=budget, rtol=rtol,
-                      atol=atol, max_step=max_step)
-    method.check(problem, t_start, x)
-    method.warm_up(problem, x)
-    module.outputs(t_start, x, p)
-    events, monitor = _events(module, x, p, t_start, projection)
-    stats.compile_time = time.perf_counter() - t0
+    with _one_blas_thread():
+        t0 = time.perf_counter()
+        _refuse_non_finite(module, x, p, t_start)
+        x, p, projection = prepare(module, x, p, t_start, redundancy)
+        check_start(module, x, p, t_start, projection)
+        if index2 is not None:
+            _check_index2(module, x, p, list(module.ALGEBRAIC), t_start)
+        max_step = float(module.max_step(p)) if hasattr(module, "max_step") else np.inf
+        problem = Problem(module, p, step, mass, check_stability,
+                          index2 if check_index else None, max_steps=budget, rtol=rtol,
+                          atol=atol, max_step=max_step)
+        method.check(problem, t_start, x)
+        method.warm_up(problem, x)
+        module.outputs(t_start, x, p)
+        events, monitor = _events(module, x, p, t_start, projection)
+        problem.monitor = monitor
+        stats.compile_time = time.perf_counter() - t0
 
-    stats.max_step = max_step if np.isfinite(max_step) else None
-    grid = np.linspace(t_start, t_end, int(points))
-    wall = time.perf_counter()
-    run = _integrate(method, problem, x, grid, _segments(t_start, t_end, module.BREAKPOINTS),
-                     stats, events, monitor)
-    stats.wall_time = time.perf_counter() - wall
-    return _result(module, method, problem, run, stats, projection, monitor, check_drift)
+        stats.max_step = max_step if np.isfinite(max_step) else None
+        grid = np.linspace(t_start, t_end, int(points))
+        wall = time.perf_counter()
+        run = _integrate(method, problem, x, grid,
+                         _segments(t_start, t_end, module.BREAKPOINTS), stats, events, monitor)
+        stats.wall_time = time.perf_counter() - wall
+        return _result(module, method, problem, run, stats, projection, monitor, check_drift)
 
 
 def _method(solver: str, t_start: float, t_end: float) -> Solver:
@@ -444,7 +448,7 @@ def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
     ts, xs = [], []
     run = _Run(grid[:0], np.empty((0, len(x))))
     done = -np.inf                # last output time recorded
-    with _one_blas_thread(), problem.interrupt:
+    with problem.interrupt:
         while segs:
             a, b = segs.pop(0)
             last = not segs

@@ -13,9 +13,13 @@ import os
 import signal
 import tempfile
 import threading
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
+
+# the elimination plans made (``Problem.lu_plan``), per module (kept while it lives)
+_PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 # A run stops where a guard margin (e.g. |cos b| of a body's Cardan angles) falls below this.
 GUARD_TOLERANCE = 1e-3
@@ -68,6 +72,9 @@ class Problem:
     atol: float = 1e-8
     max_step: float = np.inf          # the step limit the input signals set
     interrupt: Interrupt = field(default_factory=lambda: Interrupt())
+    # a constrained run's rank monitor (``consistent.RankMonitor``), among its events too:
+    # native Radau checks it in its loop (``bgc.solvers.rank``), the others as an event
+    monitor: object = None
 
     def budget(self, stats: "Stats") -> int | None:
         """Steps left of the run's budget (None: no budget)."""
@@ -78,10 +85,19 @@ class Problem:
 
     @functools.cached_property
     def lu_plan(self):
-        """The sparse elimination plan of its Newton matrices (``sparse_lu.analyse``)."""
-        from bgc.solvers.sparse_lu import analyse
-        return analyse(len(self.module.STATE_NAMES), self.module.JAC_I, self.module.JAC_J,
-                       self.mass)
+        """The sparse elimination plan of its Newton matrices (``sparse_lu.analyse``),
+        made once per module and mass matrix (its symbolic analysis in Python: 5-10 ms of
+        a 100 ms SARIB run)."""
+        try:
+            plans = _PLANS.setdefault(self.module, {})
+        except TypeError:                   # not weakly referenceable (a stand-in module)
+            plans = {}
+        key = None if self.mass is None else self.mass.tobytes()
+        if key not in plans:
+            from bgc.solvers.sparse_lu import analyse
+            plans[key] = analyse(len(self.module.STATE_NAMES), self.module.JAC_I,
+                                 self.module.JAC_J, self.mass)
+        return plans[key]
 
     def jac(self, t, x):
         return self.module.jac(t, x, self.p)

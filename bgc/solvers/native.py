@@ -26,6 +26,9 @@ N_STATS = 5
 # INTERRUPTED: its ``stop`` flag was set, by Ctrl-C: ``solver.Interrupt``)
 REACHED, STEP_TOO_SMALL, GUARD, NOT_FINITE, SINGULAR, PAUSED, UNSTABLE, INTERRUPTED = \
     range(8)
+# (MINOR: the rank monitor's minor crossed zero where the constraints may have lost rank,
+# ``bgc.solvers.rank``; the loop returns at the crossing)
+MINOR = 8
 
 
 class Model(NamedTuple):
@@ -57,22 +60,29 @@ class Outcome(NamedTuple):
 inner = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
 
+def _call_codegen(context, builder, signature, args):
+    """f(t, a.data, b.data, ...) for the C function at address args[0] (float64 arrays)."""
+    dbl = ir.DoubleType()
+    fnty = ir.FunctionType(ir.VoidType(), [dbl] + [dbl.as_pointer()] * (len(args) - 2))
+    fptr = builder.inttoptr(args[0], fnty.as_pointer())
+    ptrs = [context.make_array(ty)(context, builder, v).data
+            for ty, v in zip(signature.args[2:], args[2:])]
+    builder.call(fptr, [args[1]] + ptrs)
+    return context.get_dummy_value()
+
+
 @intrinsic
 def call_entry(typingctx, addr, t, x, p, out):
     """Call the C function at ``addr`` as f(t, x.data, p.data, out.data) (contiguous
     float64 arrays; ``out`` may be 2-D, filled in C order)."""
-    sig = types.void(addr, t, x, p, out)
+    return types.void(addr, t, x, p, out), _call_codegen
 
-    def codegen(context, builder, signature, args):
-        dbl = ir.DoubleType()
-        fnty = ir.FunctionType(ir.VoidType(), [dbl] + [dbl.as_pointer()] * 3)
-        fptr = builder.inttoptr(args[0], fnty.as_pointer())
-        ptrs = [context.make_array(ty)(context, builder, v).data
-                for ty, v in zip(signature.args[2:], args[2:])]
-        builder.call(fptr, [args[1]] + ptrs)
-        return context.get_dummy_value()
 
-    return sig, codegen
+@intrinsic
+def call_kernel(typingctx, addr, t, x, p, w, out):
+    """Call a generated module's kernel at ``addr`` as f(t, x.data, p.data, w.data,
+    out.data), ``w`` its workspace (the constraints kernel, which has no entry point)."""
+    return types.void(addr, t, x, p, w, out), _call_codegen
 
 
 @njit(cache=True)

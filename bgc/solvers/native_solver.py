@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from bgc.errors import SimulationError
-from bgc.solvers import native
+from bgc.methods import consistent
+from bgc.solvers import native, rank
 from bgc.solvers.base import (
     GUARD_TOLERANCE,
     Segment,
@@ -30,13 +31,14 @@ LOCATE_MAXITER = 60
 class NativeSolver(Solver):
     """A step loop in numba (``radau5``, ``rk4``, imported when a run takes it),
     compiled once for every model, that calls the module's rhs, Jacobian and guards
-    through their C entry points without returning to Python per step. Guards are
-    checked in the loop; other events (the rank monitor, Python functions) and rk4's
-    stability limit are checked while the loop pauses every so many steps. An event
-    that changed sign is located by bisection, re-integrating from the last pause,
-    unless it ``settle``s where the loop paused (the rank monitor, whose minor alone
-    went singular, re-picks another there): then the loop goes on with its step size."""
-    STEPS_PER_CHECK = 25          # Radau pauses for Python events every so many steps
+    through their C entry points without returning to Python per step. Guards, and in
+    Radau's loop the rank monitor of a constrained run (``rank``), are checked there
+    after every step; other events (Python functions, rk4's rank monitor) and rk4's
+    stability limit are checked while the loop pauses every so many steps. Such an
+    event that changed sign is located by bisection, re-integrating from the last
+    pause, unless it ``settle``s where the loop paused (the rank monitor, whose minor
+    alone went singular, re-picks another there): then the loop goes on."""
+    STEPS_PER_CHECK = 25          # the loop pauses for Python events every so many steps
 
     def __init__(self, name: str, loop: str, description: str):
         self.name, self.loop, self.description = name, loop, description
@@ -82,10 +84,13 @@ class NativeSolver(Solver):
         """Every count is the loop's own (rk4: no factorizations, no rejected steps)."""
         return Stats(rejected_steps=0)
 
-    def _run(self, problem, t0, t1, x0, t_eval, stats, h_start=0.0, max_steps=0, keep=None):
+    def _run(self, problem, t0, t1, x0, t_eval, stats, h_start=0.0, max_steps=0, keep=None,
+             monitor=None):
         """One call of the loop from (t0, x0) towards t1 (a ``native.Outcome``), pausing
         after ``max_steps`` steps (0: none); its counts added to ``stats``. ``keep``
-        (``radau5.Carry``): the loop's state across pauses (None: a fresh start)."""
+        (``radau5.Carry``): the loop's state across pauses (None: a fresh start);
+        ``monitor`` (``rank.Monitor``): the rank monitor Radau's loop checks (None:
+        none)."""
         model = native.Model(*problem.module.native_entry_points(),
                              len(problem.module.GUARD_NAMES), problem.p)
         counts = np.zeros(native.N_STATS, dtype=np.int64)
@@ -101,7 +106,8 @@ class NativeSolver(Solver):
             from bgc.solvers import radau5
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
-            system = radau5.System(model, mass, index2, problem.lu_plan)
+            system = radau5.System(model, mass, index2, problem.lu_plan,
+                                   monitor if monitor is not None else rank.none())
             settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
                                        GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))
@@ -114,6 +120,42 @@ class NativeSolver(Solver):
         stats.rejected_steps += int(counts[native.ST_REJECTED])
         return res
 
+    def _monitor(self, problem, n: int) -> rank.Monitor:
+        """The run's rank monitor as Radau's loop checks it (``rank.none()``: none, or a
+        module without the address of its constraints kernel: then it is a Python event
+        at the loop's pauses)."""
+        mon, module = problem.monitor, problem.module
+        engine = getattr(module, "_ENGINE", None)
+        if mon is None or engine is None or self.loop != "radau5":
+            return rank.none()
+        m = len(module.CONSTRAINT_NAMES)
+        measured = ~np.asarray(module.IMPOSED, dtype=bool)
+        floor = max(consistent.RANK_TOL, mon.projection.conditioning / consistent.LOST_RANK)
+        return rank.Monitor(
+            engine.get_function_address(f"{module._KERNEL_PREFIX}_con"), int(module.N_EVAL),
+            2 * m, m + np.flatnonzero(measured).astype(np.int64),
+            np.asarray(consistent._other_states(module, n), dtype=np.int64),
+            np.ascontiguousarray(mon.scales[0], dtype=np.float64),
+            np.ascontiguousarray(mon.scales[1], dtype=np.float64), int(mon.rank),
+            float(floor), np.zeros((2, mon.rank), dtype=np.int64),
+            np.zeros(1, dtype=np.int64))
+
+    @staticmethod
+    def _hand_over(monitor, mon: rank.Monitor, t, x):
+        """The loop's minor crossed zero where the constraints may have lost rank (status
+        MINOR, at (t, x) before the crossing): the Python ``monitor`` takes that minor
+        (``mon``'s picks, 1 at x), for the crossing to be located as its event."""
+        monitor.rows, monitor.cols = mon.picks[0].copy(), mon.picks[1].copy()
+        monitor.scale = 1.0
+        monitor.scale = monitor(t, x)
+
+    @staticmethod
+    def _watched(events, problem, mon: rank.Monitor):
+        """The events Python checks at the loop's pauses: not the guards (checked in the
+        loop), nor the rank monitor where the loop checks it (``mon``)."""
+        return [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)
+                and not (mon.con != 0 and e is problem.monitor)]
+
     def warm_up(self, problem, x0):
         """Compile (or load from numba's cache) the loop and the module's entry points."""
         native.await_precompiled(self.loop)
@@ -121,7 +163,8 @@ class NativeSolver(Solver):
                   self.new_stats())
 
     def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
-        watched = [(k, e) for k, e in enumerate(events) if not getattr(e, "guard", False)]
+        mon = self._monitor(problem, len(x0))           # the rank monitor in the loop
+        watched = self._watched(events, problem, mon)
         t_eval = np.ascontiguousarray(t_eval, dtype=np.float64)
         t, x, h = t0, np.array(x0, dtype=np.float64), 0.0   # a pause keeps its step size
         xs, done = [], 0
@@ -141,7 +184,7 @@ class NativeSolver(Solver):
             if left is not None:
                 pause = min(pause, left) if pause else left
             out, k, t_r, x_r, status, guard, h = self._run(
-                problem, t, t1, x, sel, stats, h, pause, keep)
+                problem, t, t1, x, sel, stats, h, pause, keep, mon)
             xs.append(out[:k])
             if status == native.INTERRUPTED:
                 return Segment(np.vstack(xs), np.array(x_r), float(t_r), False, "interrupted",
@@ -164,6 +207,12 @@ class NativeSolver(Solver):
                 if status == native.REACHED:
                     return Segment(np.vstack(xs), x, float(t1), True)
                 continue
+            if status == native.MINOR:     # located by re-integration, as a Python event
+                j = next(j for j, e in enumerate(events) if e is problem.monitor)
+                self._hand_over(problem.monitor, mon, t_r, x_r)
+                return self._locate(problem, stats, (float(t_r), np.array(x_r)),
+                                    (float(t_r) + h, None), t_eval[done + k:],
+                                    (j, problem.monitor, 1.0), h, xs)
             x_eval = np.vstack(xs) if xs else np.empty((0, len(x0)))
             if status == native.GUARD:
                 return Segment(x_eval, np.array(x_r), float(t_r), False, "", event=int(guard))
@@ -199,7 +248,7 @@ class NativeSolver(Solver):
     def _locate(self, problem, stats, start, end, sel, event, h, xs):
         """An event changed sign on [a, b]: from ``start`` = (a, x), where it was ``before``
         (``event`` = (its index, function, before)), to ``end`` = (b, its value there,
-        ``after``). One re-integration of [a, b] scans the event on a grid of the
+        ``after``; None: taken from the scan). One re-integration of [a, b] scans the event on a grid of the
         dense output; from the integrated state at the grid point before the change,
         regula falsi with the Illinois modification (superlinear on a smooth event, the
         bracket always holding the change) re-integrates short intervals only. Every
@@ -207,7 +256,8 @@ class NativeSolver(Solver):
         (a, x), (b, after), (k, fun, before) = start, end, event
         sign = np.sign(before)
         grid = np.linspace(a, b, LOCATE_GRID + 1)[1:-1]
-        out, n, _, _, _, _, _ = self._run(problem, a, b, x, grid, stats, h)
+        out, n, _, x_b, _, _, _ = self._run(problem, a, b, x, grid, stats, h)
+        after = fun(b, x_b) if after is None else after
         vals = [fun(t, xi) for t, xi in zip(grid[:n], out[:n])]
         first = next((j for j, v in enumerate(vals) if v == 0 or np.sign(v) != sign), n)
         lo, f_lo, x_lo, done = a, before, x, 0

@@ -24,10 +24,11 @@ import numpy as np
 from numba import njit, types
 from numba.np.linalg import _LAPACK, F_INT_nptype
 
-from bgc.solvers import sparse_lu
+from bgc.solvers import rank, sparse_lu
 from bgc.solvers.native import (
     GUARD,
     INTERRUPTED,
+    MINOR,
     N_STATS,
     NOT_FINITE,
     PAUSED,
@@ -68,17 +69,31 @@ _P = np.array([[13.0 / 3.0 + 7.0 * _S6 / 3.0, -23.0 / 3.0 - 22.0 * _S6 / 3.0,
 NEWTON_MAXITER = 6
 NO_LU, DENSE_LU, SPARSE_LU = 0, 1, 2
 MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
+# a fresh Jacobian after a step whose Newton iterations converged slower than this
+# (and took more than two): Hairer's RADAU5 takes 0.001 by default and advises 0.1 where
+# Jacobians are costly, as here: the SARIB's costs 27 rhs calls, and each one a new pair
+# of factorizations (1 s sine dwell: 147 -> 42 Jacobians, 392 -> 200 factorizations,
+# errors unchanged to three digits; Andrews 24 -> 2 Jacobians, 106 -> 107 steps)
+JAC_RATE = 0.1
+# the step (and the factors with it) is kept unless the error allows this many times it
+# (RADAU5's WORK(5): 1.2 by default, as scipy; 2 advised for large systems): on the 28 s
+# SARIB chirp 4092 -> 1028 factorizations and 495 -> 41 rejected steps (growing by 1.2
+# at a time, the step kept overshooting), 7660 -> 7633 steps; Andrews 107 -> 127 steps
+# (scipy's Radau: 116) for 54 -> 28 factorizations
+GROW_AT = 2.0
 
 
 class System(NamedTuple):
     """``M dx/dt = rhs(t, x, p)`` as the loop calls it: the model (``native.Model``),
     the mass matrix (empty: the identity), 1.0 where a state is an algebraic variable of
-    index 2 (empty: none) and ``sparse_lu.analyse``'s elimination plan for the Newton
-    matrices (``sparse_lu.DENSE``: dense)."""
+    index 2 (empty: none), ``sparse_lu.analyse``'s elimination plan for the Newton
+    matrices (``sparse_lu.DENSE``: dense) and the rank monitor of a constrained run
+    (``rank.Monitor``; ``rank.none()``: none)."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
     plan: tuple
+    monitor: rank.Monitor
 
 
 class Settings(NamedTuple):
@@ -426,9 +441,14 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     rejected step's error (error over its scale; inf where the stages were not finite),
     to name the states that made a step size collapse (STEP_TOO_SMALL). ``keep`` (a
     ``Carry``) holds the loop's own state across a pause: a call that starts where the
-    last one paused goes on as if it had not (same Jacobian, factors and predictor)."""
+    last one paused goes on as if it had not (same Jacobian, factors and predictor).
+
+    The rank monitor (``system.monitor``) is checked after every accepted step: where
+    its minor crossed zero another is picked there if the constraints are well
+    conditioned; else the loop returns at the start of that step with status MINOR
+    (its outputs recorded up to there, ``h`` the step that crossed)."""
     rhs, jac, guards, n_guards, p = system.model
-    M, index2, plan = system.mass, system.index2, system.plan
+    M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
                                      settings.h_start)
     guard_tol, max_steps, stop = settings.guard_tol, settings.max_steps, settings.stop
@@ -479,6 +499,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         t_old, h_last, y_old = t, 0.0, y.copy()
         faccon = 1.0
     kept[0] = 0.0
+    msc = rank.scratch(mon, n)
+    m_scale = rank.start(mon, msc, t, y, p) if mon.con != 0 else 0.0
     # work arrays: the stages, their predictor, the transformed variables and Newton
     # increments, the stages' rhs, the error scale and estimate
     Z = np.zeros((3, n))
@@ -590,14 +612,14 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             else:
                 accepted = True
         stats[ST_STEPS] += 1
-        recompute_jac = n_iter > 2 and rate > 1e-3
+        recompute_jac = n_iter > 2 and rate > JAC_RATE
         if err_norm == 0.0:
             factor = MAX_FACTOR
         else:
             mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
                 h_abs / h_abs_old * (err_old / err_norm) ** 0.25
             factor = min(MAX_FACTOR, safety * min(1.0, mult) * err_norm ** -0.25)
-        if not recompute_jac and factor < 1.2:
+        if not recompute_jac and factor < GROW_AT:
             factor = 1.0
         # the factors depend on h: keep them while the step stays (also when the input
         # signals' max_step clips it back to where it was)
@@ -631,6 +653,12 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
                 k_out = _record(out, k_out, t_eval, b, t_old, h_last, y_old, Q)
                 return Outcome(out, k_out, b, dense(t_old, h_last, y_old, Q, b), GUARD,
                                kg, h_abs)
+        # the monitored minor through zero: pick another, or hand a possibly singular
+        # configuration back from the step's start
+        if m_scale != 0.0 and rank.minor(mon, msc, t, y, p) / m_scale <= 0.0:
+            m_scale = rank.settle(mon, msc, t, y, p)
+            if m_scale == 0.0:
+                return Outcome(out, k_out, t_old, y_old.copy(), MINOR, -1, h_last)
         k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:
@@ -657,7 +685,7 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE)
+                    sparse_lu.DENSE, rank.none())
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

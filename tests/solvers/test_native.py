@@ -115,14 +115,60 @@ def test_native_guard_stops_at_the_gimbal_lock(tmp_path):
     assert abs(t_lock - np.arccos(1e-3) / 2.0) < 1e-6
 
 
-def test_native_rank_monitor_stops_at_the_singular_configuration(compiled):
-    """The rank monitor is a Python function: checked between chunks of the segment and
-    located by re-integration."""
+def _loop_calls(monkeypatch):
+    """Record every call of the native loops that integrates (t1 > t0: (t0, t1, status))
+    and the rank monitors they were given (``rank.Monitor``, its ``counts[0]``: the minors
+    picked again inside the loop)."""
+    from bgc.solvers.native_solver import NativeSolver
+    calls, monitors = [], []
+    run, monitor = NativeSolver._run, NativeSolver._monitor
+
+    def counted_run(self, problem, t0, t1, *args, **kw):
+        res = run(self, problem, t0, t1, *args, **kw)
+        if t1 > t0:
+            calls.append((t0, t1, res.status))
+        return res
+
+    def kept_monitor(self, *args):
+        mon = monitor(self, *args)
+        monitors.append(mon)
+        return mon
+    monkeypatch.setattr(NativeSolver, "_run", counted_run)
+    monkeypatch.setattr(NativeSolver, "_monitor", kept_monitor)
+    return calls, monitors
+
+
+def test_native_rank_monitor_repicks_inside_the_loop(compiled, monkeypatch):
+    """The slider-crank's crank turns over under lagrange: its monitored minor crosses
+    zero again and again, and each time the loop picks another itself (the constraints
+    stay well conditioned), so the whole run is one call of the loop, with no pause."""
+    from bgc.solvers import native
+    calls, monitors = _loop_calls(monkeypatch)
+    r = simulate(compiled("slider_crank", "lagrange"), t_end=1.0, rtol=1e-6, atol=1e-8,
+                 solver="native")
+    th = np.unwrap(np.arctan2(r.column("A_z"), r.column("A_x")))
+    assert r.success and th[-1] - th[0] > 2 * np.pi
+    assert calls == [(0.0, 1.0, native.REACHED)]
+    assert sum(int(m.counts[0]) for m in monitors if m.con) >= 2
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-8])
+def test_native_rank_monitor_stops_at_the_singular_configuration(compiled, monkeypatch,
+                                                                  rtol):
+    """At the dead point the run stops naming the joint directions that became
+    dependent: at rtol 1e-6 the loop's minor crosses zero where the constraints are ill
+    conditioned, the loop hands the crossing back (status MINOR) and its location by
+    re-integration meets the dead point; at 1e-8 the loop's steps collapse short of it
+    and the failed run is diagnosed."""
+    from bgc.solvers import native
+    calls, _ = _loop_calls(monkeypatch)
     mod = compiled("isosceles_slider_crank", "lagrange")
     with pytest.raises(SimulationError, match="singular configuration") as err:
-        simulate(mod, t_end=0.3, rtol=1e-8, atol=1e-10, solver="native")
+        simulate(mod, t_end=0.3, rtol=rtol, atol=rtol / 100, solver="native")
     t_stop = float(re.search(r"at t = ([0-9.]+): ", str(err.value)).group(1))
     assert t_stop == pytest.approx(T_SINGULAR, abs=1e-3)
+    assert "main.tz, crank_pin.tz, wrist_pin.tz, guide.tz became dependent" in str(err.value)
+    assert calls[0][2] == (native.MINOR if rtol == 1e-6 else native.STEP_TOO_SMALL)
 
 
 def test_cli_lists_the_solvers_and_reports_native_statistics(compiled, gen_dir):

@@ -110,6 +110,11 @@ class Settings(NamedTuple):
     stop: np.ndarray
 
 
+# the rank monitor's minor is checked every step below this (its determinant, 1 where it was
+# picked), else after at most MONITOR_MAX steps (``radau5``)
+MONITOR_NEAR, MONITOR_MAX = 0.5, 16
+
+
 class Carry(NamedTuple):
     """What the loop keeps across a pause (``Settings.max_steps``), so that going on from
     there costs no restart: the Jacobian, the Newton matrices' factors, the last step's
@@ -443,10 +448,14 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     ``Carry``) holds the loop's own state across a pause: a call that starts where the
     last one paused goes on as if it had not (same Jacobian, factors and predictor).
 
-    The rank monitor (``system.monitor``) is checked after every accepted step: where
-    its minor crossed zero another is picked there if the constraints are well
-    conditioned; else the loop returns at the start of that step with status MINOR
-    (its outputs recorded up to there, ``h`` the step that crossed)."""
+    The rank monitor (``system.monitor``) is checked after accepted steps: where its
+    minor crossed zero another is picked there if the constraints are well conditioned;
+    else the loop returns at the start of that step with status MINOR (its outputs
+    recorded up to there, ``h`` the step that crossed). Every step while the minor's
+    determinant (1 where it was picked) is below ``MONITOR_NEAR`` or falling fast; else
+    (a mechanism vibrating about its pose: the SARIB's checks were a sixth of its steps'
+    cost) after as many steps as a quarter of the fall to ``MONITOR_NEAR`` would take at
+    the rate measured since the last check, at most ``MONITOR_MAX``."""
     rhs, jac, guards, n_guards, p = system.model
     M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
@@ -501,6 +510,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     kept[0] = 0.0
     msc = rank.scratch(mon, n)
     m_scale = rank.start(mon, msc, t, y, p) if mon.con != 0 else 0.0
+    m_last, m_wait, m_left = 1.0, 1, 1      # the minor: last value, steps between checks
     # work arrays: the stages, their predictor, the transformed variables and Newton
     # increments, the stages' rhs, the error scale and estimate
     Z = np.zeros((3, n))
@@ -655,10 +665,20 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
                                kg, h_abs)
         # the monitored minor through zero: pick another, or hand a possibly singular
         # configuration back from the step's start
-        if m_scale != 0.0 and rank.minor(mon, msc, t, y, p) / m_scale <= 0.0:
-            m_scale = rank.settle(mon, msc, t, y, p)
-            if m_scale == 0.0:
-                return Outcome(out, k_out, t_old, y_old.copy(), MINOR, -1, h_last)
+        m_left -= 1
+        if m_scale != 0.0 and m_left <= 0:
+            d = rank.minor(mon, msc, t, y, p) / m_scale
+            if d <= 0.0:
+                m_scale = rank.settle(mon, msc, t, y, p)
+                if m_scale == 0.0:
+                    return Outcome(out, k_out, t_old, y_old.copy(), MINOR, -1, h_last)
+                d = 1.0
+            fall = (m_last - d) / m_wait            # per step, since the last check
+            m_wait = 1
+            if d > MONITOR_NEAR:
+                m_wait = MONITOR_MAX if fall <= 0.0 else int(
+                    max(1.0, min(MONITOR_MAX, 0.25 * (d - MONITOR_NEAR) / fall)))
+            m_last, m_left = d, m_wait
         k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:

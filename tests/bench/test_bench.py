@@ -31,6 +31,7 @@ def _bench(gen_dir, out, *parts, extra=()):
     return json.loads(res.output[res.output.index("{"):])
 
 
+@pytest.mark.slow       # 6 s: make bench runs it in full
 def test_peers_precision_and_stiffness_at_small_scale(gen_dir, tmp_path):
     rep = _bench(gen_dir, tmp_path, "peers", "precision", "stiffness")
     summary = (tmp_path / "summary.md").read_text()
@@ -78,6 +79,7 @@ def test_stability_maps_at_small_scale(gen_dir, tmp_path):
         assert (tmp_path / name).exists()
 
 
+@pytest.mark.slow       # 6 s: make bench runs it in full
 def test_symmetry_part_charts_the_one_leg_model_against_the_full_rig(gen_dir, compiled,
                                                                       tmp_path):
     """The one-leg SARIB and the full rig over the same tolerances, both measured against
@@ -102,6 +104,7 @@ def test_symmetry_part_charts_the_one_leg_model_against_the_full_rig(gen_dir, co
     assert (tmp_path / "symmetry.png").stat().st_size > 10000
 
 
+@pytest.mark.slow       # 7 s: make bench runs it in full
 def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp_path):
     """A four-bar scene: the reduced module has fewer states (the coupler's spin), both
     were derived and compiled cold and run, and they answer alike."""

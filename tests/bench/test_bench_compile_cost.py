@@ -20,6 +20,7 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow       # 20 s: two cold compiles; make bench runs it in full
 def test_a_row_times_a_cold_then_a_warm_first_result_of_a_chain(tmp_path):
     """Chain of 2 links, parasitic: the cold run compiles into an empty cache, the warm
     one finds module and cache and recompiles nothing; the module is the cold run's."""

@@ -10,6 +10,8 @@ directory, with numba's cache beside the module (no NUMBA_CACHE_DIR), as a user 
 
 from __future__ import annotations
 
+import pytest
+
 import os
 import subprocess
 import sys
@@ -92,6 +94,7 @@ def test_simulate_first_then_bare_and_package_import(tmp_path):
     simulate(tmp_path)
 
 
+@pytest.mark.slow       # 5 s: the other two orders stay in make test
 def test_both_names_in_one_process(tmp_path):
     """Imported under both names in one interpreter (then by bgc's own import), each
     module object runs, from the one cache."""

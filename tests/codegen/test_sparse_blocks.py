@@ -108,7 +108,7 @@ def test_splu_kernel_hands_a_zero_pivot_to_partial_pivoting():
     assert not ok and np.array_equal(x, b)
 
 
-@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+@pytest.mark.parametrize("method", ["lagrange", pytest.param("zcp", marks=pytest.mark.slow)])
 def test_module_solving_blocks_sparse_matches_dense(tmp_path, monkeypatch, compiled, method):
     """The four-bar's blocks, solved on their plans (the size threshold lowered), give the
     same rhs and Jacobian as the shipped threshold's dense solves, at states off the

@@ -15,6 +15,7 @@ from bgc.cli.options import (
     check_overrides,
     json_option,
     method_option,
+    out_dir_option,
     params_option,
     parse_params,
     progress_option,
@@ -34,8 +35,7 @@ from bgc.pipeline import ensure_module
 @click.option("--out", type=click.Path(dir_okay=False),
               help="CSV of f, |H|, phase [deg] on a 0.01 Hz grid")
 @params_option("override a parameter (no recompilation)")
-@click.option("-o", "--out-dir", default="generated", show_default=True,
-              help="where the generated module is kept")
+@out_dir_option
 @method_option
 @click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
               default="given", show_default=True,

@@ -15,6 +15,8 @@ from bgc.errors import BgcError
 from bgc.model.model import MAX_POINTS
 
 json_option = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
+out_dir_option = click.option("-o", "--out-dir", default="generated", show_default=True,
+                              help="where the generated module is kept")
 method_option = click.option("--method", type=click.Choice(methods.NAMES), default=methods.DEFAULT,
                              show_default=True, help="how constraint elements are handled")
 loops_option = click.option("--keep-loops", is_flag=True,

@@ -29,6 +29,7 @@ from bgc.cli.options import (
     json_option,
     loops_option,
     method_option,
+    out_dir_option,
     params_option,
     parse_params,
     progress_option,
@@ -129,8 +130,7 @@ def _points(st: Settings, t_end: float | None) -> int:
 @click.option("--states/--no-states", default=True, show_default=True,
               help="whether the CSV holds the states besides t and the outputs (without "
                    "MODEL: --no-states)")
-@click.option("-o", "--out-dir", default="generated", show_default=True,
-              help="where the generated module is kept")
+@out_dir_option
 @click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
               default="given", show_default=True,
               help="method parasitic: the joints' stiffness and damping as the model gives "

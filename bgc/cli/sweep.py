@@ -20,6 +20,7 @@ from bgc.cli.options import (
     check_overrides,
     json_option,
     method_option,
+    out_dir_option,
     parse_params,
     progress_option,
 )
@@ -62,8 +63,7 @@ from bgc.fileio import check_writable
               help="CSV of the points (and .parquet beside it if pyarrow is installed)")
 @click.option("--plot", type=click.Path(dir_okay=False),
               help="PNG stem: <stem>_<metric>.png per metric, against each parameter")
-@click.option("-o", "--out-dir", default="generated", show_default=True,
-              help="where the generated module is kept")
+@out_dir_option
 @method_option
 @json_option
 @user_errors

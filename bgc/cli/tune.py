@@ -15,6 +15,7 @@ from bgc.cli.options import (
     check_overrides,
     json_option,
     method_option,
+    out_dir_option,
     param_items,
     parse_params,
     progress_option,
@@ -56,8 +57,7 @@ def bracket_option(ctx, param, value):
 @click.option("--f-max", type=POSITIVE, help="... and its end (default: 2 F)")
 @click.option("--set", "params", multiple=True, metavar="NAME=VALUE", callback=param_items,
               help="override a parameter (the tuned one: its start value)")
-@click.option("-o", "--out-dir", default="generated", show_default=True,
-              help="where the generated module is kept")
+@out_dir_option
 @method_option
 @json_option
 @user_errors

@@ -35,6 +35,47 @@ def gen_dir(tmp_path_factory):
     return path
 
 
+class _Compiled:
+    """A step loop another worker's child process compiles into numba's cache: ``wait``
+    (``native.await_precompiled``, before the loop's first call) blocks on its lock."""
+
+    def __init__(self, lock):
+        self.lock = lock
+
+    def wait(self) -> bool:
+        fcntl.flock(self.lock, fcntl.LOCK_EX)
+        fcntl.flock(self.lock, fcntl.LOCK_UN)
+        return True
+
+
+@pytest.fixture(scope="session", autouse=True)
+def native_loops_once(gen_dir):
+    """The native step loops (16 s of CPU for Radau's) compiled once for the run, by one
+    child process beside the tests (``native.Precompile``), not once per worker: the first
+    worker starts it and holds a lock until it is done; every worker's first native run
+    waits for that (``native.await_precompiled``) and then loads the loop from the cache."""
+    import threading
+
+    from bgc.solvers import native, radau5, rk4
+    for name, mod in (("radau5", radau5), ("rk4", rk4)):
+        if native.cached(getattr(mod, name)):
+            continue
+        lock = open(gen_dir / f"{name}.lock", "a+")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:             # another worker's child compiles it
+            native._started[name] = _Compiled(lock)
+            continue
+        job = native.Precompile(name)
+        native._started[name] = job
+
+        def release(job=job, lock=lock):
+            job.wait()
+            fcntl.flock(lock, fcntl.LOCK_UN)
+        threading.Thread(target=release, daemon=True).start()
+    yield
+
+
 @pytest.fixture(scope="session")
 def compiled(gen_dir):
     """compiled(name, method) -> generated module of models/<name>.yaml (cached per

@@ -63,6 +63,7 @@ def test_precompile_child_is_stopped_and_leaves_no_process(tmp_path, monkeypatch
 
 
 def test_precompile_is_skipped_when_the_cache_has_the_loop():
+    native.await_precompiled("rk4")      # the session's own compile (conftest), if any
     rk4.compile_loop()                   # this process's cache (cache=True): present now
     assert native.cached(rk4.rk4)
     native.precompile("rk4")

@@ -57,6 +57,7 @@ def test_the_written_chain_loads_and_has_three_dof_per_link(tmp_path, method):
     assert report["bodies"] == 3 and report["dof"] == 9 and report["constraints"] == 9
 
 
+@pytest.mark.slow       # 3 s: make bench runs the chain in full
 def test_the_chain_falls_in_space(tmp_path):
     path = write_chain(2, tmp_path)
     proc = bgc("simulate", path, "--t-end", 0.2, "-o", tmp_path / "gen", "--out",

@@ -87,6 +87,7 @@ def test_bare_import_first_then_simulate_and_package_import(tmp_path):
     bare_import(tmp_path)
 
 
+@pytest.mark.slow       # 6 s: the bare-first order stays in make test
 def test_simulate_first_then_bare_and_package_import(tmp_path):
     simulate(tmp_path)
     bare_import(tmp_path, extra="assert len(rlc.native_entry_points()) == 3")

@@ -47,6 +47,7 @@ def test_zcp_jacobian_matches_finite_differences(compiled, name):
         assert np.abs(J - fd).max() / np.abs(fd).max() < 1e-5   # measured 2e-7 at most
 
 
+@pytest.mark.slow       # 9 s: zcp against lagrange stays in the four-bar and screw tests
 def test_open_chain_needs_no_loop_opening_and_matches_lagrange(compiled):
     res, rep = _check("double_pendulum")
     assert res.exit_code == 0, res.output

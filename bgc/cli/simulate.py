@@ -102,7 +102,7 @@ class _Run:
     units: dict = field(default_factory=dict)   # name -> unit the model declares
 
 
-def _points(st: Settings, t_end: float | None) -> int:
+def output_points(st: Settings, t_end: float | None) -> int:
     """The model's output times over ``t_end``: its spacing (``st.points`` over its own
     t_end) kept, so that ``--t-end 0.01`` on the 28 s SARIB (28001 points, 1 ms) gives 11
     output times, not 28001 within 10 ms."""
@@ -224,7 +224,7 @@ def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
     module = run.module
     check_overrides(o.model, o.params)
     run.p = parse_params(module, o.params)
-    run.excitation = _excitation(module, run.model, run.p, o)
+    run.excitation = set_excitation(module, run.model, run.p, o)
     if run.excitation:
         run.p = parse_params(module, o.params, base=run.p)
     if o.parasitic_mode == "auto":
@@ -261,7 +261,7 @@ def _check_plan(module, p, t_end, step, key):
                        hint="a lower frequency (--frequency, -p) or a shorter --t-end")
 
 
-def _excitation(module, m, p, o: SimulateOptions) -> dict | None:
+def set_excitation(module, m, p, o: SimulateOptions) -> dict | None:
     """Set the parameters of the excitation the options choose (in place); what was chosen."""
     kind, direction = o.exc_kind, o.exc_dir
     if kind is None and direction is None:
@@ -292,7 +292,7 @@ def _integrate(o: SimulateOptions, run: _Run) -> None:
     with progress.stage("integrate") as stage:
         result = integrate(run.module, t_end=o.t_end or st.t_end, rtol=o.rtol or st.rtol,
                            atol=o.atol or st.atol, solver=o.solver or st.solver,
-                           points=o.points or _points(st, o.t_end), params=run.p,
+                           points=o.points or output_points(st, o.t_end), params=run.p,
                            step=o.step, max_steps=o.max_steps)
         stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
                    f"t = {result.t[-1]:g} s, "

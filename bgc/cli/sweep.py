@@ -136,7 +136,7 @@ def _job(o, axes, fixed, frfs, windows):
     """The module (compiled if stale), the names checked against it, the base parameters
     (defaults, the excitation, the fixed -p values), the run of the window metrics: the
     runner's Job, and the module."""
-    from bgc.cli.simulate import _excitation, _points
+    from bgc.cli.simulate import output_points, set_excitation
     from bgc.model.model import Settings
     from bgc.pipeline import ensure_module
     from bgc.simulate import precompile_loop
@@ -163,7 +163,7 @@ def _job(o, axes, fixed, frfs, windows):
                            f"{model.file}", key="--frf", hint="directions: " + (
                                ", ".join(exc.directions) if exc else "none (no excitation:)"))
     p = parse_params(module, fixed)
-    if _excitation(module, model, p, o):
+    if set_excitation(module, model, p, o):
         p = parse_params(module, fixed, base=p)     # the fixed -p values win
     for ends in ([a.start for a in axes], [a.stop for a in axes]):
         check_overrides(o.model, fixed + tuple(zip([a.name for a in axes], ends)))
@@ -176,7 +176,7 @@ def _job(o, axes, fixed, frfs, windows):
         if late:
             raise BgcError(f"{late[0]}: the window ends after the run (t_end = {t_end:g} s)",
                            key="--metric", hint="a later --t-end or an earlier T1")
-        run = Run(t_end, st.rtol, st.atol, st.solver, _points(st, t_end))
+        run = Run(t_end, st.rtol, st.atol, st.solver, output_points(st, t_end))
         _await_loop(st.solver)
     metrics = Metrics(frfs, windows, o.f_min, o.f_max, run)
     job = Job(module.__file__, module.MODEL_HASH, model if frfs else None, p,

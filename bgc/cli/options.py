@@ -15,6 +15,26 @@ from bgc.errors import BgcError
 from bgc.model.model import MAX_POINTS
 
 json_option = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
+def excitation_options(context: str = ""):
+    """The four options that choose a model's excitation (``--excitation``, ``--direction``,
+    ``--amplitude``, ``--frequency``; ``context``: what they apply to, before each help)."""
+    def add(fn):
+        for opt in reversed((
+                click.option("--excitation", "exc_kind", metavar="KIND",
+                             help=context + "the model's excitation g(t) (e.g. constant, "
+                                            "sine, chirp)"),
+                click.option("--direction", "exc_dir", metavar="NAME",
+                             help=context + "where the excitation acts (e.g. pumping, roll, "
+                                            "pitch)"),
+                click.option("--amplitude", type=NUMBER,
+                             help="excitation amplitude (default: the model's)"),
+                click.option("--frequency", type=POSITIVE,
+                             help="sine excitation frequency [Hz]"))):
+            fn = opt(fn)
+        return fn
+    return add
+
+
 out_dir_option = click.option("-o", "--out-dir", default="generated", show_default=True,
                               help="where the generated module is kept")
 method_option = click.option("--method", type=click.Choice(methods.NAMES), default=methods.DEFAULT,

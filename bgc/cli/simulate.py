@@ -26,6 +26,7 @@ from bgc.cli.options import (
     POINTS,
     POSITIVE,
     check_overrides,
+    excitation_options,
     json_option,
     loops_option,
     method_option,
@@ -137,12 +138,7 @@ def output_points(st: Settings, t_end: float | None) -> int:
                    "them, or chosen from the eigenfrequencies")
 @click.option("--separation", type=NUMBER, default=SEPARATION, show_default=True,
               help="--parasitic auto: parasitic frequencies over the highest functional one")
-@click.option("--excitation", "exc_kind", metavar="KIND",
-              help="the model's excitation g(t) (e.g. constant, sine, chirp)")
-@click.option("--direction", "exc_dir", metavar="NAME",
-              help="where the excitation acts (e.g. pumping, roll, pitch)")
-@click.option("--amplitude", type=NUMBER, help="excitation amplitude (default: the model's)")
-@click.option("--frequency", type=POSITIVE, help="sine excitation frequency [Hz]")
+@excitation_options()
 @click.option("--zoom", type=(NUMBER, NUMBER), metavar="T0 T1",
               help="with --plot: also <plot>_zoom.png over [T0, T1], outputs that differ "
                    "only by a number (F_A1_z, F_A2_z) in one panel")

@@ -18,6 +18,7 @@ from bgc.cli.options import (
     NUMBER,
     POSITIVE,
     check_overrides,
+    excitation_options,
     json_option,
     method_option,
     out_dir_option,
@@ -49,12 +50,7 @@ from bgc.fileio import check_writable
 @click.option("--t-end", type=POSITIVE,
               help="--metric: end of the run [s] (default: the largest T1, else the "
                    "model's)")
-@click.option("--excitation", "exc_kind", metavar="KIND",
-              help="--metric: the model's excitation in the run (e.g. chirp)")
-@click.option("--direction", "exc_dir", metavar="NAME",
-              help="--metric: where the excitation acts (e.g. pumping)")
-@click.option("--amplitude", type=NUMBER, help="excitation amplitude (default: the model's)")
-@click.option("--frequency", type=POSITIVE, help="sine excitation frequency [Hz]")
+@excitation_options("--metric: ")
 @click.option("--scheduler", metavar="tcp://HOST:PORT",
               help="run on this Dask scheduler's workers (default: a local cluster)")
 @click.option("--workers", type=click.IntRange(1), metavar="N",

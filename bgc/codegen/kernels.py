@@ -100,12 +100,13 @@ class Block:
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
     k_at: tuple = ()
     b_at: tuple = ()
+    a_at: tuple = ()    # a block that stores A itself: its entries' positions
     plan: elimination.Plan | None = None
 
     def touched(self) -> set:
         """The entries (row, column) of A that sparse LU reads: A's and its fill's."""
         pl = self.plan
-        out = set(zip(*np.nonzero(self.pattern(None))))
+        out = set(zip(*np.nonzero(self.pattern())))
         if pl is not None:
             for k in range(self.n):
                 out.add((pl.rows[k], pl.cols[k]))
@@ -113,19 +114,17 @@ class Block:
                 out |= {(pl.rows[k], pl.cols[j]) for j in pl.uidx[pl.uptr[k]:pl.uptr[k + 1]]}
         return {(int(r), int(c)) for r, c in out}
 
-    def pattern(self, item: LinearBlock):
+    def pattern(self) -> np.ndarray:
         """A's structure: K B's, or the entries the block stores."""
-        a = np.zeros((self.n, self.n), dtype=bool)
-        if self.d:
-            k = np.zeros((self.n, self.d), dtype=np.int64)
-            b = np.zeros((self.d, self.n), dtype=np.int64)
-            k[tuple(np.array(self.k_at).T)] = 1
-            b[tuple(np.array(self.b_at).T)] = 1
-            a = (k @ b) != 0
-        else:
-            for i, j, _ in item.A:
-                a[i, j] = True
-        return a
+        if not self.d:
+            a = np.zeros((self.n, self.n), dtype=bool)
+            a[tuple(np.array(self.a_at, dtype=np.int64).reshape(-1, 2).T)] = True
+            return a
+        k = np.zeros((self.n, self.d), dtype=np.int64)
+        b = np.zeros((self.d, self.n), dtype=np.int64)
+        k[tuple(np.array(self.k_at).T)] = 1
+        b[tuple(np.array(self.b_at).T)] = 1
+        return (k @ b) != 0
 
 
 @dataclass
@@ -173,9 +172,11 @@ class Layout:
                     blk.k, blk.kb = self._region(n * d), self._region(d * n)
                     blk.k_at = tuple((i, j) for i, j, _ in item.factors[1])
                     blk.b_at = tuple((i, j) for i, j, _ in item.factors[2])
+                else:
+                    blk.a_at = tuple((i, j) for i, j, _ in item.A)
                 if n >= SPARSE_MIN:
                     start = start if start is not None else block_matrices(system)
-                    blk.plan = elimination.analyse(blk.pattern(item), SPARSE_WORK,
+                    blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK,
                                                    start.get(item.index))
                 blk.lu = self._region(n * n + (n if blk.plan is not None else 0))
                 if item.rank is not None:

@@ -36,7 +36,7 @@ _CMPS = {ast.Lt: sp.Lt, ast.LtE: sp.Le, ast.Gt: sp.Gt, ast.GtE: sp.Ge}
 # exponents up to 3. Exponents are bounded because sympy evaluates a power of numbers
 # exactly (10**10**10 would never finish); a larger one means a value no float holds.
 MAX_CHARS = 10_000           # characters in one expression
-MAX_DEPTH = 100              # nesting of operators and calls (Python's recursion limit)
+MAX_DEPTH = 100              # nesting of operators and calls (a flat sum or product is one)
 MAX_EXPONENT = 1000          # |n| of a numeric exponent x**n
 FLOAT_MAX = sys.float_info.max
 
@@ -56,18 +56,52 @@ def number(value) -> sp.Expr:
     return sp.Float(value)
 
 
+# Operators that chain without nesting: a + b - c is one sum, a * b / c one product.
+_CHAINS = ((ast.Add, ast.Sub), (ast.Mult, ast.Div))
+
+
+def _chain(node) -> tuple | None:
+    """The chain (``_CHAINS`` entry) a binary operation belongs to, or None."""
+    if isinstance(node, ast.BinOp):
+        for ops in _CHAINS:
+            if isinstance(node.op, ops):
+                return ops
+    return None
+
+
 def _depth(tree: ast.AST) -> int:
-    """Nesting depth of a parse tree, without recursion."""
+    """Nesting depth of a parse tree, without recursion. A chain of sums (or of products)
+    is one level, however many terms it has: Python parses ``a + b + c`` as ``(a + b) +
+    c``, but nothing in it nests, and a user's energy written as 160 terms must load."""
     deepest, todo = 0, [(tree, 1)]
     while todo:
         node, d = todo.pop()
         deepest = max(deepest, d)
-        todo.extend((c, d + 1) for c in ast.iter_child_nodes(node))
+        chain = _chain(node)
+        todo.extend((c, d if chain is not None and _chain(c) is chain else d + 1)
+                    for c in ast.iter_child_nodes(node)
+                    if not isinstance(c, (ast.operator, ast.expr_context)))
     return deepest
 
 
+def _parse_tree(text: str) -> ast.Expression:
+    """Python's parse tree of an expression of at most ``MAX_CHARS`` characters. Python
+    builds the tree of ``a + b + c ...`` nested one level per term and refuses more levels
+    than its recursion limit allows, so a flat sum of a few thousand terms (which
+    ``_depth`` counts as one level) needs the limit raised while it parses."""
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(old, MAX_CHARS + 100))
+    try:
+        return ast.parse(text, mode="eval")
+    finally:
+        sys.setrecursionlimit(old)
+
+
 def _log10(x: sp.Expr) -> float:
-    """log10 of a positive sympy number of any size (math.log10 takes big ints)."""
+    """log10 of a non-negative sympy number of any size (math.log10 takes big ints);
+    -inf for zero (which sympy 1.13+ tells apart from Float 0.0, but not always)."""
+    if x.is_zero:
+        return -math.inf
     if x.is_Integer:
         return math.log10(int(x))
     try:
@@ -102,7 +136,9 @@ def check_finite(e: sp.Expr, values: dict) -> tuple[sp.Expr, str] | None:
     def constant(x):
         return x.free_symbols <= known
 
-    def bad(x):
+    def bad(x):         # only values are judged: not a Piecewise's (expr, cond) pairs,
+        if not isinstance(x, sp.Expr):      # its conditions or other non-values
+            return None
         return _bad_value(x.xreplace(values)) if constant(x) else None
 
     def smallest(x):
@@ -111,16 +147,16 @@ def check_finite(e: sp.Expr, values: dict) -> tuple[sp.Expr, str] | None:
                 found = smallest(a)
                 if found:
                     return found
-        why = bad(x) if isinstance(x, sp.Expr) else None
+        why = bad(x)
         return (x, why) if why else None
 
     def fast_ok(x):      # the whole expression at once; only a failure is searched
-        if constant(x):
+        if constant(x) and isinstance(x, sp.Expr):
             return bad(x) is None
         return all(fast_ok(a) for a in x.args if isinstance(a, sp.Basic))
 
     for num in e.atoms(sp.Number):
-        if num.is_finite is False or (num != 0 and _log10(abs(num)) > 308.25):
+        if num.is_finite is False or _log10(abs(num)) > 308.25:
             return num, "is beyond the float range (+-1.8e308)"
     if fast_ok(e):
         return None
@@ -154,7 +190,7 @@ def parse(text, *, loc: Loc, key: str, names: dict[str, sp.Expr],
         raise ModelError(f"expression of {len(text)} characters is longer than bgc's limit "
                          f"of {MAX_CHARS}", loc=loc, key=key, hint=hint_split)
     try:
-        tree = ast.parse(text.strip(), mode="eval")
+        tree = _parse_tree(text.strip())
     except SyntaxError as exc:
         raise ModelError(f"cannot parse expression {shown!r}: {exc.msg}", loc=loc, key=key,
                          hint="use Python syntax: + - * / ** and function calls") from None
@@ -210,6 +246,8 @@ class _Converter:
             return self.name(node)
         if isinstance(node, ast.Attribute):
             return self.reference(node)
+        if _chain(node) is not None:
+            return self.chain(node)
         if isinstance(node, ast.BinOp):
             if isinstance(node.op, ast.BitXor):
                 self.fail("'^' is not a power", hint="write x**3 for a power")
@@ -229,6 +267,22 @@ class _Converter:
             self.fail("a comparison is only allowed as the first argument of ifelse",
                       hint="ifelse(x > 0, a, b)")
         self.fail(f"{type(node).__name__} is not allowed")
+
+    def chain(self, node: ast.BinOp):
+        """A sum or a product of any length, walked without recursion along the chain
+        (``_depth`` counts it as one level) and built in one sympy call, not term by
+        term (which is quadratic in the terms)."""
+        ops, parts, todo = _chain(node), [], [(node, False)]
+        while todo:                     # (node, inverted: subtracted or divided)
+            n, inv = todo.pop()
+            if _chain(n) is ops:
+                todo.append((n.right, inv ^ isinstance(n.op, (ast.Sub, ast.Div))))
+                todo.append((n.left, inv))
+            else:
+                parts.append((self.expr(n), inv))
+        if ops[0] is ast.Add:
+            return sp.Add(*[-v if inv else v for v, inv in parts])
+        return sp.Mul(*[1 / v if inv else v for v, inv in parts])
 
     def constant(self, node: ast.Constant):
         if isinstance(node.value, (int, float)) and not isinstance(node.value, bool):

@@ -19,7 +19,7 @@ import jinja2
 import sympy as sp
 
 from bgc import __version__, methods, progress
-from bgc.codegen import kernels
+from bgc.codegen import kernels, start
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.codegen.jacobian import tape
 from bgc.codegen.module_file import (  # noqa: F401
@@ -249,7 +249,10 @@ def render(system: EquationSystem) -> str:
 
 
 def write(system: EquationSystem, out_dir: str | Path = "generated") -> Path:
-    """Render and write ``out_dir/<name>.py`` atomically (temp file + rename)."""
+    """Render and write ``out_dir/<name>.py`` atomically (temp file + rename), if the
+    system's start is finite for the model's own values (``start.check``): nothing is
+    written for a model that could not run."""
+    start.check(system)
     source = render(system)
     path = module_path(system.model.name, out_dir, system.variant)
     problem = module_name_problem(path.stem)

@@ -5,9 +5,12 @@ and largest step as functions of the parameters). The equations themselves are L
 
 from __future__ import annotations
 
+import math
+
 import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 
+from bgc.errors import BgcError
 from bgc.model.signals import table
 
 _MATH = {f"numpy.{np_name}": f"math.{name}" for np_name, name in (
@@ -68,7 +71,13 @@ class NumbaPrinter(NumPyPrinter):
         return super().parenthesize(item, level, strict)
 
     def _print_Float(self, expr):
-        return repr(float(expr))
+        v = float(expr)
+        if not math.isfinite(v):       # 'inf' would be a NameError in the module
+            raise BgcError(f"a constant of the model, {sp.Float(expr, 4)}, is beyond the "
+                           "float range (+-1.8e308): nothing was written",
+                           hint="rescale the values whose product it is (masses, "
+                                "velocities, gravity, preloads)")
+        return repr(v)
 
     def _print_Integer(self, expr):
         return f"{int(expr)}.0" if abs(int(expr)) < 2**53 else repr(float(expr))

@@ -196,6 +196,28 @@ def _conflict_error(g: BondGraph, c: _Conflict, during: str) -> CausalityError:
                           key=f"elements.{c.node}", hint=hint)
 
 
+def _both_fixed(graph: BondGraph) -> None:
+    """Refuse a bond whose causality both its ends fix (a source bonded straight to a
+    source): whether or not the two agree, no equation relates its effort and flow, and
+    each source's value is lost on the other (an Se on an Sf is a power meter of nothing).
+    Named at the bond's file:line."""
+    fixed: dict[int, list[str]] = {}
+    for name, el in graph.elements.items():
+        if el.kind in _FIXED:
+            for b in graph.ports[name]:
+                fixed.setdefault(b, []).append(name)
+    for b, names in fixed.items():
+        if len(names) > 1:
+            bond = graph.bonds[b]
+            kinds = [f"{graph.elements[n].kind} '{n}'" for n in names]
+            raise CausalityError(f"bond {bond.name} joins {kinds[0]} straight to {kinds[1]}: "
+                                 "each source fixes the bond's causality, so nothing "
+                                 "relates its effort and flow", loc=bond.loc,
+                                 key=f"bonds.{bond.name}",
+                                 hint="put a junction (0 or 1) and the element the sources "
+                                      "drive between them")
+
+
 def assign(graph: BondGraph) -> CausalGraph:
     """Run SCAP and return the causal graph, or raise CausalityError."""
     s = _Scap(graph)
@@ -206,6 +228,7 @@ def assign(graph: BondGraph) -> CausalGraph:
     # the mechanism's own fixed causalities first, so that a model element that
     # contradicts them (a flow source on a port) is the one reported
     user = graph.model.elements if graph.model is not None else els
+    _both_fixed(graph)
     for name, el in sorted(els.items(), key=lambda item: item[0] in user):
         if el.kind in _FIXED or el.kind in ("EJS", "M0") or one_way(el):
             saved = list(s.effort_in), list(s.forced_by)

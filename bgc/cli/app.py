@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
+import traceback
+import warnings
+from pathlib import Path
 
 import click
 
@@ -30,6 +34,7 @@ class _Bgc(click.Group):
              **extra):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, False, **extra)
+        warnings.showwarning = _show_warning
         try:
             rv = super().main(args, prog_name, complete_var, False, **extra)
         except click.UsageError as exc:
@@ -41,7 +46,39 @@ class _Bgc(click.Group):
         except click.Abort:         # Ctrl-C outside a command's own handling
             click.echo("interrupted (Ctrl-C)", err=True)
             sys.exit(EXIT_INTERRUPTED)
+        except Exception as exc:    # noqa: BLE001 - the last resort: never a traceback
+            click.echo(internal_line(exc), err=True)
+            sys.exit(EXIT_INTERNAL)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+# exit status of an unexpected failure inside bgc (a bug), against 2 for a user's mistake
+EXIT_INTERNAL = 1
+
+
+def internal_line(exc: BaseException) -> str:
+    """One line for an exception bgc did not expect: what it was, where in bgc it was
+    raised, and how to report it (never a traceback; ``BGC_TRACEBACK=1`` shows one)."""
+    if os.environ.get("BGC_TRACEBACK"):
+        traceback.print_exception(exc)
+    tb = traceback.extract_tb(exc.__traceback__)
+    ours = [f for f in tb if f"{os.sep}bgc{os.sep}" in f.filename] or tb
+    where = (f" at {Path(ours[-1].filename).name}:{ours[-1].lineno}" if ours else "")
+    text = str(exc).splitlines()[0][:200] if str(exc) else ""
+    return ("error: internal error in bgc: " + type(exc).__name__ + (f": {text}" if text
+            else "") + where + " (hint: this is a bug in bgc, not in your input: please "
+            "report it to bgc's maintainers with the command, the model file and what "
+            "BGC_TRACEBACK=1 prints)")
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """A library's warning as one line of bgc's (no source line, no path): what it said
+    and which library said it. Numerical conditions worth reporting are said by bgc
+    itself where they arise; this is the net for the rest."""
+    lib = Path(filename).parts
+    who = next((p for p in ("numpy", "scipy", "numba", "sympy", "matplotlib", "dask")
+                if p in lib), "python")
+    click.echo(f"warning: {who}: {str(message).splitlines()[0][:200]}", err=True)
 
 
 def usage_line(exc: click.UsageError) -> str:
@@ -79,6 +116,14 @@ def user_errors(fn):
         except KeyboardInterrupt:
             click.echo("interrupted (Ctrl-C): nothing was written", err=True)
             sys.exit(EXIT_INTERRUPTED)
+        except (click.ClickException, click.Abort, click.exceptions.Exit):
+            raise
+        except Exception as exc:    # noqa: BLE001 - the last resort: never a traceback
+            if kwargs.get("as_json"):
+                click.echo(json.dumps({"error": internal_line(exc)[len("error: "):],
+                                       "internal": True}))
+            click.echo(internal_line(exc), err=True)
+            sys.exit(EXIT_INTERNAL)
     return wrapper
 
 

@@ -301,19 +301,26 @@ class RankMonitor:
         K, names, n_imposed = self._rows(x)
         return (equilibrate(K, self.scales) if K.size else K), names, n_imposed
 
-    def _minor(self, x) -> float:
+    def minor(self, x) -> tuple[float, float]:
+        """The minor's determinant as (sign, log|det|): a determinant of hundreds of rows
+        over- or underflows doubles where its logarithm does not."""
         K = self._rows(x)[0]
-        return float(np.linalg.det(K[np.ix_(self.rows, self.cols)]))
+        sign, logdet = np.linalg.slogdet(K[np.ix_(self.rows, self.cols)])
+        return float(sign), float(logdet)
 
     def repick(self, x) -> None:
         import scipy.linalg  # its import (0.25 s) paid only by the runs that use it
         K = self._rows(x)[0]
         self.rows = np.sort(scipy.linalg.qr(K.T, pivoting=True)[2][:self.rank])
         self.cols = np.sort(scipy.linalg.qr(K[self.rows], pivoting=True)[2][:self.rank])
-        self.scale = self._minor(x)
+        self.scale = self.minor(x)
 
     def __call__(self, t, x) -> float:
-        return self._minor(x) / self.scale
+        """The minor's determinant over its value where it was picked (1 there)."""
+        sign, logdet = self.minor(x)
+        if sign == 0:
+            return 0.0
+        return sign * self.scale[0] * float(np.exp(min(logdet - self.scale[1], 700.0)))
 
     def settle(self, t, x) -> bool:
         """The monitored minor changed sign by (t, x): if the constraints there are as

@@ -146,8 +146,7 @@ class NativeSolver(Solver):
         MINOR, at (t, x) before the crossing): the Python ``monitor`` takes that minor
         (``mon``'s picks, 1 at x), for the crossing to be located as its event."""
         monitor.rows, monitor.cols = mon.picks[0].copy(), mon.picks[1].copy()
-        monitor.scale = 1.0
-        monitor.scale = monitor(t, x)
+        monitor.scale = monitor.minor(x)
 
     @staticmethod
     def _watched(events, problem, mon: rank.Monitor):

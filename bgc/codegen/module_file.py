@@ -88,17 +88,27 @@ def _installed_top_level() -> frozenset:
     return frozenset(names)
 
 
-def module_name_problem(name) -> str | None:
-    """Why ``name`` cannot name a generated module (None if it can): it must be a Python
-    identifier, not a keyword, not a dunder such as ``__init__`` (which would overwrite
-    the output package's ``__init__.py``), and must not shadow a standard library module
-    or an installed package (``numpy.py`` beside other modules breaks their imports)."""
+def module_name_syntax_problem(name) -> str | None:
+    """Why ``name`` cannot be a module's name as Python reads it (None if it can): a
+    Python identifier, not a keyword, not a dunder such as ``__init__`` (which would
+    overwrite the output package's ``__init__.py``). Cheap: the warm path asks only this
+    of a module it finds fresh (which passed ``module_name_problem`` when written)."""
     if not (isinstance(name, str) and name.isascii() and name.isidentifier()):
         return f"{name!r} is not a valid Python module name"
     if keyword.iskeyword(name):
         return f"{name!r} is a Python keyword"
     if name.startswith("__") and name.endswith("__"):
         return f"{name!r} is a special (dunder) name"
+    return None
+
+
+def module_name_problem(name) -> str | None:
+    """Why ``name`` cannot name a generated module (None if it can): it must pass
+    ``module_name_syntax_problem`` and must not shadow a standard library module or an
+    installed package (``numpy.py`` beside other modules breaks their imports)."""
+    problem = module_name_syntax_problem(name)
+    if problem is not None:
+        return problem
     if name in _taken_names():
         what = "standard library module" if name in sys.stdlib_module_names \
             else "built-in module" if name in sys.builtin_module_names else "installed package"

@@ -142,9 +142,13 @@ def carry(n: int) -> Carry:
 # LU factors with partial pivoting from LAPACK's getrf, through the binding numba itself
 # uses for np.linalg (scipy's LAPACK, resolved by symbol name, so the loop is cacheable).
 # numba offers no factor/solve pair: inverting the Newton matrices instead cost 2.3x the
-# whole run on the SARIB (n = 152), where factorizations are most of the work.
-_GETRF_REAL = _LAPACK().numba_xxgetrf(types.float64)
-_GETRF_COMPLEX = _LAPACK().numba_xxgetrf(types.complex128)
+# whole run on the SARIB (n = 152), where factorizations are most of the work. The
+# binding is declared without instantiating numba's _LAPACK (which imports scipy.linalg,
+# 0.4 s): numba's helper finds scipy's getrf when it is first called, and a model of up to
+# SMALL_LU states never calls it (``_getrf_small``), so a small model's run imports no scipy.
+_GETRF_REAL = _LAPACK.numba_xxgetrf(types.float64)
+_GETRF_COMPLEX = _LAPACK.numba_xxgetrf(types.complex128)
+SMALL_LU = 16
 
 
 # (one function each: the two share the symbol numba_xxgetrf with different signatures,
@@ -152,13 +156,50 @@ _GETRF_COMPLEX = _LAPACK().numba_xxgetrf(types.complex128)
 @njit(cache=True)
 def _getrf_real(a, piv):
     n = a.shape[0]
+    if n <= SMALL_LU:
+        return _getrf_small(a, piv)
     return _GETRF_REAL(100, n, n, a.ctypes, n, piv.ctypes)
 
 
 @njit(cache=True)
 def _getrf_complex(a, piv):
     n = a.shape[0]
+    if n <= SMALL_LU:
+        return _getrf_small(a, piv)
     return _GETRF_COMPLEX(122, n, n, a.ctypes, n, piv.ctypes)
+
+
+@inner
+def _getrf_small(a, piv):
+    """getrf's LU with partial pivoting in getrf's own layout (``a`` holds the matrix
+    transposed, LAPACK's column-major order: A[r, c] is a[c, r]; ``piv`` 1-based), for
+    small matrices, where the call into LAPACK costs more than the work. The pivot is
+    the largest |re| + |im| in the column, as LAPACK's i?amax picks it. Returns getrf's
+    info: 0, or k + 1 where the k-th pivot is exactly zero."""
+    n = a.shape[0]
+    info = 0
+    for k in range(n):
+        p, big = k, abs(a[k, k].real) + abs(a[k, k].imag)
+        for r in range(k + 1, n):
+            v = abs(a[k, r].real) + abs(a[k, r].imag)
+            if v > big:
+                p, big = r, v
+        piv[k] = p + 1
+        if p != k:
+            for c in range(n):
+                a[c, k], a[c, p] = a[c, p], a[c, k]
+        if a[k, k] == 0:
+            if info == 0:
+                info = k + 1
+            continue
+        for r in range(k + 1, n):
+            a[k, r] /= a[k, k]
+        for c in range(k + 1, n):
+            akc = a[c, k]
+            if akc != 0:
+                for r in range(k + 1, n):
+                    a[c, r] -= a[k, r] * akc
+    return info
 
 
 @inner

@@ -39,7 +39,7 @@ test-all:
 # maps, compile cost; CSV + PNG + summary.md in bench/results (an hour or more; --quick:
 # minutes).
 bench: install
-	bgc bench --out bench/results
+	bgc bench --results bench/results
 
 # Regenerate the committed modules in generated/ (a test checks they are fresh).
 generated:

@@ -15,7 +15,7 @@ from bgc import methods, progress
 from bgc.codegen.module_file import (
     import_module,
     is_stale,
-    module_name_problem,
+    module_name_syntax_problem,
     module_path,
 )
 from bgc.fileio import check_writable
@@ -26,6 +26,42 @@ if TYPE_CHECKING:
     from bgc.codegen.equations import EquationSystem
     from bgc.graph.causality import CausalGraph
 
+
+
+@dataclass(frozen=True)
+class Declared:
+    """What a model declares, against which a command checks its options before any
+    work (``ensure_module``'s ``check``): its run-time parameters, outputs, settings and,
+    where the Model is loaded, everything else it says (its excitation). From the Model
+    right after load, before causality (``of_model``), or from a fresh module's metadata
+    (``of_module``: the warm path, no sympy)."""
+    name: str
+    file: str
+    params: tuple[str, ...]
+    outputs: tuple[str, ...]
+    settings: Settings
+    model: Model | None = None
+    module: object = None       # the fresh generated module (warm path), else None
+
+    @classmethod
+    def of_model(cls, model: Model, method: str) -> Declared:
+        """From the Model: its parameters and those the method adds (the module's
+        ``PARAM_NAMES`` once built; checked again there, before anything is written)."""
+        added = [n for n, _ in methods.get(method).parameters(model, [])]
+        return cls(model.name, model.file, tuple(model.parameters) + tuple(added),
+                   tuple(o.name for o in model.outputs), model.settings, model)
+
+    @classmethod
+    def of_system(cls, system: EquationSystem) -> Declared:
+        """From the equations: the module's parameters exactly, before it is written."""
+        m = system.model
+        return cls(m.name, m.file, tuple(n for _, n, _ in system.params),
+                   tuple(n for n, _ in system.outputs), m.settings, m)
+
+    @classmethod
+    def of_module(cls, module, file: str) -> Declared:
+        return cls(module.MODEL_NAME, str(file), tuple(module.PARAM_NAMES),
+                   tuple(module.OUTPUT_NAMES), Settings(**module.SETTINGS), module=module)
 
 
 @dataclass
@@ -87,21 +123,26 @@ def _fresh(doc, file: str, out_dir: str | Path, kind: str) -> Path | None:
     if not isinstance(doc, dict) or not document.plain_json(doc):
         return None
     name = doc.get("name", Path(file).stem)       # as load names it
-    if module_name_problem(name) is not None:
+    if module_name_syntax_problem(name) is not None:    # (the rest was checked when written)
         return None
     path = module_path(name, out_dir, kind)
     return None if is_stale(path, document.digest(doc), kind) else path
 
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
-                  method: str = "parasitic", **derive_options) -> tuple[Compiled, Path]:
+                  method: str = "parasitic", check=None,
+                  **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``, then compile its machine code, so that a
     later ``import`` or ``bgc simulate`` compiles nothing; nothing is written if a stage
-    before the module's fails."""
+    before the module's fails, if ``check`` refuses what the equations declare (a
+    command's options against the module's exact parameters) or if the model's own values
+    make its start non-finite (``codegen.start.check``)."""
     from bgc.codegen import emit
     check_writable(out_dir, "output directory", directory=True)   # before the work
     with progress.record() as timings:
         c = build(model, method, **derive_options)
+        if check is not None:
+            check(Declared.of_system(c.system))
         with progress.stage("emit") as st:
             path = emit.write(c.system, out_dir)
             st.done(f"{path.name}, {path.stat().st_size / 1e3:.0f} kB")
@@ -125,14 +166,16 @@ def machine_code(path: Path):
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                   method: str = "parasitic", open_loops: bool = True, on_load=None,
-                  need_model: bool = True):
+                  need_model: bool = True, check=None):
     """The generated module for a model, recompiled only if missing or stale (method zcp
     with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``); returns the
-    module, the Model and the Compiled (None if nothing was compiled). ``on_load`` is
-    called with the model's Settings as soon as they are known (e.g. to start other work
-    beside the build). ``need_model=False``: a fresh module is found from the YAML alone
-    (``_fresh``) and the Model comes back as None; the module's SETTINGS and MODEL_NAME
-    are the model's."""
+    module, the Model and the Compiled (None if nothing was compiled). ``check`` is
+    called with what the model declares (``Declared``) right after it is read, before
+    any causality, equations or compile: a command refuses its bad options there.
+    ``on_load`` is called with the model's Settings once they passed (e.g. to start
+    other work beside the build). ``need_model=False``: a fresh module is found from the
+    YAML alone (``_fresh``) and the Model comes back as None; the module's SETTINGS and
+    MODEL_NAME are the model's."""
     kind = methods.variant(method, open_loops)
     with progress.record() as timings:
         with progress.stage("load") as st:
@@ -144,15 +187,20 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                 model = _model(doc, str(model_path), st)
         if fresh is not None:
             module = import_module(fresh)
+            if check is not None:
+                check(Declared.of_module(module, model_path))
             if on_load is not None:
                 on_load(Settings(**module.SETTINGS))
             return module, None, None
+        if check is not None:
+            check(Declared.of_model(model, method))
         if on_load is not None:
             on_load(model.settings)
         path = module_path(model.name, out_dir, kind)
         compiled = None
         if is_stale(path, model.digest, kind):
-            compiled, path = compile_model(model, out_dir, method, open_loops=open_loops)
+            compiled, path = compile_model(model, out_dir, method, check=check,
+                                           open_loops=open_loops)
         module = import_module(path)
     if compiled is not None:
         compiled.timings = timings        # its load too

@@ -19,6 +19,7 @@ from threadpoolctl import threadpool_limits
 
 from bgc.errors import SimulationError
 from bgc.methods import consistent
+from bgc.model.model import SOLVERS as SOLVER_NAMES
 from bgc.solvers import native
 from bgc.solvers.base import (
     GUARD_TOLERANCE,
@@ -88,6 +89,7 @@ SOLVERS: dict[str, Solver] = {s.name: s for s in (
     SundialsSolver("ida", "ida", "SUNDIALS IDA (scikit-sundae): BDF on the residual, "
                                  "mass matrices (index-1 DAEs)"),
 )}
+assert tuple(SOLVERS) == SOLVER_NAMES, "bgc.model.model.SOLVERS lists the solvers here"
 
 
 _GUARD_HINT = ("XYZ Cardan angles cannot pass b = +-90 deg; choose the body's frame so that "
@@ -314,6 +316,7 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     stops it within a step and raises ``Interrupted`` (a SimulationError) likewise.
     """
     method = _method(solver, t_start, t_end)
+    check_result_size(int(points), len(module.STATE_NAMES) + len(module.OUTPUT_NAMES))
     mass, index2 = _mass_matrix(module, method, mass, check_index)
     budget = _budget(method, step, max_steps, t_start, t_end)
     p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
@@ -345,6 +348,24 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
                          _segments(t_start, t_end, module.BREAKPOINTS), stats, events, monitor)
         stats.wall_time = time.perf_counter() - wall
         return _result(module, method, problem, run, stats, projection, monitor, check_drift)
+
+
+# A run keeps every state and output at every output time: at most this many values (a
+# gigabyte), refused before anything is allocated (--points over a large model, a --t-end
+# that keeps the model's spacing over 1e308 s).
+MAX_RESULT_VALUES = 125_000_000
+
+
+def check_result_size(points: int, columns: int) -> None:
+    """Refuse a result of ``points`` output times x ``columns`` values over
+    ``MAX_RESULT_VALUES``, before any allocation."""
+    if points * max(columns, 1) > MAX_RESULT_VALUES:
+        raise SimulationError(
+            f"{points} output times x {columns} states and outputs is "
+            f"{points * columns:.3g} values, more than bgc's limit of "
+            f"{MAX_RESULT_VALUES:.3g} (1 GB); nothing was run",
+            hint="fewer output times (--points), a shorter --t-end, or --no-states "
+                 "with a scene that keeps only the outputs asked for")
 
 
 def _method(solver: str, t_start: float, t_end: float) -> Solver:

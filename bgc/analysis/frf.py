@@ -89,9 +89,31 @@ def linearize(module, model, direction: str, p=None, x0=None) -> Linearization:
     return Linearization(A, B, C, D, x, res, tuple(module.OUTPUT_NAMES), p0)
 
 
+# The grid H is computed on: 0.01 Hz, at most this many frequencies (a 2 kHz band; one
+# linear solve of the model's size each), refused before any allocation.
+STEP_HZ = 0.01
+MAX_FREQUENCIES = 200_001
+
+
+def check_band(f_min: float, f_max: float, key: str = "--f-max") -> None:
+    """A band [f_min, f_max] the grid can cover: 0 < f_min < f_max and at most
+    ``MAX_FREQUENCIES`` grid points."""
+    if not 0 < f_min < f_max:
+        raise BgcError(f"need 0 < --f-min < --f-max, got {f_min:g} and {f_max:g}",
+                       key="--f-min" if key == "--f-max" else key,
+                       hint="give the band's start first, e.g. --f-min 5 --f-max 25")
+    n = (f_max - f_min) / STEP_HZ + 1
+    if not n <= MAX_FREQUENCIES:
+        raise BgcError(f"the band {f_min:g}..{f_max:g} Hz is {n:.3g} frequencies at "
+                       f"{STEP_HZ} Hz, more than bgc's limit of {MAX_FREQUENCIES}", key=key,
+                       hint=f"narrow the band to at most "
+                            f"{(MAX_FREQUENCIES - 1) * STEP_HZ:g} Hz")
+
+
 def sweep(lin: Linearization, output: str, f_min: float, f_max: float,
-          step: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+          step: float = STEP_HZ) -> tuple[np.ndarray, np.ndarray]:
     """The frequencies of a ``step`` grid over [f_min, f_max] and H there."""
+    check_band(f_min, f_max)
     f = np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
     return f, lin.response(f, output)
 

@@ -8,14 +8,17 @@ import json
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import POSITIVE, json_option
+from bgc.cli.options import POSITIVE, json_option, retired_option
 from bgc.errors import BgcError
 from bgc.fileio import check_writable
 
 
 @main.command()
-@click.option("--out", default="bench/results", show_default=True,
-              type=click.Path(file_okay=False), help="where CSV, PNG and summary.md go")
+@click.option("--results", "out", default="bench/results", show_default=True,
+              type=click.Path(file_okay=False),
+              help="the directory CSV, PNG and summary.md go to")
+@retired_option("--out", "--results DIR for the directory of the benchmarks' files (--out "
+                         "names one output file in bgc's commands)")
 @click.option("--part", "parts", multiple=True,
               type=click.Choice(["peers", "precision", "stiffness", "stability", "compile",
                                  "symmetry", "scenes"]),
@@ -33,11 +36,11 @@ from bgc.fileio import check_writable
 @user_errors
 def bench(out, parts, quick, repeats, budget, build, as_json):
     """Measure speed against accuracy: peers, work-precision, parasitic stiffness,
-    stability maps, compile cost (CSV + PNG + summary.md in --out)."""
+    stability maps, compile cost (CSV + PNG + summary.md in --results)."""
     from bgc import bench as bbench
     if repeats < 1:
         raise BgcError(f"--repeats must be >= 1, got {repeats}", key="--repeats")
-    check_writable(out, "--out", directory=True)
+    check_writable(out, "--results", directory=True)
     report = bbench.run(out, parts or bbench.PARTS, quick, repeats, budget,
                         log=lambda m: click.echo(m, err=True), build=build)
     if as_json:

@@ -10,7 +10,14 @@ import json
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import json_option, loops_option, method_option, progress_option
+from bgc.cli.options import (
+    check_method_options,
+    check_out_dir,
+    json_option,
+    loops_option,
+    method_option,
+    progress_option,
+)
 from bgc.cli.stages import STAGES
 from bgc.errors import BgcError
 from bgc.pipeline import build
@@ -34,6 +41,8 @@ def check(model, stage, out_dir, method, keep_loops, as_json):
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
     Given a scene file: the state count before and after each reduction pass."""
     from bgc.scene import scenes as bscene
+    check_method_options(method, keep_loops)
+    check_out_dir(out_dir)
     if bscene.is_scene(model):
         if stage is not None:
             raise BgcError(f"--stage applies to a model file, not the scene {model}",

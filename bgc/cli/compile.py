@@ -9,15 +9,22 @@ import time
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import json_option, loops_option, method_option, progress_option
+from bgc.cli.options import (
+    check_method_options,
+    check_out_dir,
+    json_option,
+    loops_option,
+    method_option,
+    out_dir_option,
+    progress_option,
+)
 from bgc.codegen.module_file import stored_hash
 from bgc.pipeline import compile_model
 
 
 @main.command("compile")
 @click.argument("model", type=click.Path())
-@click.option("-o", "--out-dir", default="generated", show_default=True,
-              help="directory for <model>.py")
+@out_dir_option
 @method_option
 @loops_option
 @json_option
@@ -25,6 +32,8 @@ from bgc.pipeline import compile_model
 @progress_option
 def compile_cmd(model, out_dir, method, keep_loops, as_json):
     """Generate the numba simulation module for MODEL."""
+    check_method_options(method, keep_loops)
+    check_out_dir(out_dir)
     t0 = time.perf_counter()
     c, path = compile_model(model, out_dir, method, open_loops=not keep_loops)
     total = time.perf_counter() - t0

@@ -1,4 +1,4 @@
-"""``bgc draw MODEL -o FILE``: the model's bond graph as the causality stage assigned it, in
+"""``bgc draw MODEL --out FILE``: the model's bond graph as the causality stage assigned it, in
 standard notation (``bgc.draw``), to an SVG, PNG or PDF file chosen by its suffix."""
 
 from __future__ import annotations
@@ -8,13 +8,21 @@ import time
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import loops_option, method_option, progress_option
+from bgc.cli.options import (
+    check_method_options,
+    loops_option,
+    method_option,
+    progress_option,
+    retired_option,
+)
 
 
 @main.command()
 @click.argument("model", type=click.Path())
-@click.option("-o", "--out", required=True, metavar="FILE",
+@click.option("--out", required=True, metavar="FILE",
               help="the drawing: .svg, .png or .pdf")
+@retired_option("-o", "--out FILE for the drawing (-o names the directory of generated "
+                      "modules, which bgc draw does not write)")
 @click.option("--only", metavar="NAME[,NAME...]",
               help="draw some groups: a body (with its joints), a joint, 'network' (the "
                    "model's own elements) or a pattern such as 'beater_*'; the SARIB's leg "
@@ -32,6 +40,7 @@ def draw(model, out, only, method, keep_loops):
     from bgc import progress
     from bgc.draw import diagram, layout, render
     from bgc.fileio import check_writable
+    check_method_options(method, keep_loops)
     render.image_format(out)
     check_writable(out, "drawing")
     d, conflict = diagram.of_model(model, method, only, open_loops=not keep_loops)

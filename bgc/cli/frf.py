@@ -12,15 +12,21 @@ from bgc import progress
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import (
     POSITIVE,
+    check_direction,
+    check_method_options,
+    check_out_dir,
+    check_output,
     check_overrides,
+    check_params,
     json_option,
+    loops_option,
     method_option,
     out_dir_option,
+    parasitic_option,
     params_option,
     parse_params,
     progress_option,
 )
-from bgc.errors import BgcError
 from bgc.fileio import check_writable
 from bgc.pipeline import ensure_module
 
@@ -37,28 +43,30 @@ from bgc.pipeline import ensure_module
 @params_option("override a parameter (no recompilation)")
 @out_dir_option
 @method_option
-@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
-              default="given", show_default=True,
-              help="method parasitic: the joints' stiffness as the model gives it, or chosen "
-                   "by bgc.methods.parasitic.auto (as bgc simulate --parasitic auto)")
+@parasitic_option
+@loops_option
 @json_option
 @user_errors
 @progress_option
 def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, parasitic_mode,
-        as_json):
+        keep_loops, as_json):
     """Frequency response of an output to an excitation direction, linearized about the
     static equilibrium; its anti-resonances and resonances in the band."""
-    # eleven parameters, one per option as click passes them, each read once below: a
+    # twelve parameters, one per option as click passes them, each read once below: a
     # settings object would only rename them (simulate's 22 have one, SimulateOptions)
     from bgc.analysis import frf as bfrf
-    if not 0 < f_min < f_max:
-        raise BgcError(f"need 0 < --f-min < --f-max, got {f_min} and {f_max}", key="--f-min")
+    bfrf.check_band(f_min, f_max)
+    check_method_options(method, keep_loops, parasitic_mode)
+    check_out_dir(out_dir)
     check_writable(out, "--out")
-    module, m, _ = ensure_module(model, out_dir, method)
-    if output not in module.OUTPUT_NAMES:
-        raise BgcError(f"unknown output '{output}'", key="--output",
-                       hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
-    check_overrides(model, params)
+
+    def check(decl):            # against the model, before any compile
+        check_output(decl, output)
+        check_direction(decl, direction, "--input")
+        check_params(decl, params)
+        check_overrides(model, params, decl.model)
+    module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
+                                 check=check)
     p, choice = _parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
         lin = bfrf.linearize(module, m, direction, p)
@@ -95,10 +103,6 @@ def _parameters(module, model, method, params, mode):
     p = parse_params(module, params)
     if mode != "auto":
         return p, None
-    from bgc import methods
     from bgc.methods import parasitic
-    if methods.get(method).ideal:
-        raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
-                       key="--parasitic", hint="drop --parasitic or use --method parasitic")
     p, choice = parasitic.auto(module, model, module.initial_state(p), p)
     return parse_params(module, params, base=p), choice

@@ -4,15 +4,18 @@ parameter overrides, checked before any work."""
 
 from __future__ import annotations
 
+import difflib
 import functools
 import math
+from pathlib import Path
 
 import click
 import numpy as np
 
 from bgc import methods, progress
 from bgc.errors import BgcError
-from bgc.model.model import MAX_POINTS
+from bgc.fileio import check_writable
+from bgc.model.model import FIXED_STEP_SOLVERS, MAX_POINTS, SOLVERS
 
 json_option = click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def excitation_options(context: str = ""):
@@ -39,6 +42,11 @@ out_dir_option = click.option("-o", "--out-dir", default="generated", show_defau
                               help="where the generated module is kept")
 method_option = click.option("--method", type=click.Choice(methods.NAMES), default=methods.DEFAULT,
                              show_default=True, help="how constraint elements are handled")
+parasitic_option = click.option(
+    "--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]), default="given",
+    show_default=True, help="method parasitic: the joints' stiffness and damping as the "
+                            "model gives them, or chosen from the eigenfrequencies "
+                            "(bgc.methods.parasitic.auto)")
 loops_option = click.option("--keep-loops", is_flag=True,
                             help="method zcp: keep kinematic loops (class-4 ZCPs) closed, an "
                                  "index-2 DAE that --solver native integrates, instead of "
@@ -114,10 +122,26 @@ def parse_params(module, items, base=None) -> np.ndarray:
     return p
 
 
-def check_overrides(model, items) -> None:
+def check_params(decl, items, key: str = "--param") -> None:
+    """Refuse ``-p`` names the model does not declare (``pipeline.Declared``), naming the
+    valid ones (the model's own first, then those bgc adds: joints' values, methods')."""
+    for name, _ in items:
+        if name not in decl.params:
+            own = [n for n in decl.params if "__" not in n]
+            added = [n for n in decl.params if "__" in n]
+            near = difflib.get_close_matches(name, decl.params, 3)
+            raise BgcError(f"unknown parameter '{name}' of model {decl.name}", key=key,
+                           hint=(f"did you mean {' or '.join(near)}? " if near else "")
+                           + "parameters: " + (", ".join(own) or "none")
+                           + (f"; and {len(added)} that bgc adds, e.g. "
+                              f"{', '.join(added[:3])}" if added else ""))
+
+
+def check_overrides(model, items, loaded=None) -> None:
     """Refuse ``-p`` values that the model's own checks refuse (a capacitance, inertance
     or mass not > 0, a constant that becomes infinite or complex): the model is read
-    again with them, and its error is told as the option's."""
+    again with them, and its error is told as the option's. ``loaded``: the Model if it
+    is read already (nothing to do without overrides either way)."""
     if not items:
         return
     from bgc.model import load
@@ -128,3 +152,102 @@ def check_overrides(model, items) -> None:
         where = f" ({exc.key} at {exc.loc})" if exc.loc else ""
         raise BgcError(f"{given}: {exc.message}{where}", key="--param",
                        hint=exc.hint) from None
+
+
+def check_solver(name: str, step, key: str = "--solver") -> None:
+    """A solver name bgc has, and a fixed-step one given its ``--step``; before any
+    work (``key``: the option, or the model setting, that named it)."""
+    if name not in SOLVERS:
+        raise BgcError(f"unknown solver '{name}'", key=key,
+                       hint="valid solvers: " + ", ".join(SOLVERS))
+    if name in FIXED_STEP_SOLVERS and step is None:
+        given = "" if key == "--solver" else f" (the model's {key})"
+        raise BgcError(f"solver {name}{given} takes a fixed step: give --step H (s)",
+                       key=key if key == "--solver" else "--step",
+                       hint=f"e.g. --solver {name} --step 1e-4, or an adaptive solver "
+                            "(--solver native)")
+
+
+def check_method_options(method: str, keep_loops: bool = False, parasitic: str = "given",
+                         separation: float | None = None) -> None:
+    """Options that apply to some constraint methods only: ``--keep-loops`` (those that
+    can keep loops closed), ``--parasitic auto`` and ``--separation`` (parasitic, which
+    has compliant joints); refused with the method that would take them."""
+    from bgc import methods
+    if keep_loops and method not in methods.CLOSES_LOOPS:
+        raise BgcError(f"--keep-loops applies to --method {' or '.join(methods.CLOSES_LOOPS)}"
+                       f", not {method}", key="--keep-loops",
+                       hint="drop --keep-loops, or use --method zcp")
+    if parasitic == "auto" and method != "parasitic":
+        raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
+                       key="--parasitic", hint="drop --parasitic or use --method parasitic")
+    if separation is not None and not separation > 1:
+        raise BgcError(f"--separation must be > 1, got {separation:g}", key="--separation",
+                       hint="parasitic frequencies this many times the highest functional "
+                            "one, e.g. 100")
+
+
+def check_window(window, key: str, what: str = "T0 T1") -> None:
+    """A window or range given as two numbers: its start before its end."""
+    lo, hi = window
+    if not lo < hi:
+        raise BgcError(f"{key} {lo:g} {hi:g}: the start must be before the end",
+                       key=key, hint=f"give {what} with the smaller first, e.g. "
+                                     f"{key} {min(lo, hi):g} {max(lo, hi):g}"
+                       if lo != hi else f"give {what} with the smaller first")
+
+
+# suffixes of the files bgc writes: a directory option given one of these is a mistake
+# (``-o sine.csv`` meant ``--out sine.csv``)
+FILE_SUFFIXES = (".csv", ".png", ".svg", ".pdf", ".json", ".html", ".parquet", ".fmu",
+                 ".txt", ".yaml", ".yml", ".py")
+
+
+def check_out_dir(path, key: str = "-o/--out-dir") -> None:
+    """``-o`` is the directory of the generated modules in every command: a path that
+    names one of the files bgc writes is refused, saying which option names that file."""
+    if path is None:
+        return
+    suffix = Path(str(path)).suffix.lower()
+    if suffix in FILE_SUFFIXES and not Path(path).is_dir():
+        what = {".png": "--plot (or --out for bgc draw)", ".svg": "--out",
+                ".pdf": "--out"}.get(suffix, "--out")
+        raise BgcError(f"'{path}' looks like a file, but -o names the directory where the "
+                       f"generated module is kept", key="-o",
+                       hint=f"name the output file with {what} {path}; -o DIR (default: "
+                            f"generated)")
+    check_writable(path, "output directory", directory=True)
+
+
+def check_output(decl, name: str, key: str = "--output") -> None:
+    """An output the model declares."""
+    if name not in decl.outputs:
+        near = difflib.get_close_matches(name, decl.outputs, 3)
+        raise BgcError(f"unknown output '{name}' of model {decl.name}", key=key,
+                       hint=(f"did you mean {' or '.join(near)}? " if near else "")
+                       + ("outputs: " + ", ".join(decl.outputs) if decl.outputs else
+                          "the model declares no outputs: add an 'outputs:' section"))
+
+
+def check_direction(decl, name: str, key: str = "--direction") -> None:
+    """An excitation direction the model declares (its Model is loaded)."""
+    exc = decl.model.excitation if decl.model is not None else None
+    if exc is None:
+        raise BgcError(f"{decl.file} has no 'excitation' section", key=key,
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    if name not in exc.directions:
+        raise BgcError(f"unknown excitation direction '{name}'", key=key,
+                       hint="valid directions: " + ", ".join(exc.directions))
+
+
+def retired_option(flag: str, instead: str, nargs: int = 1):
+    """A hidden option an earlier bgc took: given, it is refused with one line saying
+    what to write instead (scripts learn of the change; nothing runs)."""
+    def refuse(ctx, param, value):
+        if value not in (None, (), False):
+            raise click.BadParameter(f"{flag} is no longer an option of 'bgc "
+                                     f"{ctx.info_name}': write {instead}", ctx, param)
+        return None
+    return click.option(flag, f"_retired_{flag.strip('-').replace('-', '_')}", hidden=True,
+                        multiple=nargs == 1, expose_value=False, callback=refuse,
+                        is_eager=True)

@@ -8,17 +8,27 @@ import json
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import json_option, params_option, progress_option
+from bgc.cli.options import (
+    check_out_dir,
+    json_option,
+    params_option,
+    progress_option,
+    retired_option,
+)
 from bgc.errors import BgcError
 from bgc.fileio import check_writable
 
 
 @main.command("run")
 @click.argument("scene", type=click.Path())
-@click.option("--out", "out_dir", default="results/scenes", show_default=True,
-              type=click.Path(file_okay=False), help="where the CSV, PNG and JSON go")
-@click.option("-o", "--gen-dir", default="generated/scenes", show_default=True,
-              help="where the scene's reduced module goes")
+@click.option("--results", "out_dir", default="results/scenes", show_default=True,
+              type=click.Path(file_okay=False),
+              help="the directory the CSV, PNG and JSON summary go to")
+@click.option("-o", "--out-dir", "gen_dir", default="generated/scenes", show_default=True,
+              help="where the scene's reduced module is kept")
+@retired_option("--out", "--results DIR for the directory of the scene's files (--out "
+                         "names one output file in bgc's commands)")
+@retired_option("--gen-dir", "-o/--out-dir DIR")
 @params_option("set a parameter the scene exposes (repeatable)")
 @json_option
 @user_errors
@@ -37,8 +47,8 @@ def run_cmd(scene, out_dir, gen_dir, params, as_json):
                            key="-p", hint="exposed: " + (", ".join(sc.expose) or "none; "
                                                        "add it to the scene's expose list"))
         values[name] = value
-    check_writable(out_dir, "--out", directory=True)
-    check_writable(gen_dir, "-o", directory=True)
+    check_writable(out_dir, "--results", directory=True)
+    check_out_dir(gen_dir)
     summary = bscene.run_scene(sc, out_dir, gen_dir, values)
     if as_json:
         click.echo(json.dumps(summary, indent=2, default=str))

@@ -10,6 +10,7 @@ loader is imported only where it is used: on a fresh module the warm path import
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import dataclass, field, fields, replace
@@ -25,7 +26,12 @@ from bgc.cli.options import (
     NUMBER,
     POINTS,
     POSITIVE,
+    check_method_options,
+    check_out_dir,
     check_overrides,
+    check_params,
+    check_solver,
+    check_window,
     excitation_options,
     json_option,
     loops_option,
@@ -38,7 +44,8 @@ from bgc.cli.options import (
 from bgc.errors import BgcError
 from bgc.fileio import check_writable
 from bgc.methods.parasitic import SEPARATION
-from bgc.model.model import MAX_POINTS, Settings
+from bgc.model.limits import MAX_PLANNED_STEPS
+from bgc.model.model import FIXED_STEP_SOLVERS, MAX_POINTS, Settings
 from bgc.pipeline import ensure_module
 from bgc.simulate import SOLVERS
 
@@ -109,7 +116,8 @@ def output_points(st: Settings, t_end: float | None) -> int:
     output times, not 28001 within 10 ms."""
     if t_end is None or t_end == st.t_end or not st.t_end > 0:
         return st.points
-    return min(max(round((st.points - 1) * t_end / st.t_end) + 1, 2), MAX_POINTS)
+    n = (st.points - 1) * (t_end / st.t_end) + 1       # a float: --t-end 1e308 is inf
+    return MAX_POINTS if not n < MAX_POINTS else max(round(n), 2)   # (refused before)
 
 
 @main.command()
@@ -160,7 +168,7 @@ def simulate(**options):
     """
     o = resolve(options, click.get_current_context())
     _check_options(o)
-    run = _prepare(o)
+    run = _prepare(o, functools.partial(_check_declared, o))
     _choose_parameters(o, run)
     _integrate(o, run)
     _write_files(o, run)
@@ -185,10 +193,33 @@ def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
 
 
 def _check_options(o: SimulateOptions) -> None:
-    """What can be refused before any work: the solver's name, the output paths."""
-    if o.solver is not None and o.solver not in SOLVERS:
-        raise BgcError(f"unknown solver '{o.solver}'", key="--solver",
-                       hint="valid solvers: " + ", ".join(SOLVERS))
+    """What can be refused before the model is read: names, combinations and ranges of
+    the options themselves, the output paths."""
+    if o.solver is not None:
+        check_solver(o.solver, o.step, "--solver")
+    check_method_options(o.method, o.keep_loops, o.parasitic_mode, o.separation)
+    if o.step is not None and (o.solver or "") not in FIXED_STEP_SOLVERS and o.solver:
+        raise BgcError(f"--step applies to the fixed-step solvers "
+                       f"({', '.join(FIXED_STEP_SOLVERS)}), not {o.solver}", key="--step",
+                       hint="drop --step (an adaptive solver chooses its steps; --rtol and "
+                            "--atol set its accuracy) or use --solver rk4")
+    if (o.amplitude is not None or o.frequency is not None) and not (o.exc_kind or
+                                                                      o.exc_dir):
+        raise BgcError(f"{'--amplitude' if o.amplitude is not None else '--frequency'} "
+                       f"needs --excitation KIND --direction NAME",
+                       key="--amplitude" if o.amplitude is not None else "--frequency",
+                       hint="it sets the chosen excitation's; add e.g. --excitation sine "
+                            "--direction pumping")
+    if (o.exc_kind is None) != (o.exc_dir is None):
+        raise BgcError("--excitation and --direction go together",
+                       key="--excitation" if o.exc_kind is None else "--direction",
+                       hint="give both, e.g. --excitation chirp --direction pumping")
+    if o.zoom is not None:
+        check_window(o.zoom, "--zoom")
+        if not o.plot:
+            raise BgcError("--zoom draws a window of --plot's picture", key="--zoom",
+                           hint="add --plot FILE.png")
+    check_out_dir(o.out_dir)
     check_writable(o.out, "--out")       # before the run: a bad path fails at once
     check_writable(o.plot, "--plot")
     if o.plot:
@@ -196,10 +227,51 @@ def _check_options(o: SimulateOptions) -> None:
         plot_format(o.plot, "--plot")
 
 
-def _prepare(o: SimulateOptions) -> _Run:
+def _check_declared(o: SimulateOptions, decl) -> None:
+    """What is refused against what the model declares (``pipeline.Declared``), right
+    after it is read and before any compile: ``-p`` names and values, the excitation,
+    the model's solver and what it needs, the output times."""
+    check_params(decl, o.params)
+    check_overrides(decl.file, o.params, decl.model)
+    if o.exc_kind is not None and decl.model is not None:
+        exc = decl.model.excitation
+        if exc is None:
+            raise BgcError(f"{decl.file} has no 'excitation' section", key="--excitation",
+                           hint="declare excitation: {directions: ..., kinds: ...} in the "
+                                "model, or drop --excitation and --direction")
+        exc.select(o.exc_kind, o.exc_dir, o.amplitude, o.frequency)
+    check_solver(o.solver or decl.settings.solver, o.step,
+                 "--solver" if o.solver else "simulation.solver")
+    t_end = o.t_end or decl.settings.t_end
+    st = decl.settings
+    if decl.module is not None and o.exc_kind is None:   # the module's own signals' plan
+        _check_plan(decl.module, parse_params(decl.module, o.params), t_end, o.step,
+                    "--param" if o.params else "--t-end")
+    if o.points is None and o.t_end is not None and st.t_end > 0:
+        n = (st.points - 1) * (o.t_end / st.t_end) + 1
+        if not n <= MAX_POINTS:
+            raise BgcError(f"--t-end {o.t_end:g} s at the model's output spacing "
+                           f"({st.t_end / (st.points - 1):.3g} s) is {n:.3g} output times, "
+                           f"more than bgc's limit of {MAX_POINTS:.0e}", key="--t-end",
+                           hint="give the number of output times with --points N")
+    if o.frequency is not None:
+        from bgc.model.limits import too_fast
+        why = too_fast(o.frequency, t_end)
+        if why:
+            raise BgcError(f"--frequency {o.frequency:g} Hz: {why}", key="--frequency",
+                           hint="a lower --frequency or a shorter --t-end")
+    if o.step is not None and t_end / o.step > MAX_PLANNED_STEPS:
+        raise BgcError(f"--t-end {t_end:g} s in steps of {o.step:g} s is "
+                       f"{t_end / o.step:.3g} steps, more than bgc's limit of "
+                       f"{MAX_PLANNED_STEPS:.0e}", key="--step",
+                       hint="a larger --step or a shorter --t-end")
+
+
+def _prepare(o: SimulateOptions, check) -> _Run:
     """The model's generated module, rebuilt only if stale; the Model only for what reads
     it (an excitation, --parasitic auto): else a fresh module is found from the model
-    file's YAML, without sympy (``pipeline.ensure_module``)."""
+    file's YAML, without sympy (``pipeline.ensure_module``). ``check`` refuses bad options
+    against what the model declares before any of it is compiled."""
     from bgc.simulate import precompile_loop
 
     def loop_beside(settings):          # the native loop compiles beside the model's build
@@ -209,7 +281,7 @@ def _prepare(o: SimulateOptions) -> _Run:
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
                                             open_loops=not o.keep_loops, on_load=loop_beside,
-                                            need_model=need_model)
+                                            need_model=need_model, check=check)
     st = Settings(**module.SETTINGS)        # the model's, as the module was written
     return _Run(module, m, compiled, stages, st)
 
@@ -218,21 +290,12 @@ def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
     """The parameter array: the module's defaults, the excitation's, --parasitic auto's,
     then the explicit ``-p`` values, which always win; the step plan checked."""
     module = run.module
-    check_overrides(o.model, o.params)
     run.p = parse_params(module, o.params)
     run.excitation = set_excitation(module, run.model, run.p, o)
     if run.excitation:
         run.p = parse_params(module, o.params, base=run.p)
     if o.parasitic_mode == "auto":
-        from bgc import methods
         from bgc.methods import parasitic
-        if methods.get(o.method).ideal:     # auto chooses a compliant joint's values
-            raise BgcError(f"--parasitic auto applies to --method parasitic, not {o.method}",
-                           key="--parasitic", hint="drop --parasitic or use --method "
-                                                    "parasitic")
-        if not o.separation > 1:
-            raise BgcError(f"--separation must be > 1, got {o.separation}",
-                           key="--separation")
         run.p, run.parasitic = parasitic.auto(module, run.model, module.initial_state(run.p),
                                               run.p, o.separation)
         run.p = parse_params(module, o.params, base=run.p)
@@ -241,14 +304,10 @@ def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
 
 
 def _check_plan(module, p, t_end, step, key):
-    """Refuse a run whose step plan alone exceeds ``limits.MAX_PLANNED_STEPS``: a fixed
-    ``--step`` or the fastest input signal's period (``max_step``) over ``t_end``;
+    """Refuse a run whose step plan exceeds ``limits.MAX_PLANNED_STEPS``: the fastest
+    input signal's period (``max_step``, at the run's parameter values) over ``t_end``;
     ``key``: the option the error names when the signal is too fast."""
-    from bgc.model.limits import MAX_PLANNED_STEPS, STEPS_PER_PERIOD, too_fast
-    if step is not None and t_end / step > MAX_PLANNED_STEPS:
-        raise BgcError(f"--t-end {t_end:g} s in steps of {step:g} s is {t_end / step:.3g} "
-                       f"steps, more than bgc's limit of {MAX_PLANNED_STEPS:.0e}",
-                       key="--step", hint="a larger --step or a shorter --t-end")
+    from bgc.model.limits import STEPS_PER_PERIOD, too_fast
     h = float(module.max_step(p)) if hasattr(module, "max_step") else math.inf
     why = too_fast(1.0 / (STEPS_PER_PERIOD * h), t_end) if h > 0 else "no step is possible"
     if why:
@@ -261,9 +320,6 @@ def set_excitation(module, m, p, o: SimulateOptions) -> dict | None:
     """Set the parameters of the excitation the options choose (in place); what was chosen."""
     kind, direction = o.exc_kind, o.exc_dir
     if kind is None and direction is None:
-        for opt, val in (("--amplitude", o.amplitude), ("--frequency", o.frequency)):
-            if val is not None:
-                raise BgcError(f"{opt} needs --excitation KIND --direction NAME", key=opt)
         return None
     exc = m.excitation
     if exc is None:

@@ -17,11 +17,18 @@ from bgc.cli.app import main, user_errors
 from bgc.cli.options import (
     NUMBER,
     POSITIVE,
+    check_direction,
+    check_method_options,
+    check_out_dir,
+    check_output,
     check_overrides,
+    check_params,
     excitation_options,
     json_option,
+    loops_option,
     method_option,
     out_dir_option,
+    parasitic_option,
     parse_params,
     progress_option,
 )
@@ -61,6 +68,8 @@ from bgc.fileio import check_writable
               help="PNG stem: <stem>_<metric>.png per metric, against each parameter")
 @out_dir_option
 @method_option
+@parasitic_option
+@loops_option
 @json_option
 @user_errors
 @progress_option
@@ -85,9 +94,15 @@ def sweep(**o):
     if o.workers is not None and o.scheduler is not None:
         raise BgcError("--workers sets the local cluster's size, not --scheduler's",
                        key="--workers", hint="start as many workers on the scheduler")
-    if frfs and not 0 < o.f_min < o.f_max:
-        raise BgcError(f"need 0 < --f-min < --f-max, got {o.f_min} and {o.f_max}",
-                       key="--f-min")
+    if frfs:
+        from bgc.analysis.frf import check_band
+        check_band(o.f_min, o.f_max)
+    if (o.exc_kind is None) != (o.exc_dir is None):
+        raise BgcError("--excitation and --direction go together",
+                       key="--excitation" if o.exc_kind is None else "--direction",
+                       hint="give both, e.g. --excitation chirp --direction pumping")
+    check_method_options(o.method, o.keep_loops, o.parasitic_mode)
+    check_out_dir(o.out_dir)
     check_writable(o.out, "--out")
     check_writable(o.plot, "--plot")
     if o.plot:
@@ -142,27 +157,36 @@ def _job(o, axes, fixed, frfs, windows):
     def loop_beside(settings):          # the native loop compiles beside the model's build
         if windows:
             precompile_loop(settings.solver)
-    module, model, _ = ensure_module(o.model, o.out_dir, o.method, on_load=loop_beside)
+    def check(decl):            # against the model, before any compile
+        check_params(decl, [(a.name, a.start) for a in axes] + list(fixed))
+        for m, key in [(m, "--frf") for m in frfs] + [(m, "--metric") for m in windows]:
+            try:
+                check_output(decl, m.output, key)
+            except BgcError as exc:
+                raise BgcError(f"{m.label}: {exc.message}", key=key, hint=exc.hint) from None
+        for m in frfs:
+            try:
+                check_direction(decl, m.direction, "--frf")
+            except BgcError as exc:
+                raise BgcError(f"{m.label}: {exc.message}", key="--frf",
+                               hint=exc.hint) from None
+        if o.exc_kind is not None:
+            check_direction(decl, o.exc_dir, "--direction")
+            decl.model.excitation.select(o.exc_kind, o.exc_dir, o.amplitude, o.frequency)
+        for ends in ([a.start for a in axes], [a.stop for a in axes]):
+            check_overrides(o.model, fixed + tuple(zip([a.name for a in axes], ends)),
+                            decl.model)
+    module, model, _ = ensure_module(o.model, o.out_dir, o.method,
+                                     open_loops=not o.keep_loops, on_load=loop_beside,
+                                     check=check)
     names = list(module.PARAM_NAMES)
-    for a in axes:
-        if a.name not in names:
-            raise BgcError(f"unknown parameter '{a.name}'", key="--param",
-                           hint="parameters: " + ", ".join(names))
-    for m, key in [(m, "--frf") for m in frfs] + [(m, "--metric") for m in windows]:
-        if m.output not in module.OUTPUT_NAMES:
-            raise BgcError(f"{m.label}: unknown output '{m.output}'", key=key,
-                           hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
-    exc = model.excitation
-    for m in frfs:
-        if exc is None or m.direction not in exc.directions:
-            raise BgcError(f"{m.label}: '{m.direction}' is not an excitation direction of "
-                           f"{model.file}", key="--frf", hint="directions: " + (
-                               ", ".join(exc.directions) if exc else "none (no excitation:)"))
     p = parse_params(module, fixed)
     if set_excitation(module, model, p, o):
         p = parse_params(module, fixed, base=p)     # the fixed -p values win
-    for ends in ([a.start for a in axes], [a.stop for a in axes]):
-        check_overrides(o.model, fixed + tuple(zip([a.name for a in axes], ends)))
+    if o.parasitic_mode == "auto":     # the joints' values chosen once, at the base point
+        from bgc.methods import parasitic
+        p, _ = parasitic.auto(module, model, module.initial_state(p), p)
+        p = parse_params(module, fixed, base=p)
     st = Settings(**module.SETTINGS)
     run = None
     if windows:

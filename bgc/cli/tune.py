@@ -12,13 +12,21 @@ from bgc.cli.app import main, user_errors
 from bgc.cli.options import (
     NUMBER,
     POSITIVE,
+    check_direction,
+    check_method_options,
+    check_out_dir,
+    check_output,
     check_overrides,
+    check_params,
     json_option,
+    loops_option,
     method_option,
     out_dir_option,
     param_items,
+    parasitic_option,
     parse_params,
     progress_option,
+    retired_option,
 )
 from bgc.errors import BgcError
 from bgc.pipeline import ensure_module
@@ -41,11 +49,22 @@ def bracket_option(ctx, param, value):
     return lo, hi
 
 
+def tune_params(ctx, param, items):
+    """``-p NAME=VALUE`` as everywhere; a bare ``--param NAME`` is the form that named the
+    tuned parameter before ``--tune``, told so."""
+    for item in items:
+        if "=" not in item:
+            raise click.BadParameter(f"'{item}' is not NAME=VALUE: -p/--param sets a "
+                                     f"parameter in every command; the parameter to tune "
+                                     f"is --tune {item}", ctx, param)
+    return param_items(ctx, param, items)
+
+
 @main.command()
 @click.argument("model", type=click.Path())
 @click.option("--target-frequency", "target", type=POSITIVE, required=True, metavar="F",
               help="where the anti-resonance must sit [Hz]")
-@click.option("--param", "name", required=True, metavar="NAME",
+@click.option("--tune", "name", required=True, metavar="NAME",
               help="the parameter tuned (a module parameter: no recompilation)")
 @click.option("--input", "direction", required=True, metavar="NAME",
               help="the excitation direction driven (e.g. pumping, roll, pitch)")
@@ -55,36 +74,55 @@ def bracket_option(ctx, param, value):
 @click.option("--f-min", type=POSITIVE, help="the band where the anti-resonance nearest F "
               "is picked at the start [Hz] (default: F/2)")
 @click.option("--f-max", type=POSITIVE, help="... and its end (default: 2 F)")
-@click.option("--set", "params", multiple=True, metavar="NAME=VALUE", callback=param_items,
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE",
+              callback=tune_params,
               help="override a parameter (the tuned one: its start value)")
+@retired_option("--set", "-p NAME=VALUE")
 @out_dir_option
 @method_option
+@parasitic_option
+@loops_option
 @json_option
 @user_errors
 @progress_option
 def tune(model, target, name, direction, output, bracket, f_min, f_max, params, out_dir,
-         method, as_json):
+         method, parasitic_mode, keep_loops, as_json):
     """Tune a parameter so that the anti-resonance of an output, for an excitation
     direction, sits on a target frequency: root finding on the linearization about the
     static equilibrium. Reports the value and the sensitivity dF/dparam there."""
     # one value per option as click passes them, each read once below
+    from bgc.analysis import frf as bfrf
     from bgc.analysis import tune as btune
     band = (f_min or target / 2, f_max or 2 * target)
     if not band[0] < target < band[1]:
         raise BgcError(f"need --f-min < F < --f-max, got {band[0]:g}, {target:g}, "
                        f"{band[1]:g}", key="--f-min")
-    module, m, _ = ensure_module(model, out_dir, method)
-    if output not in module.OUTPUT_NAMES:
-        raise BgcError(f"unknown output '{output}'", key="--output",
-                       hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
-    if name not in module.PARAM_NAMES or name.startswith("excitation__"):
-        raise BgcError(f"'{name}' is not a parameter that can be tuned", key="--param",
-                       hint="parameters: " + ", ".join(n for n in module.PARAM_NAMES
-                                                       if not n.startswith("excitation__")))
-    check_overrides(model, params)
+    bfrf.check_band(*band)
+    check_method_options(method, keep_loops, parasitic_mode)
+    check_out_dir(out_dir)
+
+    def check(decl):            # against the model, before any compile
+        check_output(decl, output)
+        check_direction(decl, direction, "--input")
+        if name not in decl.params or name.startswith("excitation__"):
+            raise BgcError(f"'{name}' is not a parameter that can be tuned", key="--tune",
+                           hint="parameters: " + ", ".join(
+                               n for n in decl.params if "__" not in n) + " (and the "
+                                "joints' values bgc adds, <joint>__<value>)")
+        check_params(decl, params)
+        check_overrides(model, params, decl.model)
+        if bracket is not None:
+            _check_ends(model, params, name, bracket)
+    module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
+                                 check=check)
     p = parse_params(module, params)
-    bracket = bracket or btune.default_bracket(p[module.PARAM_NAMES.index(name)], name)
-    _check_ends(model, params, name, bracket)
+    if parasitic_mode == "auto":
+        from bgc.methods import parasitic
+        p, _ = parasitic.auto(module, m, module.initial_state(p), p)
+        p = parse_params(module, params, base=p)
+    if bracket is None:
+        bracket = btune.default_bracket(p[module.PARAM_NAMES.index(name)], name)
+        _check_ends(model, params, name, bracket)
     with progress.stage("tuning") as stage:
         r = btune.tune(module, m, direction, output, name, target, p, bracket, band)
         stage.done(f"{progress.count(r.linearizations, 'linearization')}")

@@ -57,7 +57,7 @@ def image_format(path: str | Path) -> str:
     fmt = Path(path).suffix[1:].lower()
     if fmt not in FORMATS:
         raise BgcError(f"cannot draw to {str(path)!r}: unknown suffix '{Path(path).suffix}'",
-                       key="-o", hint="use " + ", ".join(f".{f}" for f in FORMATS))
+                       key="--out", hint="use " + ", ".join(f".{f}" for f in FORMATS))
     return fmt
 
 

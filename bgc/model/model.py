@@ -178,6 +178,13 @@ class Block:
 MAX_POINTS = 10_000_000
 
 
+# The solvers a model's ``simulation.solver`` (and ``--solver``) may name, in the order
+# ``--help`` lists them: those ``simulate.SOLVERS`` registers (it checks so), known here
+# without importing any. ``FIXED_STEP_SOLVERS`` take their step from ``--step``.
+SOLVERS = ("native", "rk4", "bdf", "radau", "lsoda", "rk45", "cvode", "ida")
+FIXED_STEP_SOLVERS = ("rk4",)
+
+
 @dataclass(frozen=True)
 class Settings:
     """Default run settings a model file may carry (``simulation:``)."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from bgc import methods
@@ -57,11 +57,13 @@ class Scene:
     digest: str
     # merge relay chains: None = where exact (ideal joints); True also under parasitic
     merge_relays: bool | None = None
+    # where each name of ``expose`` and ``params`` stands in the scene file
+    name_locs: dict = field(default_factory=dict)
 
 
 def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every mistake is one located line."""
-    from bgc.simulate import SOLVERS
+    from bgc.model.model import SOLVERS
     path = Path(path)
     doc = document.read(path, "scene file", "scene")
     if not isinstance(doc, YMap):
@@ -93,9 +95,16 @@ def load_scene(path: str | Path) -> Scene:
     exc = _excitation(doc, model)
     t_start, t_end, n_points = _time(doc, exc)
     rtol, atol = _tolerances(doc, model)
-    params = _params(doc)
+    params, name_locs = _params(doc)
     expose = (strings(doc["expose"], _at(doc, "expose"), "expose", "parameter names")
               if doc.get("expose") is not None else [])
+    for k, name in enumerate(expose):
+        loc = doc["expose"].item_locs[k]
+        if name in expose[:k]:
+            fail(f"'{name}' is exposed twice", loc, f"expose[{k}]",
+                 f"it is listed already at line {name_locs[name].line}")
+        name_locs[name] = loc
+    _check_parameters(model, method, expose, params, name_locs)
     merge = doc.get("merge_relays")
     if merge is not None and not isinstance(merge, bool):
         fail(f"merge_relays is true or false, got {merge!r}", _at(doc, "merge_relays"),
@@ -109,7 +118,21 @@ def load_scene(path: str | Path) -> Scene:
         [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
         default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
-                 n_points, rtol, atol, solver, expose, params, digest, merge)
+                 n_points, rtol, atol, solver, expose, params, digest, merge, name_locs)
+
+
+def _check_parameters(model, method: str, expose, params, locs) -> None:
+    """Every exposed or set parameter is one the model declares (with the method's):
+    refused at its own line in the scene, before any build."""
+    from bgc.pipeline import Declared
+    known = Declared.of_model(model, method).params
+    for name in list(expose) + list(params):
+        if name not in known:
+            fail(f"unknown parameter '{name}' of model {model.name}", locs[name],
+                 "expose" if name in expose else f"params.{name}",
+                 "its parameters: " + (", ".join(n for n in known if "__" not in n)
+                                       or "none") + " (and the joints' values bgc adds, "
+                 "<joint>__<value>)")
 
 
 def _at(m: YMap, key):
@@ -121,14 +144,19 @@ def _outputs(doc: YMap, model):
     """``outputs:``, a non-empty list of the model's output names."""
     outputs = doc["outputs"]
     names = [o.name for o in model.outputs]
+    valid = ("model outputs: " + ", ".join(names) if names else
+             f"model {model.name} declares no outputs: add an 'outputs:' section to it")
     if not isinstance(outputs, list) or not outputs:
-        fail("expected a non-empty list of outputs", _at(doc, "outputs"), "outputs",
-             "model outputs: " + ", ".join(names))
+        fail("expected a non-empty list of outputs", _at(doc, "outputs"), "outputs", valid)
     strings(outputs, _at(doc, "outputs"), "outputs", "output names")
     for k, o in enumerate(outputs):
         if o not in names:
             fail(f"unknown output '{o}' of model {model.name}", outputs.item_locs[k],
-                 f"outputs[{k}]", "model outputs: " + ", ".join(names))
+                 f"outputs[{k}]", valid)
+        if o in outputs[:k]:
+            fail(f"output '{o}' is listed twice", outputs.item_locs[k], f"outputs[{k}]",
+                 f"it is listed already at line "
+                 f"{outputs.item_locs[outputs.index(o)].line}")
     return outputs
 
 
@@ -190,15 +218,16 @@ def _tolerances(doc: YMap, model) -> tuple[float, float]:
     return tols["rtol"], tols["atol"]
 
 
-def _params(doc: YMap) -> dict[str, float]:
-    """``params:`` {name: value}, the values the scene sets."""
-    params = {}
+def _params(doc: YMap) -> tuple[dict[str, float], dict]:
+    """``params:`` {name: value}, the values the scene sets, and where each name stands."""
+    params, locs = {}, {}
     if doc.get("params") is not None:
         pm = mapping(doc["params"], _at(doc, "params"), "params")
         for k, v in pm.items():
             string(k, pm.key_locs[k], "params", "a parameter name")
             params[k] = number(v, _at(pm, k), f"params.{k}")
-    return params
+            locs[k] = pm.key_locs[k]
+    return params, locs
 
 
 def scene_values(scene: Scene, model) -> dict[str, float]:
@@ -218,10 +247,13 @@ def reduced_system(scene: Scene):
     c = build(scene.model, scene.method)
     known = {name for _, name, _ in c.system.params}
     for name in list(scene.expose) + list(scene.params):
-        if name not in known:
-            raise ModelError(f"unknown parameter '{name}' of model {c.model.name}",
-                             loc=Loc(scene.file, 1), key="expose/params",
-                             hint="see PARAM_NAMES of the generated module")
+        if name not in known:       # a parameter the method does not keep
+            raise ModelError(f"model {c.model.name} has no parameter '{name}' under method "
+                             f"{scene.method}", key="expose" if name in scene.expose
+                             else f"params.{name}",
+                             loc=scene.name_locs.get(name, Loc(scene.file, 1)),
+                             hint="its parameters under this method: " + ", ".join(
+                                 n for n in sorted(known) if "__" not in n))
     merged, removed, note = reduce.merge_relays(
         c.model, scene.outputs, list(scene.expose) + list(scene.params))
     merged_c = c

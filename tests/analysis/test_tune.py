@@ -82,7 +82,7 @@ def test_tuned_mass_is_k_over_omega_squared_and_its_sensitivity_the_derivative()
 def test_cli_json_reports_value_frequency_sensitivity(absorber):
     _, _, d = absorber
     r = CliRunner().invoke(main, ["tune", str(d / "tune_absorber.yaml"), "-o", str(d),
-                                  "--target-frequency", "9", "--param", "m_t", "--input",
+                                  "--target-frequency", "9", "--tune", "m_t", "--input",
                                   "push", "--output", "z", "--bracket", "0.4:0.8", "--json",
                                   "-q"])
     assert r.exit_code == 0, r.output
@@ -99,14 +99,17 @@ def test_cli_json_reports_value_frequency_sensitivity(absorber):
      ["out of reach", "m_t in [0.4, 0.8]", "between 7.958 and 11.25 Hz"]),
     (["--target-frequency", "9", "--bracket", "0.8:0.4"], "--bracket", ["LO < HI"]),
     (["--target-frequency", "9", "--bracket", "-1:0.4"], "--bracket", ["m_t=-1"]),
-    (["--target-frequency", "9", "--param", "nope"], "--param", ["m_t"]),
+    (["--target-frequency", "9", "--tune", "nope"], "--tune", ["m_t"]),
+    (["--target-frequency", "9", "--param", "m_t"], "--param", ["--tune m_t"]),
+    (["--target-frequency", "9", "--tune", "m_t", "--set", "m_t=0.5"], "--set",
+     ["-p NAME=VALUE"]),
 ])
 def test_cli_refuses_in_one_line(absorber, args, key, words):
     _, _, d = absorber
     base = ["tune", str(d / "tune_absorber.yaml"), "-o", str(d), "--input", "push",
             "--output", "z", "-q"]
-    if "--param" not in args:
-        base += ["--param", "m_t"]
+    if "--tune" not in args and "--param" not in args:
+        base += ["--tune", "m_t"]
     r = CliRunner().invoke(main, base + args)
     assert r.exit_code == 2
     [line] = r.output.strip().splitlines()

@@ -22,7 +22,7 @@ def _rows(path):
 
 
 def _bench(gen_dir, out, *parts, extra=()):
-    args = ["bench", "--quick", "--out", str(out), "--build", str(gen_dir), "--repeats", "2",
+    args = ["bench", "--quick", "--results", str(out), "--build", str(gen_dir), "--repeats", "2",
             "--budget", "20", "--json"]
     for p in parts:
         args += ["--part", p]

@@ -97,8 +97,8 @@ def test_files_frf_csv_under_regular_file(work):
 def test_files_scene_output_under_regular_file(work):
     scene = work / "scene.yaml"
     scene.write_text(f"model: {RLC}\noutputs: [current]\ntime: {{end: 0.01, points: 11}}\n")
-    refused(work, "run", scene, "--out", "afile/res", "-o", "gen", names="'afile/res'")
-    refused(work, "run", scene, "--out", "res", "-o", "afile", names="'afile'")
+    refused(work, "run", scene, "--results", "afile/res", "-o", "gen", names="'afile/res'")
+    refused(work, "run", scene, "--results", "res", "-o", "afile", names="'afile'")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only directory")

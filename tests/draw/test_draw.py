@@ -79,7 +79,7 @@ def check_drawing(path, graph, effort_in, elements):
 
 def test_small_model_strokes_match_the_causality_report(tmp_path):
     out = tmp_path / "dc_motor.svg"
-    r = run("draw", MODELS / "dc_motor.yaml", "-o", out, "--quiet")
+    r = run("draw", MODELS / "dc_motor.yaml", "--out", out, "--quiet")
     assert r.exit_code == 0, r.output
     c = build(MODELS / "dc_motor.yaml")
     g = c.causal.graph
@@ -90,7 +90,7 @@ def test_small_model_strokes_match_the_causality_report(tmp_path):
     assert {names[bd.name] for bd in g.bonds if "L_a" in (bd.src, bd.dst)} == {"L_a"}
     assert {names[bd.name] for bd in g.bonds if "supply" in (bd.src, bd.dst)} == {"armature"}
     png = tmp_path / "dc_motor.png"      # the format by the suffix
-    assert run("draw", MODELS / "dc_motor.yaml", "-o", png, "-q").exit_code == 0
+    assert run("draw", MODELS / "dc_motor.yaml", "--out", png, "-q").exit_code == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -151,7 +151,7 @@ def test_conflict_is_drawn_marked_then_reported(tmp_path):
     model = tmp_path / "clash.yaml"
     model.write_text(CONFLICT)
     out = tmp_path / "clash.svg"
-    r = run("draw", model, "-o", out, "--quiet")
+    r = run("draw", model, "--out", out, "--quiet")
     assert r.exit_code == 2
     [line] = r.output.strip().splitlines()
     assert line.startswith("error: ") and "causality conflict" in line
@@ -163,9 +163,10 @@ def test_conflict_is_drawn_marked_then_reported(tmp_path):
 
 
 @pytest.mark.parametrize("args, key", [
-    (("-o", "{tmp}/x.svg", "--only", "leg_9"), "--only"),
-    (("-o", "{tmp}/x.jpg"), "-o"),
-    (("-o", "{tmp}/file/x.svg"), "drawing"),
+    (("--out", "{tmp}/x.svg", "--only", "leg_9"), "--only"),
+    (("--out", "{tmp}/x.jpg"), "--out"),
+    (("--out", "{tmp}/file/x.svg"), "drawing"),
+    (("-o", "{tmp}/x.svg"), "-o"),
 ])
 def test_bad_input_is_one_line(tmp_path, args, key):
     (tmp_path / "file").write_text("")

@@ -84,7 +84,7 @@ def test_pruning_and_folding_keep_the_answer_of_a_small_model(tmp_path):
         a = simulate(full, t_end=2.0, rtol=1e-8, atol=1e-10, params=pf, points=201)
         b = simulate(reduced, t_end=2.0, rtol=1e-8, atol=1e-10, params=[k], points=201)
         assert np.abs(a.column("position") - b.column("position")).max() < 1e-7
-    res = CliRunner().invoke(main, ["run", str(path), "--out", str(tmp_path / "out"),
+    res = CliRunner().invoke(main, ["run", str(path), "--results", str(tmp_path / "out"),
                                     "-o", str(tmp_path / "gen"), "-p", "k=700", "--json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)

@@ -127,11 +127,13 @@ def test_window_metrics_are_the_rms_and_the_peak_of_the_output_over_the_window(c
 
 @pytest.mark.parametrize("args, line", [
     (["-p", "kk=1:2:2", "--metric", "peak:position"],
-     "error: --param: unknown parameter 'kk' (hint: parameters: m, k, c, F0, f_drive)"),
+     "error: --param: unknown parameter 'kk' of model msd_forced (hint: did you mean k? "
+     "parameters: m, k, c, F0, f_drive)"),
     (["-p", "k=400:800:2", "--metric", "peak:speed"],
-     "error: --metric: peak:speed: unknown output 'speed' (hint: outputs: position, "),
+     "error: --metric: peak:speed: unknown output 'speed' of model msd_forced (hint: "
+     "outputs: position, "),
     (["-p", "k=400:800:2", "--frf", "push:position"],
-     "error: --frf: push:position: 'push' is not an excitation direction of "),
+     "error: --frf: push:position: "),
     (["-p", "k=-400:800:2", "--metric", "peak:position"],
      "error: --param: k=-400: capacitance C of C 'spring' must be > 0"),
     (["-p", "k=400:800:2"], "error: --frf: no metric to compute"),

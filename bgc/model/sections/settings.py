@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from bgc.model.document import YMap
-from bgc.model.model import Settings
-from bgc.model.values import check_keys, number, points, string
+from bgc.model.model import SOLVERS, Settings
+from bgc.model.values import check_keys, fail, number, points, string
 
 
 def settings(sec: YMap) -> Settings:
@@ -17,6 +17,9 @@ def settings(sec: YMap) -> Settings:
             loc, kk = sec.val_locs[k], f"simulation.{k}"
             if k == "solver":
                 kw[k] = string(sec[k], loc, kk, "a solver name")
+                if kw[k] not in SOLVERS:
+                    fail(f"unknown solver '{kw[k]}'", loc, kk,
+                         "valid solvers: " + ", ".join(SOLVERS))
             elif k == "points":
                 kw[k] = points(sec[k], loc, kk)
             else:

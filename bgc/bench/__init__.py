@@ -11,6 +11,8 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
 - ``compile``: cold and warm time to first result (``bgc simulate`` in a fresh
   interpreter, empty caches), per stage, against model size: chains of N = 5 ... 80
   links and the SARIB, per method (``compile_cost.py``);
+- ``startup``: a 2-state model's warm start to its first result, by phase (bgc's fixed
+  cost: ``startup.py``);
 - ``symmetry``: the one-leg SARIB against the full rig under pumping, its error next to
   its speed (``symmetry.py``);
 - ``scenes``: each shipped scene's reduced module against the full model: states,
@@ -33,12 +35,13 @@ from pathlib import Path
 import numpy as np
 
 from bgc import methods as constraint_methods
-from bgc.bench import charts, compile_cost, precision, scenes, stability, symmetry
+from bgc.bench import charts, compile_cost, precision, scenes, stability, startup, symmetry
 from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
 from bgc.bench.peers import at_equal_error, peers
 from bgc.fileio import atomic_write
 
-PARTS = ("peers", "precision", "stiffness", "stability", "compile", "symmetry", "scenes")
+PARTS = ("peers", "precision", "stiffness", "stability", "compile", "startup", "symmetry",
+         "scenes")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 METHODS = constraint_methods.NAMES
 
@@ -252,6 +255,12 @@ class Run:
 
     def stability(self):
         stability.report(self)
+
+    def startup(self):
+        """A small model (2 states) to its first result, warm: bgc's fixed cost, and
+        where it goes (issue 38)."""
+        row = startup.measure(MODELS / "rlc.yaml", 2 if self.quick else 7, self.log)
+        startup.report(self, row)
 
     def compile(self):
         """Cold and warm time to first result against model size: chains of N links

@@ -247,3 +247,25 @@ def _cold_by_stage(ax, rs, m, stage_cols, num) -> None:
     ax.set_ylabel(f"{m}: cold [s]")
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=6, ncol=4)
+
+
+def startup(row: dict, phases, path: Path, title: str) -> Path:
+    """A small model's warm start to its first result: the phases (wall seconds) as one
+    stacked bar beside the command's own median, with the target."""
+    from bgc.bench.startup import TARGET_S
+    fig, axes = panels(1, 2.6)
+    ax = axes[0, 0]
+    left = 0.0
+    for k, p in enumerate(phases):
+        w = float(row.get(f"{p}_s", 0.0))
+        ax.barh([1], [w], left=left, color=f"C{k}", label=f"{p.replace('_', ' ')} "
+                f"{w:.2f} s")
+        left += w
+    ax.barh([0], [row["command_s"]], color="0.5",
+            label=f"bgc simulate (the command) {row['command_s']:.2f} s")
+    ax.axvline(TARGET_S, color="k", ls="--", lw=0.8)
+    ax.set_yticks([0, 1], ["command", "phases"])
+    ax.set_xlabel(f"wall time [s] (dashed: target {TARGET_S} s)")
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.35))
+    return save_figure(fig, path, title)

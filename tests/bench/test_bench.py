@@ -118,3 +118,18 @@ def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp
     assert 0 < float(row["integration_error_full"]) < 1e-4    # the run's own error, beside it
     assert "idle_dofs 36->35" in row["passes"]
     assert "## Scenes" in (tmp_path / "summary.md").read_text()
+
+
+@pytest.mark.slow       # ~10 s: make bench runs it in full
+def test_startup_part_times_the_command_and_its_phases(gen_dir, tmp_path):
+    rep = _bench(gen_dir, tmp_path, "startup")
+    [row] = _rows(tmp_path / "startup.csv")
+    phases = [float(row[f"{p}_s"]) for p in ("launch", "imports", "module",
+                                             "numba_first_load", "loop", "integrate", "csv")]
+    assert all(v >= 0 for v in phases) and float(row["command_s"]) > 0.1
+    # the phases are the command's work: together about its time (the process's own exit
+    # and argument parsing are the rest)
+    assert 0.5 < sum(phases) / float(row["command_s"]) < 1.5
+    assert "## Start-up" in (tmp_path / "summary.md").read_text()
+    assert (tmp_path / "startup.png").stat().st_size > 5000
+    assert any("small model warm start" in t for t in rep["targets"])

@@ -93,6 +93,22 @@ def error_lines(stderr: str) -> list[str]:
     return [ln for ln in stderr.splitlines() if not ln.startswith(PREFIX)]
 
 
+def one_line_error(proc) -> re.Match:
+    """What a refused input gets from the CLI (``proc``: a finished ``bgc`` run): exit
+    status 2, no traceback, one or two lines on stderr besides progress lines, the first in
+    bgc's form ``error: FILE:LINE:COL: KEY: message (hint: ...)`` with a hint. Returns
+    that line's parts (``ERROR_LINE``'s groups)."""
+    detail = f"\nstdout: {proc.stdout[-2000:]!r}\nstderr: {proc.stderr[-2000:]!r}"
+    assert "Traceback" not in proc.stderr + proc.stdout, detail
+    assert proc.returncode == 2, f"exit {proc.returncode}" + detail
+    lines = error_lines(proc.stderr)
+    assert 1 <= len(lines) <= 2, detail
+    m = ERROR_LINE.match(lines[0])
+    assert m, "not bgc's error form" + detail
+    assert m["hint"].strip(), detail
+    return m
+
+
 def snapshot(root: Path) -> dict:
     """Every file under ``root`` with its bytes and mode (directories by name)."""
     return {str(p.relative_to(root)): (p.read_bytes(), stat.S_IMODE(p.stat().st_mode))

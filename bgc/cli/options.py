@@ -173,12 +173,11 @@ def check_method_options(method: str, keep_loops: bool = False, parasitic: str =
     """Options that apply to some constraint methods only: ``--keep-loops`` (those that
     can keep loops closed), ``--parasitic auto`` and ``--separation`` (parasitic, which
     has compliant joints); refused with the method that would take them."""
-    from bgc import methods
     if keep_loops and method not in methods.CLOSES_LOOPS:
         raise BgcError(f"--keep-loops applies to --method {' or '.join(methods.CLOSES_LOOPS)}"
                        f", not {method}", key="--keep-loops",
                        hint="drop --keep-loops, or use --method zcp")
-    if parasitic == "auto" and method != "parasitic":
+    if parasitic == "auto" and methods.get(method).ideal:   # auto sets compliant joints
         raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
                        key="--parasitic", hint="drop --parasitic or use --method parasitic")
     if separation is not None and not separation > 1:

@@ -98,6 +98,19 @@ def _storage(bld: Builder, name, el, qname):
                     name, b)
 
 
+def _inverse(M: sp.Matrix, name: str, el, key: str) -> sp.Matrix:
+    """The inverse of a constant matrix law, or an EquationError at the law's file:line
+    where it is singular (an R of 0 used as a conductance, a mass matrix with a zero)."""
+    try:
+        return M.inv()
+    except (ValueError, ZeroDivisionError):      # sympy's NonInvertibleMatrixError
+        raise EquationError(f"{el.kind} '{name}': its {key} is a singular matrix, which "
+                            "the causality it has needs inverted", key=f"elements.{name}."
+                            f"{key}", loc=el.field_locs.get(key, el.loc),
+                            hint="give it an invertible matrix (a positive definite one "
+                                 "for C, I and R)") from None
+
+
 def _storage_vector(bld: Builder, name, el, qname, b, s, E, F):
     """A multiport C or I with a matrix law (mass matrix, inertia tensor, stiffness):
     integral causality only, the law inverted numerically once (it is constant)."""
@@ -112,7 +125,7 @@ def _storage_vector(bld: Builder, name, el, qname, b, s, E, F):
     dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
     law = el.fields.get(el.law)
     M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-    value = matmul(M, x) if el.law == "k" else matmul(M.inv(), x)
+    value = matmul(M, x) if el.law == "k" else matmul(_inverse(M, name, el, el.law), x)
     if el.kind == "C":
         bld.define(E, value, name, b)
         bld.define(dx, s * F, name, b)
@@ -144,7 +157,7 @@ def _R(bld: Builder, name, el):
         if bld.cg.r_form[name] == "resistance":
             bld.define(E, R * (s * F), name, b)
         else:
-            bld.define(F, s * R.inv() * E, name, b)
+            bld.define(F, s * _inverse(R, name, el, "R") * E, name, b)
         return
     f = s * F
     if bld.cg.r_form[name] == "resistance":
@@ -202,7 +215,7 @@ def _TF(bld: Builder, name, el):
             bld.define(bld.F(c), matmul(n, sp.Matrix([bld.F(a)])), name, c)
             bld.define(bld.E(a), matmul(n.T, sp.Matrix([bld.E(c)])), name, a)
         else:                          # a rotation, or a constant invertible matrix
-            inv = n.T if el.orthogonal else n.inv()
+            inv = n.T if el.orthogonal else _inverse(n, name, el, "ratio")
             bld.define(bld.F(a), matmul(inv, bld.F(c)), name, a)
             bld.define(bld.E(c), matmul(inv.T, bld.E(a)), name, c)
         return

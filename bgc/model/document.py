@@ -78,7 +78,8 @@ def read_source(path: str | Path, what: str = "model file", key: str = "model") 
     if st.st_size > MAX_FILE_BYTES:
         refuse(f"{what} of {st.st_size} bytes is larger than bgc's limit of "
                f"{MAX_FILE_BYTES} bytes", hint=f"a {what} is at most "
-               f"{MAX_FILE_BYTES >> 20} MiB; the largest shipped model is ~11 kB")
+               f"{MAX_FILE_BYTES >> 20} MiB (the largest shipped model is ~11 kB); a long "
+               "table signal is the usual cause: resample it to fewer samples")
     try:        # non-blocking, and checked again: it may have been swapped since the stat
         fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with os.fdopen(fd, "rb") as fh:
@@ -136,9 +137,13 @@ class _Composer(yaml.SafeLoader):
         else:
             node.size = 1
         if node.size > MAX_NODES:
-            self.refuse(f"more than {MAX_NODES} YAML values once aliases are expanded",
+            aliased = "*" in self.text and "&" in self.text
+            self.refuse(f"more than {MAX_NODES} YAML values"
+                        + (" once aliases are expanded" if aliased else ""),
                         event.start_mark, "aliases (*name) that repeat large values "
-                        "multiply; write the model without them")
+                        "multiply; write the model without them" if aliased else
+                        "a long table signal is the usual cause: resample it to fewer "
+                        "samples")
         return node
 
 

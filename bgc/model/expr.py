@@ -185,7 +185,9 @@ def parse(text, *, loc: Loc, key: str, names: dict[str, sp.Expr],
                 else "nothing" if text is None else type(text).__name__)
         raise ModelError(f"expected a number or an expression string, got {kind}",
                          loc=loc, key=key, hint="write e.g. 2.5 or \"k*q + k3*q**3\"")
-    hint_split = "split it: give its parts names as parameters, signals or outputs"
+    hint_split = ("split it: sum blocks add its parts (blocks: {part_1: {type: sum, "
+                  "inputs: [...]}}) and an expression reads their part_1.y; a constant "
+                  "part can be a parameter, a function of time a signal")
     if len(text) > MAX_CHARS:
         raise ModelError(f"expression of {len(text)} characters is longer than bgc's limit "
                          f"of {MAX_CHARS}", loc=loc, key=key, hint=hint_split)

@@ -34,7 +34,7 @@ from bgc.model.sections import blocks, bodies, excitation, joints, network, para
 from bgc.model.sections.context import Context
 from bgc.model.sections.joints import joint_params  # noqa: F401  (scene.reduce's)
 from bgc.model.sections.settings import settings
-from bgc.model.values import check_keys, fail, kind_of
+from bgc.model.values import check_keys, fail, kind_of, text
 
 TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies", "joints",
             "parasitic", "excitation", "elements", "bonds", "blocks", "outputs",
@@ -88,7 +88,8 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
     outputs = network.outputs(cx, section("outputs"), params, sigs, elements, bnds)
     return Model(name=name, file=file, digest=digest(doc), parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bnds, outputs=outputs,
-                 settings=sets, description=doc.get("description"), bodies=bods,
+                 settings=sets, bodies=bods, description=text(
+                     doc.get("description"), doc.val_locs.get("description"), "description"),
                  gravity=gravity, gravity_expr=gravity_expr, joints=jts, excitation=exc,
                  static_loads=doc.get("parasitic", {}).get("loads") == "static",
                  ports=cx.ports, blocks=blks)

@@ -64,6 +64,17 @@ def string(v, loc, key, what="a name") -> str:
     return v
 
 
+def text(v, loc, key, what="a text"):
+    """A description or a unit: text, or a number written as one (``unit: 1`` for a
+    dimensionless quantity, ``description: 2024``: earlier bgc took these, and they are
+    read as the text they are); None stays None."""
+    if v is None or isinstance(v, str):
+        return v
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return str(v)
+    return string(v, loc, key, what)
+
+
 # an output's unit (``outputs: {a: {expr: ..., unit: m/s^2}}``) goes into generated code and
 # into plot labels: a short text of letters, digits and a few signs, nothing that a string
 # literal, a docstring or matplotlib's mathtext ($, \\) would read as syntax
@@ -71,12 +82,12 @@ UNIT = re.compile(r"[A-Za-z0-9 /*^.()%+_-]{1,32}")
 
 
 def unit(v, loc, key) -> str:
-    """An output's unit: ``UNIT`` text, e.g. m/s^2, N m, kg m^2, "1" (dimensionless)."""
-    text = string(v, loc, key, "a unit text")
-    if not UNIT.fullmatch(text) or not text.strip():
-        fail(f"unit {text[:40]!r} is not a unit text", loc, key,
+    """An output's unit: ``UNIT`` text, e.g. m/s^2, N m, kg m^2, 1 (dimensionless)."""
+    written = text(v, loc, key, "a unit text")
+    if not UNIT.fullmatch(written) or not written.strip():
+        fail(f"unit {written[:40]!r} is not a unit text", loc, key,
              "up to 32 letters, digits, spaces and / * ^ . ( ) % + _ -, e.g. m/s^2, N m, 1")
-    return text.strip()
+    return written.strip()
 
 
 def strings(v, loc, key, what="names") -> list[str]:
@@ -95,7 +106,7 @@ def check_keys(m: YMap, allowed, key):
             fail(f"unknown key '{k}'", m.key_locs[k], f"{key}.{k}",
                  "valid keys: " + ", ".join(allowed))
         if k in ("description", "unit") and m[k] is not None:
-            string(m[k], m.val_locs[k], f"{key}.{k}", f"a {k} text")
+            text(m[k], m.val_locs[k], f"{key}.{k}", f"a {k} text")
 
 
 def number(v, loc, key, *, positive=False, nonneg=False, divisor=False) -> float:

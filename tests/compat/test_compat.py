@@ -3,10 +3,7 @@ an earlier bgc accepted, each saying in its header which forms it exercises and 
 (and until) which commit each was the documented one; here every file is loaded, built
 and run briefly with its own ``simulation:`` settings, and its outputs checked against
 closed forms. A form that was retired on purpose (tests/compat/retired/) gets bgc's
-one-line error, which must say what to write instead.
-
-Tests marked ``# needs:`` fail on purpose until bgc changes as the comment says (they
-are not xfail: the failure is the reminder)."""
+one-line error, which must say what to write instead."""
 
 from __future__ import annotations
 
@@ -61,8 +58,6 @@ def close(actual, expected, tol, scale=None):
 
 
 # ------------------------------------------------------------------ every file loads
-# needs (expr_flat_sum, expr_float_zero, expr_ifelse): the bgc/model/expr.py fixes that
-# test_flat_sums, test_float_zero and test_ifelse name
 @pytest.mark.parametrize("name", MODEL_FILES)
 def test_every_compat_file_loads_and_says_what_it_exercises(name):
     assert COMMIT.search(header(COMPAT / name)), "the header names no commit"
@@ -236,8 +231,6 @@ def test_scene(tmp_path):
 
 
 def test_ifelse(tmp_path):
-    # needs: bgc/model/expr.py check_finite to skip the Piecewise's (expr, cond) pairs and
-    # booleans (today: AttributeError 'ExprCondPair' object has no attribute 'evalf')
     _, r = run(tmp_path, "expr_ifelse.yaml")
     t, y = r.t, r.column
     close(y("u"), np.where(t < 0.01, t / 0.01, 1.0), 1e-12)
@@ -249,8 +242,6 @@ def test_ifelse(tmp_path):
 
 
 def test_float_zero(tmp_path):
-    # needs: bgc/model/expr.py check_finite/_log10 to take a float zero (abs(0.0) is the
-    # Integer 0: today ValueError: math domain error)
     _, r = run(tmp_path, "expr_float_zero.yaml")
     t, y = r.t, r.column
     close(y("rectified"), np.maximum(0.0, np.sin(2 * np.pi * 5 * t)), 1e-12)
@@ -260,8 +251,6 @@ def test_float_zero(tmp_path):
 
 
 def test_flat_sums(tmp_path):
-    # needs: bgc/model/expr.py to measure nesting as nesting (a flat sum or product is
-    # one level; today > ~100 terms are refused as 'more than 100 deep')
     _, r = run(tmp_path, "expr_flat_sum.yaml")
     t, y = r.t, r.column
     close(y("v_cap"), 1.5 * (1 - np.exp(-t / 0.1)), 1e-6)
@@ -272,7 +261,6 @@ def test_flat_sums(tmp_path):
 
 # ------------------------------------------------------------------ the 40-link chain
 def test_chain40_loads_with_its_energy_one_flat_sum():
-    # needs: bgc/model/expr.py to measure nesting as nesting (today: 'more than 100 deep')
     assert COMMIT.search(header(COMPAT / CHAIN))
     outs = {o.name: o.expr for o in load.load(COMPAT / CHAIN).outputs}
     assert len(outs["kinetic"].args) == 240 and len(outs["potential"].args) == 40
@@ -285,7 +273,6 @@ def test_chain40_conserves_energy(tmp_path, method):
     """Ideal spherical joints: the falling chain's energy stays what it was to the
     integration tolerance while joules turn from potential into kinetic. (Slow: the
     40-link build and compile take ~25 s a method.)"""
-    # needs: bgc/model/expr.py to measure nesting as nesting
     mod, r = run(tmp_path, CHAIN, method=method)
     y = r.column
     close(y("energy"), y("kinetic") + y("potential"), 1e-12)
@@ -303,13 +290,14 @@ RETIRED_FORMS = {
     "points_one.yaml": ("simulation.points", "1001"),
     "scene_points_one.yaml": ("time.points", "1001"),
     "module_name.yaml": ("name", "name: wave_model"),
-    # needs: bgc/model/values.py check_keys/string to say how to write a unit text
-    # (quote it: unit: "1"); today: 'write a unit text as plain text'
-    "unit_number.yaml": ("parameters.gain.unit", 'unit: "1"'),
-    # needs: bgc/model/values.py check_keys/string likewise for a description
-    # (quote it: description: "2024"); today: 'write a description text as plain text'
-    "description_number.yaml": ("model.description", 'description: "2024"'),
 }
+
+
+def test_a_number_written_as_a_unit_or_a_description_is_its_text():
+    """unit: 1 and description: 2024 were refused for a while (36037d0): read again as
+    the text they are."""
+    assert load.load(COMPAT / "unit_number.yaml").parameters["gain"].unit == "1"
+    assert load.load(COMPAT / "description_number.yaml").description == "2024"
 
 
 @pytest.mark.parametrize("name", sorted(RETIRED_FORMS))
@@ -346,7 +334,6 @@ def test_retired_expression_longer_than_the_limit_says_what_to_write(tmp_path):
     so the hint 'give its parts names as parameters, signals or outputs' does not say how;
     sum blocks can hold the parts (blocks: {part: {type: sum, inputs: [...]}}, their
     .y added by the output), and that form loads."""
-    # needs: bgc/model/expr.py parse's hint for MAX_CHARS to name sum blocks
     m = one_line_error(bgc("check", long_expression_model(tmp_path, 600), cwd=tmp_path))
     assert m["key"] == "outputs.big" and "10000" in m["msg"]
     assert "sum" in m["hint"] and "block" in m["hint"], m.group(0)
@@ -380,8 +367,6 @@ def test_retired_model_file_over_the_size_limit_says_what_to_write(tmp_path):
     """A model file over document.MAX_FILE_BYTES (1 MiB), in practice a long table
     signal (here 45 000 samples at 0.001 s, 10 decimals): accepted until b02f8f7, refused since
     d3ba890. Today's hint says the limit, not what to write instead."""
-    # needs: bgc/model/document.py read_source's hint for MAX_FILE_BYTES to say what to
-    # do about a long table (resample it to fewer samples)
     path = table_model(tmp_path, 45_000, wide=True)
     assert path.stat().st_size > load.MAX_FILE_BYTES
     m = one_line_error(bgc("check", path, cwd=tmp_path))
@@ -393,8 +378,6 @@ def test_retired_table_over_the_node_limit_says_what_to_write(tmp_path):
     """A table of 55 000 samples (110 000 YAML values, a 540 kB file): accepted until
     b02f8f7, refused since d3ba890 by document.MAX_NODES, whose hint blames aliases the
     file does not have. (Slow: composing it takes ~2.5 s of CPU before the refusal.)"""
-    # needs: bgc/model/document.py _Composer.compose_node's hint to blame aliases only
-    # where the file has some, and to say what to do about a long table
     m = one_line_error(bgc("check", table_model(tmp_path, 55_000), cwd=tmp_path,
                            timeout=60))
     assert "alias" not in m["hint"] and "table" in m["hint"], m.group(0)

@@ -16,7 +16,7 @@ from bgc.model import symbols
 from bgc.model.document import YList, YMap
 from bgc.model.model import BLOCK_KINDS, Block
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail
+from bgc.model.values import check_keys, fail, text
 
 ANTI_WINDUP = ("back_calculation", "none")
 # the values that must be > 0 at the parameters' values: key -> what it is
@@ -79,7 +79,8 @@ def _block(cx: Context, name, kind, v: YMap, names, pnames, resolver) -> Block:
     initial = (_value(cx, v[spec.initial], v.val_locs[spec.initial],
                       f"{key}.{spec.initial}", pnames) if spec.initial in v else sp.S.Zero)
     blk = Block(name, kind, v.loc, u, values, limits, initial, aw != "none",
-                v.get("description"))
+                text(v.get("description"), v.val_locs.get("description"),
+                     f"{key}.description"))
     _check_values(cx, blk, v, key)
     return blk
 

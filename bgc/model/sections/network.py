@@ -13,7 +13,7 @@ from bgc.model.document import YList, YMap
 from bgc.model.model import KINDS, Bond, Element, Output, Port
 from bgc.model.sections.bodies import R0_DIRECTIONS
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail, kind_of, unit
+from bgc.model.values import check_keys, fail, kind_of, text, unit
 
 
 def element_headers(cx: Context, sec: YMap) -> dict[str, tuple[str, YMap]]:
@@ -145,7 +145,8 @@ def element_fields(cx: Context, headers, params, signals, bonds) -> dict[str, El
             fail(f"{kind} needs exactly one of: " + ", ".join(spec.laws)
                  + (f" (got {', '.join(given)})" if given else ""), v.loc, key,
                  KINDS[kind].doc)
-        el = Element(name, kind, v.loc, description=v.get("description"))
+        el = Element(name, kind, v.loc, description=text(
+            v.get("description"), v.val_locs.get("description"), f"{key}.description"))
         for k in given:
             kloc, kk = v.val_locs[k], f"{key}.{k}"
             resolve = resolver(kk, kloc) if spec.modulated else None

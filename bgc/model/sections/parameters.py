@@ -10,7 +10,7 @@ from bgc.model import signals as bsignals
 from bgc.model.document import YMap
 from bgc.model.model import Parameter, Signal, Table
 from bgc.model.sections.context import Context
-from bgc.model.values import check_keys, fail, mapping, number, number_list
+from bgc.model.values import check_keys, fail, mapping, number, number_list, text
 
 
 def parameters(cx: Context, sec: YMap) -> dict[str, Parameter]:
@@ -25,7 +25,7 @@ def parameters(cx: Context, sec: YMap) -> dict[str, Parameter]:
             check_keys(v, ("value", "unit", "description"), key)
             if "value" not in v:
                 fail("missing 'value'", v.loc, key, "write {value: 1.0, unit: kg}")
-            unit = v.get("unit")
+            unit = text(v.get("unit"), v.val_locs.get("unit"), f"{key}.unit")
             loc = v.val_locs["value"]
             v = v["value"]
         value = number(v, loc, key)

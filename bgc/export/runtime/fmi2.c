@@ -26,7 +26,9 @@ typedef struct {
     char *name;
     fmi2Type type;
     int logging, state;
-    double t, t_start, rtol, atol, h_next, t_stop;
+    double t, t_start, rtol, atol, h_next, t_stop, t_int, t_prev, h_max;
+    double *x_int, *x_prev;
+    int going;                          /* the integrator goes on from (t_int, x_int) */
     double *x, *p, *w, *dx, *y, *ind, *J, *v, *nominal;
     int fresh;                          /* dx and y computed at (t, x, p) */
     /* co-simulation: bgc's Radau and what it keeps across calls */
@@ -104,6 +106,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->x = calloc(n + 1, sizeof(double));
     c->dx = calloc(n + 1, sizeof(double));
     c->nominal = calloc(n + 1, sizeof(double));
+    c->x_int = calloc(n + 1, sizeof(double));
+    c->x_prev = calloc(n + 1, sizeof(double));
     c->v = calloc(2 * n + 2, sizeof(double));
     c->p = calloc(M->np + 1, sizeof(double));
     c->y = calloc(M->ny + 1, sizeof(double));
@@ -121,7 +125,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         c->mass = calloc(nn + 1, sizeof(double));
         c->index2 = calloc(n + 1, sizeof(double));
     }
-    if (!c->x || !c->dx || !c->nominal || !c->v || !c->p || !c->y || !c->ind || !c->w || !c->J ||
+    if (!c->x || !c->dx || !c->nominal || !c->x_int || !c->x_prev || !c->v || !c->p || !c->y || !c->ind || !c->w || !c->J ||
         !c->diag || !c->carry || !c->Q || !c->y_old || !c->kept || !c->lu_cplx || !c->piv ||
         (M->n_algebraic > 0 && (!c->mass || !c->index2))) {
         fail(c, "out of memory");
@@ -147,7 +151,7 @@ void fmi2FreeInstance(fmi2Component comp)
 {
     Instance *c = comp;
     if (!c) return;
-    free(c->x); free(c->dx); free(c->nominal); free(c->v); free(c->p); free(c->y); free(c->ind); free(c->w);
+    free(c->x); free(c->dx); free(c->nominal); free(c->x_int); free(c->x_prev); free(c->v); free(c->p); free(c->y); free(c->ind); free(c->w);
     free(c->J); free(c->diag); free(c->carry); free(c->Q); free(c->y_old); free(c->kept);
     free(c->lu_cplx); free(c->piv); free(c->mass); free(c->index2); free(c->name);
     free(c);
@@ -203,7 +207,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp)
        at the start, at least the model's atol / rtol */
     for (int i = 0; i < M->n; i++) c->nominal[i] = fmax(fabs(c->x[i]), M->atol / M->rtol);
     c->fresh = 0;
-    c->h_next = 0.0;
+    c->going = 0;
     c->state = ST_RUN;
     return fmi2OK;
 }
@@ -227,7 +231,7 @@ fmi2Status fmi2Reset(fmi2Component comp)
     c->atol = M->atol;
     c->t_stop = INFINITY;
     c->fresh = 0;
-    c->h_next = 0.0;
+    c->going = 0;
     c->state = ST_INSTANTIATED;
     return fmi2OK;
 }
@@ -267,8 +271,10 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
                 return fail(c, "parameter %s: %g is not finite", M->param_names[r - VR_P],
                             value[k]);
             c->p[r - VR_P] = value[k];
+            c->going = 0;
         } else if (r >= VR_IN && r < VR_END) {
             c->p[M->inputs[r - VR_IN]] = value[k];
+            c->going = 0;
         } else {
             return fail(c, "value reference %u cannot be set (a state, derivative or "
                         "output: bgc computes it)", vr[k]);
@@ -544,47 +550,95 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nomina
 
 /* ---- Co-Simulation ---- */
 
-static fmi2Status integrate(Instance *c, double t1)
+/* one call of bgc's Radau from the integrator's (t_int, x_int) towards t1: one step
+   (max_steps 1: it pauses after it, keeping its Jacobian, factors and step size for the
+   next call) or up to t1 (max_steps 0); the status, t_int and x_int moved */
+static fmi2Status radau(Instance *c, double t1, int64_t max_steps, int *status)
 {
     int64_t ret = 0;
     void *exc = NULL;
-    double out[3], hmax = M->max_step(c->p);
-    if (!(hmax > 0.0)) hmax = INFINITY;
-    while (c->t < t1) {
-        double b = next_breakpoint(c->t), end = b < t1 ? b : t1;
-        memset(c->kept, 0, sizeof(double) * 11);
-        int32_t st = bgc_radau5_step(
-            &ret, &exc, (int64_t)(intptr_t)M->rhs_entry, (int64_t)(intptr_t)M->jac_entry,
-            (int64_t)(intptr_t)M->guard_entry, M->ng, M->n, M->np, c->x, c->p,
-            M->n_algebraic > 0, c->mass, c->index2, M->sparse, M->perm, M->lptr, M->lidx,
-            M->uptr, M->uidx, M->n_l, M->n_u, c->t, end, c->rtol, c->atol, hmax, c->h_next,
-            0, c->stats, c->diag, out, c->J, c->carry, c->lu_cplx, c->piv, c->piv + M->n,
-            c->Q, c->y_old, c->kept);
-        c->fresh = 0;
-        if (st != 0) return fail(c, "bgc's Radau raised an internal error at t = %g", c->t);
-        int status = (int)ret;
-        if (status != BGC_REACHED) {
-            double t = out[0];
-            c->t = t;
-            if (status == BGC_GUARD)
-                return fail(c, "%s reached at t = %.6g: XYZ Cardan angles cannot pass b = "
-                            "+-90 deg", M->guard_names[(int)out[2]], t);
-            if (status == BGC_NOT_FINITE)
-                return fail(c, "Radau failed at t = %.6g: the state became non-finite", t);
-            if (status == BGC_SINGULAR)
-                return fail(c, "Radau failed at t = %.6g: the Newton matrix is singular at "
-                            "every step size", t);
-            int worst = 0;
-            for (int i = 1; i < M->n; i++)
-                if (c->diag[i] > c->diag[worst]) worst = i;
-            return fail(c, "Radau failed at t = %.6g: the step size collapsed to %.3g s "
-                        "(the error of %s dominates)", t, out[1], M->state_names[worst]);
-        }
-        c->t = end;
-        /* a breakpoint: the next segment starts afresh, as bgc simulate's do */
-        c->h_next = end == b ? 0.0 : out[1];
+    double out[3];
+    int32_t st = bgc_radau5_step(
+        &ret, &exc, (int64_t)(intptr_t)M->rhs_entry, (int64_t)(intptr_t)M->jac_entry,
+        (int64_t)(intptr_t)M->guard_entry, M->ng, M->n, M->np, c->x_int, c->p,
+        M->n_algebraic > 0, c->mass, c->index2, M->sparse, M->perm, M->lptr, M->lidx,
+        M->uptr, M->uidx, M->n_l, M->n_u, c->t_int, t1, c->rtol, c->atol, c->h_max,
+        c->h_next, max_steps, c->stats, c->diag, out, c->J, c->carry, c->lu_cplx, c->piv,
+        c->piv + M->n, c->Q, c->y_old, c->kept);
+    if (st != 0) return fail(c, "bgc's Radau raised an internal error at t = %g", c->t_int);
+    *status = (int)ret;
+    double t = out[0];
+    if (*status == BGC_REACHED || *status == BGC_PAUSED) {
+        c->t_int = t;
+        c->h_next = out[1];
+        return fmi2OK;
     }
-    return fmi2OK;
+    memcpy(c->x, c->x_int, sizeof(double) * M->n);
+    c->t = t;
+    if (*status == BGC_GUARD)
+        return fail(c, "%s reached at t = %.6g: XYZ Cardan angles cannot pass b = +-90 deg",
+                    M->guard_names[(int)out[2]], t);
+    if (*status == BGC_NOT_FINITE)
+        return fail(c, "Radau failed at t = %.6g: the state became non-finite", t);
+    if (*status == BGC_SINGULAR)
+        return fail(c, "Radau failed at t = %.6g: the Newton matrix is singular at every "
+                    "step size", t);
+    int worst = 0;
+    for (int i = 1; i < M->n; i++)
+        if (c->diag[i] > c->diag[worst]) worst = i;
+    return fail(c, "Radau failed at t = %.6g: the step size collapsed to %.3g s (the error "
+                "of %s dominates)", t, out[1], M->state_names[worst]);
+}
+
+/* a fresh start of the integrator at the communication point (t, x), as a segment of
+   bgc simulate starts: the first step estimated */
+static void restart(Instance *c)
+{
+    memcpy(c->x_int, c->x, sizeof(double) * M->n);
+    c->t_int = c->t_prev = c->t;
+    memset(c->kept, 0, sizeof(double) * 11);
+    c->h_next = 0.0;
+    c->h_max = M->max_step(c->p);
+    if (!(c->h_max > 0.0)) c->h_max = INFINITY;
+    c->going = 1;
+}
+
+/* The co-simulation step: the integrator runs on its own steps, as in bgc simulate, and
+   the state at the communication point comes from its last step's collocation
+   polynomial (the dense output bgc simulate's output times take); it lands exactly on
+   every breakpoint and starts afresh there. A parameter or input set between steps
+   restarts it from the communication point. */
+static fmi2Status advance(Instance *c, double target)
+{
+    int n = M->n, status;
+    if (!c->going) restart(c);
+    for (;;) {
+        if (c->t_int >= target) {       /* x(target) on the last step's polynomial */
+            double h = c->t_int - c->t_prev;
+            double s = h > 0.0 ? (target - c->t_prev) / h : 1.0;
+            for (int i = 0; i < n; i++)
+                c->x[i] = c->t_int == target ? c->x_int[i] : c->x_prev[i] + s * (
+                    c->Q[3 * i] + s * (c->Q[3 * i + 1] + s * c->Q[3 * i + 2]));
+            c->t = target;
+            c->fresh = 0;
+            return fmi2OK;
+        }
+        double e = next_breakpoint(c->t_int);
+        if (e <= target) {              /* land on the breakpoint, go on afresh from it */
+            if (radau(c, e, 0, &status) != fmi2OK) return fmi2Error;
+            memcpy(c->x, c->x_int, sizeof(double) * n);
+            c->t = e;
+            restart(c);
+            continue;
+        }
+        memcpy(c->x_prev, c->x_int, sizeof(double) * n);
+        c->t_prev = c->t_int;
+        if (radau(c, isfinite(c->t_stop) && c->t_stop > target && c->t_stop < e ?
+                  c->t_stop : e, 1, &status) != fmi2OK)
+            return fmi2Error;
+        if (status == BGC_REACHED && c->t_int == e)
+            c->h_next = 0.0;            /* on a breakpoint: the next step starts afresh */
+    }
 }
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
@@ -600,8 +654,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
     if (fabs(currentCommunicationPoint - c->t) > 1e-9 * fmax(1.0, fabs(c->t)))
         return fail(c, "fmi2DoStep at t = %.17g, but the FMU is at t = %.17g",
                     currentCommunicationPoint, c->t);
-    c->t = currentCommunicationPoint;
-    fmi2Status s = integrate(c, currentCommunicationPoint + communicationStepSize);
+    fmi2Status s = advance(c, currentCommunicationPoint + communicationStepSize);
     if (s != fmi2OK) c->state = ST_ERROR;
     return s;
 }

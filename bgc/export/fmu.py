@@ -176,9 +176,10 @@ def export(model, fmu, method: str = "parasitic", fmi: int = 2, params=(),
     compiler = toolchain.find()
     t0 = time.perf_counter()
     with progress.record() as timings:
-        system, p = _build(model, method, open_loops, params, parasitic, separation, out_dir)
+        system, p, inputs = _build(model, method, open_loops, params, parasitic, separation,
+                                   out_dir)
         with progress.stage("describe") as st:
-            unit = describe(system, p)
+            unit = describe(system, p, inputs)
             st.done(f"{unit.n_states} states, {len(unit.variables)} variables, "
                     f"{unit.n_indicators} event indicators")
         with progress.stage("binary") as st:
@@ -199,7 +200,13 @@ def _build(model, method, open_loops, params, parasitic, separation, out_dir):
     """The equation system and the parameter values the FMU starts from."""
     from bgc import pipeline
     from bgc.cli.options import check_overrides
-    c = pipeline.build(model, method, open_loops)
+    from bgc.export.inputs import add_inputs
+    from bgc.model import load
+    with progress.stage("load") as st:
+        m = load.load(model)
+        inputs = add_inputs(m)
+        st.done(f"{m.name}: {progress.count(len(inputs), 'input')}")
+    c = pipeline.build(m, method, open_loops)
     system = c.system
     names = [name for _, name, _ in system.params]
     p = np.array([float(v) for _, _, v in system.params], dtype=np.float64)
@@ -217,7 +224,7 @@ def _build(model, method, open_loops, params, parasitic, separation, out_dir):
         module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
         given = _set(p.copy(), names, params)
         p, _ = par.auto(module, c.model, module.initial_state(given), given, separation)
-    return system, _set(p, names, params)
+    return system, _set(p, names, params), inputs
 
 
 def _set(p, names, params):
@@ -264,13 +271,13 @@ def _indicators(system, rhs_asg) -> list:
     return found
 
 
-def describe(system, p) -> Unit:
-    """The FMU of an equation system at parameter values ``p``."""
+def describe(system, p, inputs=None) -> Unit:
+    """The FMU of an equation system at parameter values ``p``; ``inputs``: the
+    parameters that are its inputs (``inputs.add_inputs``)."""
+    inputs = inputs or {}
     from bgc import methods
     from bgc.codegen import emit, kernels
-    from bgc.codegen.equations import LinearBlock
     from bgc.methods.consistent import RANK_PARAM
-    from bgc.model.model import Excitation
     from bgc.solvers import sparse_lu
     m = system.model
     system_h, progs, jt = emit.programs(system)
@@ -320,6 +327,8 @@ def describe(system, p) -> Unit:
     base = 2 * n + len(system.outputs)
     for i, (sym, name, _) in enumerate(system.params):
         par = m.parameters.get(name)
+        if name in inputs:
+            continue
         if i in computed:
             variables.append(Variable(base + i, name, "calculatedParameter", "fixed",
                                       "calculated", unit=(par.unit or "") if par else "",
@@ -328,6 +337,11 @@ def describe(system, p) -> Unit:
         variables.append(Variable(
             base + i, name, "parameter", "fixed" if sym in fixed else "tunable", "exact",
             float(p[i]), (par.unit or "") if par else "", _param_doc(name, False)))
+    in_params = [names.index(name) for name in inputs]
+    for k, name in enumerate(inputs):
+        fmi_name, unit_name, doc = inputs[name]
+        variables.append(Variable(base + len(names) + k, fmi_name, "input", "continuous",
+                                  None, 0.0, unit_name, doc))
     c_model = dict(
         name=m.name, prefix=prefix, kernels=list(progs) + ["jac_full"],
         entries=["rhs_entry", "jac_entry", "guard_entry"],
@@ -345,19 +359,17 @@ def describe(system, p) -> Unit:
         imposed=[int(c in system.imposed) for c, _, _ in system.constraints],
         pose=pose, algebraic=algebraic, loads=loads,
         excitation=[i for i, s in enumerate(names) if s.startswith("excitation__")],
-        inputs=[], static_loads=int(static),
+        inputs=in_params, static_loads=int(static),
         rank_param=names.index(RANK_PARAM) if RANK_PARAM in names else -1,
         plan=[list(map(int, a)) for a in plan], n=n, n_work=kern.n_work,
         n_eval=kern.n_eval, n_ind=len(indicators), rtol=_real(m.settings.rtol),
         atol=_real(m.settings.atol), t_end=_real(m.settings.t_end),
         name_c=_c_string(m.name))
-    del Excitation
     unit = Unit(m.name, system.method, m.description or "", variables, c_model, ir,
                 ir_straight, prefix, interfaces, n, len(indicators), m.settings.t_end,
                 m.settings.rtol, notes=notes)
     unit.guid = _guid(unit)
     c_model["guid_c"] = _c_string(unit.guid)
-    _ = LinearBlock
     return unit
 
 

@@ -5,7 +5,8 @@ a separate process that never imports bgc; prints one JSON object.
 
     python run_fmpy.py JOBS_JSON
 
-JOBS_JSON: a list of {"fmu", "t_end", "rtol_me", "rtol_cs", "start": {name: value}}."""
+JOBS_JSON: a list of {"fmu", "t_end", "rtol_me", "rtol_cs", "start": {name: value},
+"input": {name: constant value}}."""
 
 import json
 import sys
@@ -42,6 +43,11 @@ def main():
     out = []
     for job in json.loads(sys.argv[1]):
         path, start = job["fmu"], job.get("start", {})
+        signals = None
+        if job.get("input"):
+            names = list(job["input"])
+            signals = np.array([(t, *job["input"].values()) for t in (0.0, job["t_end"])],
+                               dtype=[("time", np.float64)] + [(n, np.float64) for n in names])
         res = {"problems": validate_fmu(path)}
         md = read_model_description(path)
         for kind, rtol in (("ModelExchange", job["rtol_me"]), ("CoSimulation", job["rtol_cs"])):
@@ -49,7 +55,7 @@ def main():
                 continue
             r = simulate_fmu(path, fmi_type=kind, stop_time=job["t_end"],
                              output_interval=1e-3, relative_tolerance=rtol,
-                             start_values=start)
+                             start_values=start, input=signals)
             res[kind] = {n: r[n].tolist() for n in r.dtype.names}
         if md.modelExchange is not None:
             res["jacobian"], res["x0"] = jacobian(path, start)

@@ -270,11 +270,11 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             if (!isfinite(value[k]))
                 return fail(c, "parameter %s: %g is not finite", M->param_names[r - VR_P],
                             value[k]);
+            if (c->p[r - VR_P] != value[k]) c->going = 0;   /* changed: a fresh start */
             c->p[r - VR_P] = value[k];
-            c->going = 0;
         } else if (r >= VR_IN && r < VR_END) {
+            if (c->p[M->inputs[r - VR_IN]] != value[k]) c->going = 0;
             c->p[M->inputs[r - VR_IN]] = value[k];
-            c->going = 0;
         } else {
             return fail(c, "value reference %u cannot be set (a state, derivative or "
                         "output: bgc computes it)", vr[k]);

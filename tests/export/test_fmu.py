@@ -40,7 +40,7 @@ def run_fmpy(jobs) -> list[dict]:
     proc = subprocess.run([sys.executable, str(HERE / "run_fmpy.py"), json.dumps(jobs)],
                           capture_output=True, text=True, env=env, cwd=HERE, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    out = json.loads(proc.stdout)
+    out = json.loads(proc.stdout.strip().splitlines()[-1])     # (after fmpy's warnings)
     assert out["bgc_imported"] is False
     return out["results"]
 

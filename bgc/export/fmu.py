@@ -224,7 +224,20 @@ def _build(model, method, open_loops, params, parasitic, separation, out_dir):
         module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
         given = _set(p.copy(), names, params)
         p, _ = par.auto(module, c.model, module.initial_state(given), given, separation)
-    return system, _set(p, names, params), inputs
+    p = _set(p, names, params)
+    if system.algebraic:
+        _check_index2(model, method, open_loops, out_dir, p)
+    return system, p, inputs
+
+
+def _check_index2(model, method, open_loops, out_dir, p):
+    """A zcp model with its loops kept closed is an index-2 DAE, whose Newton matrices
+    are singular where its algebraic equations are dependent: refused here, at the
+    FMU's parameter values, as bgc simulate refuses it, not at the importer's run."""
+    from bgc import pipeline, simulate
+    module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
+    x, q, _ = simulate.prepare(module, module.initial_state(p), p)
+    simulate._check_index2(module, x, q, list(module.ALGEBRAIC), 0.0)
 
 
 def _set(p, names, params):

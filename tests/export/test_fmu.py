@@ -248,3 +248,25 @@ def test_excitation_as_input(gen_dir, compiled):
     p[module.PARAM_NAMES.index("excitation__pumping")] = 200.0
     results.pop("jacobian")
     check_runs(module, results, p, 1.0)
+
+
+@pytest.mark.slow
+def test_loops_kept_closed(gen_dir, tmp_path):
+    """zcp with --keep-loops: an index-2 DAE, Co-Simulation only (bgc's Radau takes its
+    mass matrix), equal to bgc's run; a model whose closed loops are redundant (Bricard's
+    linkage) is refused at export, as bgc simulate refuses it."""
+    from bgc.errors import BgcError
+    from bgc.pipeline import ensure_module
+    path = gen_dir / "fmu" / "four_bar_zcp_closed.fmu"
+    done = fmu_export.export(MODELS / "four_bar.yaml", path, "zcp", open_loops=False,
+                             out_dir=tmp_path)
+    assert done.interfaces == ["CoSimulation"] and done.notes
+    module, _, _ = ensure_module(MODELS / "four_bar.yaml", tmp_path, "zcp", open_loops=False)
+    results = run_fmpy([{"fmu": str(path), "t_end": 1.0, "rtol_me": RTOL_ME,
+                         "rtol_cs": RTOL_CS}])[0]
+    assert results["problems"] == [] and "ModelExchange" not in results
+    check_runs(module, results, module.PARAMS.copy(), 1.0)
+    with pytest.raises(BgcError, match="redundant constraints"):
+        fmu_export.export(MODELS / "bricard.yaml", tmp_path / "b.fmu", "zcp",
+                          open_loops=False, out_dir=tmp_path)
+    assert not (tmp_path / "b.fmu").exists()

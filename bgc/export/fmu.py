@@ -20,8 +20,6 @@ The stages, one structure in and one out each:
 from __future__ import annotations
 
 import hashlib
-import re
-import subprocess
 import tempfile
 import time
 import zipfile

@@ -168,10 +168,11 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
                    constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints]), mapping
 
 
-def render(system: EquationSystem) -> str:
-    """The module source for an equation system."""
+def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
+    """The kernels' programs of a system (its calls hoisted, ``hoist_calls``): name ->
+    (the assignments in causal order that its results need, [(out index, expr)]), and
+    the Jacobian's tape. ``kernels.lower`` turns them into IR."""
     system, hoisted = hoist_calls(system)
-    m = system.model
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = cone(system.assignments, dx)
     with progress.stage("jacobian") as st:
@@ -191,18 +192,26 @@ def render(system: EquationSystem) -> str:
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
     con_asg, _ = cone(system.assignments, con_exprs)
+    return system, {
+        "rhs": (rhs_asg, list(enumerate(dx))),
+        "jac": (jac_all, jt.partials),
+        "out": (out_asg, list(enumerate(out_exprs))),
+        "guard": (guard_asg, list(enumerate(guard_exprs))),
+        "con": (con_asg, list(enumerate(con_exprs)))}, jt
+
+
+def render(system: EquationSystem) -> str:
+    """The module source for an equation system."""
+    system, progs, jt = programs(system)
+    m = system.model
+    dx = [st.dsym for st in system.states]
     freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
     # every name the code assigns or reads is written as is: each must be an identifier
     for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
-    kern = kernels.lower(system, kernels.PLACEHOLDER, {
-        "rhs": (rhs_asg, list(enumerate(dx))),
-        "jac": (jac_all, jt.partials),
-        "out": (out_asg, list(enumerate(out_exprs))),
-        "guard": (guard_asg, list(enumerate(guard_exprs))),
-        "con": (con_asg, list(enumerate(con_exprs)))}, jt)
+    kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt)
     # the kernels' names: the module's and its IR's digest (one model compiled with other
     # options is other code; two such modules in one process must not share a name)
     digest = hashlib.sha256(f"{kern.ir}\n{kern.ir_straight}".encode()).hexdigest()[:12]

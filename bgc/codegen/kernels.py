@@ -1592,9 +1592,10 @@ ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "gua
 
 
 def lower(system, prefix: str, programs: dict, jt) -> Kernels:
-    """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)]))
-    and for the Jacobian from its tape ``jt`` (program ``jac`` computes the tape's
-    partials); functions named ``<prefix>_<name>``, ``prefix`` an identifier."""
+    """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)]):
+    ``PROGRAMS``, and any other, e.g. an FMU's event indicators) and for the Jacobian
+    from its tape ``jt`` (program ``jac`` computes the tape's partials); functions named
+    ``<prefix>_<name>``, ``prefix`` an identifier."""
     layout = Layout(system, max(jt.n_colours, 1))
     n_eval = layout.size
     layout.pv = layout._region(max(len(jt.src), 1))
@@ -1616,7 +1617,7 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
                       "double*, double*, i32*, double*, i32*, double*, i32*, i32*, i32*)")
         mod.functions.append(_lstsq_ir(prefix))
     mod.tables(system.tables)
-    for name in PROGRAMS:
+    for name in programs:           # PROGRAMS, and any other a caller asks for
         mod.program(name, *programs[name])
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:

@@ -11,10 +11,13 @@ import click
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import (
     NUMBER,
+    check_method_options,
+    check_out_dir,
     json_option,
     loops_option,
     method_option,
     out_dir_option,
+    parasitic_option,
     params_option,
     progress_option,
 )
@@ -23,15 +26,13 @@ from bgc.methods.parasitic import SEPARATION
 
 @main.command("export")
 @click.argument("model", type=click.Path())
-@click.option("--fmu", "fmu_path", required=True, type=click.Path(dir_okay=False),
-              metavar="OUT.fmu", help="the FMU to write")
+@click.option("--fmu", "--out", "fmu_path", required=True, type=click.Path(dir_okay=False),
+              metavar="OUT.fmu", help="the FMU to write (--out, as every command's output "
+                                      "file)")
 @click.option("--fmi", type=click.IntRange(2, 3), default=2, show_default=True,
               help="FMI version (2.0; 3.0 is not written yet)")
 @params_option("a parameter's value in the FMU (its start value there)")
-@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
-              default="given", show_default=True,
-              help="method parasitic: the joints' stiffness and damping as the model gives "
-                   "them, or chosen from the eigenfrequencies (as bgc simulate)")
+@parasitic_option
 @click.option("--separation", type=NUMBER, default=SEPARATION, show_default=True,
               help="--parasitic auto: parasitic frequencies over the highest functional one")
 @out_dir_option
@@ -50,10 +51,10 @@ def export_cmd(model, fmu_path, fmi, params, parasitic_mode, separation, out_dir
     pip install ziglang). -o is where --parasitic auto keeps the generated module it
     linearizes. See docs/fmu.md.
     """
-    from bgc.errors import BgcError
     from bgc.export import fmu
-    if parasitic_mode == "auto" and not separation > 1:
-        raise BgcError(f"--separation must be > 1, got {separation}", key="--separation")
+    check_method_options(method, keep_loops, parasitic_mode,
+                         separation if parasitic_mode == "auto" else None)
+    check_out_dir(out_dir)
     done = fmu.export(model, fmu_path, method, fmi, params, not keep_loops, parasitic_mode,
                       separation, out_dir)
     if as_json:

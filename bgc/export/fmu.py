@@ -197,28 +197,22 @@ def export(model, fmu, method: str = "parasitic", fmi: int = 2, params=(),
 def _build(model, method, open_loops, params, parasitic, separation, out_dir):
     """The equation system and the parameter values the FMU starts from."""
     from bgc import pipeline
-    from bgc.cli.options import check_overrides
+    from bgc.cli.options import check_overrides, check_params
     from bgc.export.inputs import add_inputs
     from bgc.model import load
     with progress.stage("load") as st:
         m = load.load(model)
         inputs = add_inputs(m)
         st.done(f"{m.name}: {progress.count(len(inputs), 'input')}")
+    check_params(pipeline.Declared.of_model(m, method), params)     # before the build
+    check_overrides(model, [(n, v) for n, v in params if n in m.parameters], m)
     c = pipeline.build(m, method, open_loops)
     system = c.system
     names = [name for _, name, _ in system.params]
     p = np.array([float(v) for _, _, v in system.params], dtype=np.float64)
-    for name, _ in params:
-        if name not in names:
-            raise BgcError(f"unknown parameter '{name}'", key="--param",
-                           hint="parameters: " + ", ".join(names))
-    check_overrides(model, [(n, v) for n, v in params if n in c.model.parameters])
+    check_params(pipeline.Declared.of_system(system), params)       # the exact ones
     if parasitic == "auto":
-        from bgc import methods
         from bgc.methods import parasitic as par
-        if methods.get(method).ideal:
-            raise BgcError(f"--parasitic auto applies to --method parasitic, not {method}",
-                           key="--parasitic")
         module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
         given = _set(p.copy(), names, params)
         p, _ = par.auto(module, c.model, module.initial_state(given), given, separation)

@@ -73,7 +73,19 @@ def native_loops_once(gen_dir):
             job.wait()
             fcntl.flock(lock, fcntl.LOCK_UN)
         threading.Thread(target=release, daemon=True).start()
+    # bgc export's Radau object (21 s of CPU), compiled in a child beside the tests as
+    # well: object_code's lock makes every other caller wait for it, then read it
+    from bgc.export import radau
+    threading.Thread(target=_radau_object, args=(radau,), daemon=True).start()
     yield
+
+
+def _radau_object(radau):
+    """The FMU's Radau object into bgc's cache (an error shows in the tests that use it)."""
+    try:
+        radau.object_code()
+    except Exception:           # noqa: BLE001 - reported where it is used
+        pass
 
 
 @pytest.fixture(scope="session")

@@ -122,15 +122,35 @@ def cache_dir() -> Path:
     return Path(user) / "bgc"
 
 
-def object_code() -> bytes:
-    """The loop's object code, compiled (in a child process) if not cached yet."""
-    path = cache_dir() / f"radau5_fmu.{key()}.o"
+def _cached(path: Path) -> bytes | None:
     try:
         data = path.read_bytes()
-        if data[:32] == hashlib.sha256(data[32:]).digest():
-            return data[32:]
     except OSError:
-        pass
+        return None
+    return data[32:] if data[:32] == hashlib.sha256(data[32:]).digest() else None
+
+
+def object_code() -> bytes:
+    """The loop's object code, compiled (in a child process) if not cached yet; two
+    processes that both miss the cache compile it once (a lock beside the cache)."""
+    path = cache_dir() / f"radau5_fmu.{key()}.o"
+    obj = _cached(path)
+    if obj is not None:
+        return obj
+    import fcntl
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        lock = open(path.parent / "radau5_fmu.lock", "a+")
+    except OSError:             # no cache directory: compile here, unshared
+        return _compile(path)
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        obj = _cached(path)     # compiled by another process meanwhile
+        return obj if obj is not None else _compile(path)
+
+
+def _compile(path: Path) -> bytes:
+    """Compile the object in a child process and keep it at ``path`` (if it can)."""
     import tempfile
     with tempfile.TemporaryDirectory(prefix="bgc-radau-") as tmp:
         env = dict(os.environ, NUMBA_CPU_NAME="generic", NUMBA_CPU_FEATURES="",

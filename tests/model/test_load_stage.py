@@ -177,20 +177,23 @@ def test_geometry_readers_are_exact():
 
 def test_an_output_may_declare_its_unit():
     """``outputs: {name: {expr, unit}}`` beside the plain form (issue 27): the unit is kept
-    for labels; a unit outside the safe characters, a number, an unknown key or a missing
-    expr is refused at its line and key."""
+    for labels (a number given as a unit is its text, as earlier bgc read it); a unit
+    outside the safe characters, a list, an unknown key or a missing expr is refused at
+    its line and key."""
     text = RLC.replace("  i: l.f\n", "  i: {expr: l.f, unit: A}\n").replace(
         "  v_c: c.e\n", "  v_c: {expr: c.e, unit: \"1\"}\n  charge: c.q\n")
     m = load.loads(text, "u.yaml")
     assert [(o.name, o.unit, str(o.expr)) for o in m.outputs] == [
         ("i", "A", "REF_l__f"), ("v_c", "1", "REF_c__e"), ("charge", None, "REF_c__q")]
+    numbered = load.loads(text.replace("unit: A}", "unit: 1}"), "u.yaml")   # read as text
+    assert numbered.outputs[0].unit == "1"
     line = text.splitlines().index("  i: {expr: l.f, unit: A}") + 1
     for form, key, says in [
             ("{expr: l.f, unit: \"A$\\\\x$\"}", "outputs.i.unit", "not a unit text"),
             ("{expr: l.f, unit: 'A\"); import os; (\"'}", "outputs.i.unit", "not a unit text"),
             ("{expr: l.f, unit: \"\\u00b5A\"}", "outputs.i.unit", "not a unit text"),
             ("{expr: l.f, unit: " + "m" * 33 + "}", "outputs.i.unit", "not a unit text"),
-            ("{expr: l.f, unit: 3}", "outputs.i.unit", "expected a unit text"),
+            ("{expr: l.f, unit: [A]}", "outputs.i.unit", "expected a unit text"),
             ("{expr: l.f, units: A}", "outputs.i.units", "unknown key 'units'"),
             ("{unit: A}", "outputs.i", "missing 'expr'"),
             ("{expr: l.nope, unit: A}", "outputs.i.expr", "nope")]:

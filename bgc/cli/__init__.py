@@ -1,6 +1,7 @@
-"""The ``bgc`` command line: check, compile, simulate, frf, tune, sweep, run, bench, draw.
+"""The ``bgc`` command line: check, compile, simulate, frf, modes, tune, sweep, run, bench,
+draw.
 
-One module per command (``check``, ``compile``, ``simulate``, ``frf``, ``tune``,
+One module per command (``check``, ``compile``, ``simulate``, ``frf``, ``modes``, ``tune``,
 ``sweep``, ``run``, ``bench``, ``draw``), each registering itself on the group ``app.main``; ``app``
 holds the group and the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130),
 ``options`` what several commands share. The long stages report their progress on stderr
@@ -12,7 +13,18 @@ generator are imported where a command needs them, so that ``bgc simulate`` on a
 module loads none of them (tests/cli/test_warm_start.py).
 """
 
-from bgc.cli import bench, check, compile, draw, frf, run, simulate, sweep, tune  # noqa: F401
+from bgc.cli import (  # noqa: F401
+    bench,
+    check,
+    compile,
+    draw,
+    frf,
+    modes,
+    run,
+    simulate,
+    sweep,
+    tune,
+)
 from bgc.cli.app import main
 
 __all__ = ["main"]

@@ -17,6 +17,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
+# the tutorial's model: a cabin on its suspension and a tuned mass (Den Hartog's absorber)
+TUTORIAL_MODEL = ROOT / "docs" / "tutorial" / "absorber.yaml"
 # models whose numba compilation and runs take minutes: their tests are marked slow (the
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
 # CI scale)

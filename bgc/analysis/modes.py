@@ -67,9 +67,10 @@ class Mode:
         """The JSON form: frequency, damping, kind, bodies; the shape over the body pose
         coordinates (``body_states``: body -> {coordinate: state index}) as [re, im], or
         over every state (``state_names``) for a model without bodies."""
-        out = {"frequency_hz": round(self.frequency_hz, 6),
-               "damping_ratio": round(self.damping_ratio, 6),
-               "damped_hz": round(self.damped_hz, 6), "kind": self.kind,
+        sig = lambda v: float(f"{v:.9g}")  # noqa: E731
+        out = {"frequency_hz": sig(self.frequency_hz),
+               "damping_ratio": sig(self.damping_ratio),
+               "damped_hz": sig(self.damped_hz), "kind": self.kind,
                "eigenvalue": [float(self.eigenvalue.real), float(self.eigenvalue.imag)],
                "bodies": [{"name": n, "share": round(s, 4)} for n, s in self.bodies]}
         pair = lambda z: [float(f"{z.real:.6g}"), float(f"{z.imag:.6g}")]  # noqa: E731

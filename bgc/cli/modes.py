@@ -28,8 +28,7 @@ from bgc.pipeline import ensure_module
 @click.argument("model", type=click.Path())
 @click.option("--f-min", type=NUMBER, default=0.0, show_default=True,
               help="band start [Hz] (natural frequencies)")
-@click.option("--f-max", type=NUMBER, default=math.inf, show_default="every mode",
-              help="band end [Hz]")
+@click.option("--f-max", type=NUMBER, help="band end [Hz] (default: every mode)")
 @params_option("override a parameter (no recompilation)")
 @out_dir_option
 @method_option
@@ -48,6 +47,7 @@ def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, as_json)
     from bgc.analysis import frf, mechanism
     from bgc.analysis import modes as bmodes
     from bgc.cli.frf import parameters
+    f_max = math.inf if f_max is None else f_max
     if not 0 <= f_min < f_max:
         raise BgcError(f"need 0 <= --f-min < --f-max, got {f_min} and {f_max}",
                        key="--f-min")

@@ -155,8 +155,9 @@ def test_sarib_modes_agree_across_methods_and_carry_its_resonances(compiled, gen
     """The SARIB about its static equilibrium: lagrange and zcp give the same functional
     modes in their constraint subspaces (1e-4 Hz), parasitic the same within its joints'
     compliance (0.3 %: 0.05 Hz on the 16.7 Hz mode) plus its parasitic modes; the
-    pumping mode is carried by the four beaters alike; every resonance bgc frf finds under pumping is one of them to 0.01 Hz,
-    while the peak of a_OF_z sits 0.09 Hz below it (the anti-resonance beside it)."""
+    pumping mode is carried by the four beaters alike; every resonance bgc frf finds
+    under pumping is one of them to 0.01 Hz, while the peak of a_OF_z sits 0.09 Hz below
+    it (the anti-resonance beside it)."""
     from helpers import MODELS
     reps = {}
     for method in ("zcp", "lagrange", "parasitic"):

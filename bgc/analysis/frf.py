@@ -122,10 +122,15 @@ def central_differences(fun, x, cols=None, rel: float = 1e-6) -> np.ndarray:
     return out if out is not None else np.zeros((len(np.asarray(fun(x))), 0))
 
 
+def grid(f_min: float, f_max: float, step: float = 0.01) -> np.ndarray:
+    """The frequencies of a ``step`` grid over [f_min, f_max]."""
+    return np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
+
+
 def sweep(lin: Linearization, output: str, f_min: float, f_max: float,
           step: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
     """The frequencies of a ``step`` grid over [f_min, f_max] and H there."""
-    f = np.linspace(f_min, f_max, int(round((f_max - f_min) / step)) + 1)
+    f = grid(f_min, f_max, step)
     return f, lin.response(f, output)
 
 

@@ -246,8 +246,13 @@ def resonances(module, model, lin: Linearization, output: str, f_min: float, f_m
     anti, peaks = frf.extrema(lin, output, f_min, f_max, grid)
     behind = analyse(module, model, lin, kinds=False).behind(output, peaks) \
         if peaks else []
-    res = sorted({md.frequency_hz if md is not None else f for md, f in zip(behind, peaks)})
-    return anti, res, peaks
+    return anti, natural(behind, peaks), peaks
+
+
+def natural(behind: list, peaks) -> list[float]:
+    """The resonances of peaks whose modes are ``behind`` (``Modal.behind``): each mode's
+    natural frequency once, a peak no mode explains at its own frequency."""
+    return sorted({md.frequency_hz if md is not None else f for md, f in zip(behind, peaks)})
 
 
 def body_states(mechanism) -> dict:

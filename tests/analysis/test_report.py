@@ -132,3 +132,38 @@ def test_the_chirp_ripples_are_not_anti_resonances(tutorial_report):
     assert rep["frf_antiresonances_hz"]["a_cabin"] == [17.94]
     assert [f for f in mins if f not in trans][0] == pytest.approx(17.95, abs=0.02)
     assert rep["envelope_transients_hz"]["x_tuned"]     # 19.29: its ripple too
+
+
+@pytest.mark.slow
+def test_main_job_report(compiled, gen_dir, tmp_path, monkeypatch, browser):  # noqa: F811
+    """make run's report: the SARIB's pumping chirp under zcp, under 20 MB, opened with no
+    error and no request; its outputs are the CSV's, its 3D view drawn and moving, its
+    modes the pumping one among them; the envelope's 17.53 Hz dip is the sweep's
+    transient, its 18.04 Hz one the anti-resonance (the FRF's 18.06)."""
+    compiled("sarib", "zcp")
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(main, ["simulate", "--excitation", "chirp", "-o", str(gen_dir),
+                                  "--json", "-q"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    html = tmp_path / rep["files"]["report"]
+    assert html.name == "sarib_pumping_chirp.html" and html.stat().st_size < 20e6
+    assert rep["envelope_transients_hz"]["a_OF_z"] == [17.53]
+    assert 18.04 in rep["envelope_minima_hz"]["a_OF_z"]
+    page = open_page(browser, html)
+    assert page.errors() == [] and only_the_file(page, html) == []
+    p = page.page
+    names, data = read_csv(tmp_path / rep["files"]["csv"])
+    for k, name in enumerate(names[1:], 1):
+        y = np.array(p.evaluate(f"bgcReport.output({name!r})"))
+        assert y == pytest.approx(data[:, k], rel=1e-10, abs=1e-12 * np.abs(data[:, k]).max())
+    still = page.shot("#view3d")
+    assert drawn(still) > 0.02
+    p.evaluate("bgcView.seek(16.5)")
+    p.wait_for_function("!bgcView.state.busy")
+    a = page.shot("#view3d")
+    p.evaluate("bgcView.seek(16.52)")
+    p.wait_for_function("!bgcView.state.busy")
+    assert changed(a, page.shot("#view3d")) > 1e-4
+    modes = p.evaluate("bgcReport.data.modes")
+    assert any(abs(m["frequency_hz"] - 16.22) < 0.01 for m in modes)

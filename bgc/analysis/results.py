@@ -88,6 +88,31 @@ def axis_label(name: str, unit: str | None) -> str:
     return f"{name} [{'-' if unit.strip() == '1' else unit}]"
 
 
+# the units of the parameters a joint's values become (``<joint>__<role>``), by role;
+# a free direction's own (``<dir>_k`` ...) by whether it turns (r) or slides (t)
+_JOINT_UNITS = {"stiffness": "N/m", "rot_stiffness": "N m/rad", "damping": "N s/m",
+                "rot_damping": "N m s/rad"}
+_DIRECTION_UNITS = {"k": ("N/m", "N m/rad"), "c": ("N s/m", "N m s/rad"),
+                    "preload": ("N", "N m"), "load": ("N", "N m")}
+
+
+def parameter_unit(model, name: str) -> str | None:
+    """The unit of a module parameter: the model's declared one (``parameters:``), else
+    that of the joint value it holds (``hinge__rx_k``: N m/rad); None if not known."""
+    par = model.parameters.get(name) if model is not None else None
+    if par is not None and par.unit:
+        return par.unit
+    joint, sep, role = name.rpartition("__")
+    if not sep or model is None or joint not in model.joints:
+        return None
+    if role in _JOINT_UNITS:
+        return _JOINT_UNITS[role]
+    label, _, kind = role.partition("_")
+    if kind in _DIRECTION_UNITS and len(label) == 2 and label[0] in "tr":
+        return _DIRECTION_UNITS[kind][label[0] == "r"]
+    return None
+
+
 def noise_panel(ax, peaks: dict, unit: str | None, floor: float, what: str = "peak") -> None:
     """A panel whose outputs (``peaks``: name -> largest value, the ``what``) are numerical
     noise (``bgc.analysis.noise``): what they are, in words, over a zero line and the band

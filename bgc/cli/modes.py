@@ -74,8 +74,8 @@ def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, as_json)
         click.echo(json.dumps(report, indent=2))
         return
     band = f"[{f_min:g}, {'inf' if math.isinf(f_max) else f'{f_max:g}'}] Hz"
-    click.echo(f"{m.name} ({method}): {len(shown)} modes in {band}, linearized about the "
-               f"equilibrium (|dx/dt| = {lin.residual:.2g})")
+    click.echo(f"{m.name} ({method}): {progress.count(len(shown), 'mode')} in {band}, "
+               f"linearized about the equilibrium (|dx/dt| = {lin.residual:.2g})")
     if modal.basis is not None:
         click.echo(f"  in the constraint subspace: {report['subspace']} of {modal.states} "
                    f"states ({modal.constraints} independent constraint rows)")

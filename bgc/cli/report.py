@@ -12,6 +12,7 @@ import click
 from bgc.cli import simulate as sim
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import json_option, progress_option
+from bgc.fileio import check_writable
 
 # simulate's options that choose its files (the report is the one file here), its JSON
 # and --quiet (this command has its own)
@@ -36,6 +37,7 @@ def report(out, as_json, **options):
     o = sim.resolve(options, ctx)
     o = replace(o, out=None, plot=None, zoom=None,
                 report=o.report if options["model"] is None or out else "report.html")
+    check_writable(o.report, "--out")
     run = sim.run_for(o)
     path = Path(run.files["report"])
     if as_json:

@@ -59,6 +59,10 @@ def linearize(module, model, direction: str | None = None, p=None,
     alone (B and D zero: what ``bgc modes`` reads), every excitation off and none
     needed."""
     exc = model.excitation
+    if len(getattr(module, "ALGEBRAIC", ())):
+        raise BgcError("a module whose kinematic loops are kept closed (an index-2 DAE, zcp "
+                       "--keep-loops) is not linearized", key="--keep-loops",
+                       hint="drop --keep-loops: the loops opened give the same motion")
     names = list(module.PARAM_NAMES)
     p0 = np.array(module.PARAMS if p is None else p, dtype=np.float64)
     if direction is not None:

@@ -90,17 +90,19 @@ def _radau_object(radau):
 
 @pytest.fixture(scope="session")
 def compiled(gen_dir):
-    """compiled(name, method) -> generated module of models/<name>.yaml (cached per
-    session)."""
+    """compiled(name, method) -> generated module of models/<name>.yaml, or of the model
+    file ``name`` (a Path), in ``gen_dir`` (cached per session)."""
     cache = {}
 
-    def get(name: str, method: str = "parasitic"):
+    def get(name, method: str = "parasitic"):
+        """``name``: a shipped model's, or the path of another model file."""
         if (name, method) not in cache:
             # one worker compiles (source and machine code, cached on disk) while the
             # others wait, then load it
-            with open(gen_dir / f"{name}_{method}.lock", "w") as lock:
+            file = MODELS / f"{name}.yaml" if isinstance(name, str) else name
+            with open(gen_dir / f"{file.stem}_{method}.lock", "w") as lock:
                 fcntl.flock(lock, fcntl.LOCK_EX)
-                model = load.load(MODELS / f"{name}.yaml")
+                model = load.load(file)
                 path = emit.module_path(model.name, gen_dir, method)
                 if emit.is_stale(path, model.digest, method):
                     compile_model(model, gen_dir, method)

@@ -17,6 +17,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
+# the tutorial's model: a cabin on its suspension and a tuned mass (Den Hartog's absorber)
+TUTORIAL_MODEL = ROOT / "docs" / "tutorial" / "absorber.yaml"
 # models whose numba compilation and runs take minutes: their tests are marked slow (the
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
 # CI scale)
@@ -173,3 +175,60 @@ def slider_closure(r):
     th = np.arctan2(r.column("A_z"), r.column("A_x"))
     x = rc * np.cos(th) + np.sqrt(rl ** 2 - (rc * np.sin(th)) ** 2)
     return np.abs(r.column("slider_x") - x).max(), th
+
+
+# ------------------------------------------------------------------ a real browser
+CHROMIUM = "/usr/bin/chromium"      # Debian's, installed by .ci/run
+# headless without a GPU: WebGL (plotly's 3D and scattergl) through SwiftShader, which
+# chromium no longer falls back to unless told; no network, no profile of the user's
+CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync",
+                  "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+
+
+class Page:
+    """A page opened in headless chromium (playwright, driving Debian's chromium, never a
+    browser of its own): what it logged and every request it made, kept from the start."""
+
+    def __init__(self, page):
+        self.page = page
+        self.console: list[tuple[str, str]] = []
+        self.requests: list[str] = []
+        page.on("console", lambda m: self.console.append((m.type, m.text)))
+        page.on("pageerror", lambda e: self.console.append(("pageerror", str(e))))
+        page.on("request", lambda r: self.requests.append(r.url))
+
+    def errors(self) -> list[str]:
+        return [f"{k}: {t}" for k, t in self.console if k in ("error", "pageerror")]
+
+    def shot(self, selector: str) -> np.ndarray:
+        """The element's screenshot as an RGB array."""
+        import io
+
+        import matplotlib.image as mpimg
+        png = self.page.locator(selector).screenshot()
+        return mpimg.imread(io.BytesIO(png), format="png")[..., :3]
+
+
+def open_page(browser, path, width: int = 1400, height: int = 1000) -> Page:
+    """``path`` (a local HTML file) opened in a fresh context of ``browser``, waited for
+    until the page says it is drawn (``body[data-ready]``)."""
+    ctx = browser.new_context(viewport={"width": width, "height": height})
+    page = Page(ctx.new_page())
+    page.page.goto(Path(path).resolve().as_uri())
+    page.page.wait_for_selector("body[data-ready='1']", timeout=120_000)
+    return page
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless chromium for a test module (playwright gives it a fresh profile); a
+    missing chromium fails, naming the fix."""
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"{CHROMIUM} is missing: apt-get install -y chromium (.ci/run does)")
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+        yield chromium
+        chromium.close()

@@ -92,3 +92,32 @@ def minima_hz(curves: dict | None, digits: int) -> dict | None:
     if curves is None:
         return None
     return {name: [round(f, digits) for f in c[2]] for name, c in curves.items()}
+
+
+def sweep_rate(chirp: dict) -> float:
+    """The chirp's sweep rate [Hz/s] (negative: downwards)."""
+    return (chirp["f_end"] - chirp["f_start"]) / (chirp["t3"] - chirp["t2"])
+
+
+def explain(curves: dict, chirp: dict, frf_anti: dict, lag: float) -> dict:
+    """Which envelope minima are the structure's: name -> (anti-resonances, transients).
+
+    A chirp's envelope follows the steady state |H(f)| late: the response builds up and
+    decays with the modes' time constants, so a minimum of |H| shows up to ``lag``
+    [s] of sweep later (``lag``: the slowest functional mode's 1/(zeta omega) in the
+    band) and two envelope periods either way. A minimum of the envelope within that
+    window of an anti-resonance of the FRF (``frf_anti``: name -> [Hz]) is that
+    anti-resonance; one no anti-resonance explains is the sweep's own: the beating of a
+    mode's free vibration, started as the sweep passed its resonance, against the forced
+    response (the ripples after a resonance), or a nonlinear effect the FRF cannot show."""
+    rate = sweep_rate(chirp)
+    out = {}
+    for name, (_, _, mins) in curves.items():
+        anti, trans = [], []
+        for fm in mins:
+            step = 2 * abs(rate) / max(fm, 1e-9)          # two envelope periods
+            ok = any(-step <= (fm - fa) * np.sign(rate) <= abs(rate) * lag + step
+                     for fa in frf_anti.get(name, ()))
+            (anti if ok else trans).append(fm)
+        out[name] = (anti, trans)
+    return out

@@ -63,9 +63,11 @@ def save_figure(fig, path: str | Path, title: str) -> Path:
     import matplotlib.pyplot as plt
     try:
         fmt = plot_format(path)     # the temporary file's suffix is .tmp
+        # constrained layout keeps room for the title above the panels' tick labels
+        # (tight_layout let it sit on the top panel's frame)
+        fig.set_layout_engine("constrained")
         if title:
             fig.suptitle(title)
-        fig.tight_layout()
         return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format=fmt), "plot")
     finally:
         plt.close(fig)
@@ -79,8 +81,36 @@ def output_units(module) -> dict[str, str]:
 
 
 def axis_label(name: str, unit: str | None) -> str:
-    """``name [unit]``; the name alone where the model declares no unit."""
-    return f"{name} [{unit}]" if unit else name
+    """``name [unit]``, a dimensionless unit ("1") as ``[-]``; the name alone where the
+    model declares no unit."""
+    if not unit:
+        return name
+    return f"{name} [{'-' if unit.strip() == '1' else unit}]"
+
+
+# the units of the parameters a joint's values become (``<joint>__<role>``), by role;
+# a free direction's own (``<dir>_k`` ...) by whether it turns (r) or slides (t)
+_JOINT_UNITS = {"stiffness": "N/m", "rot_stiffness": "N m/rad", "damping": "N s/m",
+                "rot_damping": "N m s/rad"}
+_DIRECTION_UNITS = {"k": ("N/m", "N m/rad"), "c": ("N s/m", "N m s/rad"),
+                    "preload": ("N", "N m"), "load": ("N", "N m")}
+
+
+def parameter_unit(model, name: str) -> str | None:
+    """The unit of a module parameter: the model's declared one (``parameters:``), else
+    that of the joint value it holds (``hinge__rx_k``: N m/rad); None if not known."""
+    par = model.parameters.get(name) if model is not None else None
+    if par is not None and par.unit:
+        return par.unit
+    joint, sep, role = name.rpartition("__")
+    if not sep or model is None or joint not in model.joints:
+        return None
+    if role in _JOINT_UNITS:
+        return _JOINT_UNITS[role]
+    label, _, kind = role.partition("_")
+    if kind in _DIRECTION_UNITS and len(label) == 2 and label[0] in "tr":
+        return _DIRECTION_UNITS[kind][label[0] == "r"]
+    return None
 
 
 def noise_panel(ax, peaks: dict, unit: str | None, floor: float, what: str = "peak") -> None:
@@ -155,17 +185,39 @@ def mark_minima(ax, mins) -> list:
         at = (fm - x0) / (x1 - x0) if x1 > x0 else 0.5
         left = at > 0.85 or (row == 0 and len(marked) > 1 and at > 0.15)
         out.append(ax.annotate(f"{fm:.2f} Hz", (fm, 0.0), xycoords=trans,
-                               xytext=(-4 if left else 4, 4 + 13 * row),
+                               xytext=(-4 if left else 4, 8 + 13 * row),
                                textcoords="offset points", ha="right" if left else "left",
                                va="bottom", fontsize=8, color=colour))
     return out
 
 
+def mark_transients(ax, freqs) -> None:
+    """Envelope minima that no anti-resonance of the linearization explains (the sweep's
+    transients, ``envelope.explain``): thin grey dotted lines, unlabelled, named once in
+    the legend, so they cannot be read as anti-resonances."""
+    for i, f in enumerate(freqs):
+        ax.axvline(f, color="0.55", lw=0.8, ls=":",
+                   label="minimum of the sweep's transient" if i == 0 else None)
+
+
+def mark_frf(ax, freqs) -> None:
+    """The linearization's anti-resonances (``bgc frf``) as triangles on the bottom edge."""
+    from matplotlib.transforms import blended_transform_factory
+    trans = blended_transform_factory(ax.transData, ax.transAxes)
+    if freqs:
+        ax.plot(freqs, [0.0] * len(freqs), "^", color="C2", ms=6, transform=trans,
+                clip_on=False, label="anti-resonance of the FRF (bgc frf)")
+
+
 def plot_envelopes(curves: dict, path: str | Path, title: str = "",
-                   units: dict | None = None, floor: dict | None = None) -> Path:
+                   units: dict | None = None, floor: dict | None = None,
+                   explained: dict | None = None, frf_anti: dict | None = None) -> Path:
     """One panel per output: its envelope over a chirp against the instantaneous
     frequency, the minima marked (``curves``: name -> (freq, amplitude, minima)); an
-    envelope below its noise ``floor`` is stated, not drawn, and has no minima."""
+    envelope below its noise ``floor`` is stated, not drawn, and has no minima. With
+    ``explained`` (``envelope.explain``: name -> (anti-resonances, transients)) only the
+    minima an anti-resonance of the linearization explains are marked as such, the
+    sweep's transients drawn apart, and ``frf_anti`` (name -> [Hz]) shown on the axis."""
     units, floor = units or {}, floor or {}
     fig, axes = panels(len(curves), 2.2)
     for ax, (name, (f, a, mins)) in zip(axes[:, 0], curves.items()):
@@ -174,7 +226,16 @@ def plot_envelopes(curves: dict, path: str | Path, title: str = "",
                         "envelope at most")
         else:
             ax.semilogy(f, a, lw=1.2)
-            mark_minima(ax, mins)
+            if explained is not None and name in explained:
+                anti, trans = explained[name]
+                mark_transients(ax, trans)
+                mark_minima(ax, anti)
+            else:
+                mark_minima(ax, mins)
+            if frf_anti is not None:
+                mark_frf(ax, [x for x in frf_anti.get(name, []) if f.min() <= x <= f.max()])
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=7, loc="upper right")
         ax.set_ylabel(axis_label(f"|{name}|", units.get(name)))
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel("instantaneous excitation frequency [Hz]")

@@ -55,6 +55,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
     # twelve parameters, one per option as click passes them, each read once below: a
     # settings object would only rename them (simulate's 22 have one, SimulateOptions)
     from bgc.analysis import frf as bfrf
+    from bgc.analysis import modes
     bfrf.check_band(f_min, f_max)
     check_method_options(method, keep_loops, parasitic_mode)
     check_out_dir(out_dir)
@@ -67,11 +68,12 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
         check_overrides(model, params, decl.model)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
                                  check=check)
-    p, choice = _parameters(module, m, method, params, parasitic_mode)
+    p, choice = parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
         lin = bfrf.linearize(module, m, direction, p)
         f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
-        anti, res = bfrf.extrema(lin, output, f_min, f_max, grid)
+        anti, res, peaks = modes.resonances(module, m, lin, output, f_min, f_max,
+                                            grid)
         stage.done(f"{progress.count(len(f), 'frequency', 'frequencies')}, "
                    f"{progress.count(len(anti), 'anti-resonance')}, "
                    f"{progress.count(len(res), 'resonance')}")
@@ -79,6 +81,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
               "f_min": f_min, "f_max": f_max, "equilibrium_residual": lin.residual,
               "antiresonances_hz": [round(f, 2) for f in anti],
               "resonances_hz": [round(f, 2) for f in res],
+              "peaks_hz": [round(f, 2) for f in peaks],
               "parasitic": choice.to_dict() if choice else None}
     if out:
         from bgc.analysis.results import write_table
@@ -92,12 +95,14 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
     if choice:
         click.echo(choice.describe())
     click.echo(f"  anti-resonances: {', '.join(f'{f:.2f}' for f in anti) or 'none'} Hz")
-    click.echo(f"  resonances: {', '.join(f'{f:.2f}' for f in res) or 'none'} Hz")
+    click.echo(f"  resonances: {', '.join(f'{f:.2f}' for f in res) or 'none'} Hz (natural "
+               f"frequencies of the modes behind the peaks of |H|, at "
+               f"{', '.join(f'{f:.2f}' for f in peaks) or 'none'} Hz)")
     if out:
         click.echo(f"  csv: {report['files']['csv']}")
 
 
-def _parameters(module, model, method, params, mode):
+def parameters(module, model, method, params, mode):
     """The module's parameters with ``-p`` applied; under ``--parasitic auto`` the joints'
     stiffness and damping chosen first (the explicit ``-p`` values still win)."""
     p = parse_params(module, params)

@@ -85,6 +85,7 @@ class SimulateOptions:
     amplitude: float | None
     frequency: float | None
     zoom: tuple[float, float] | None
+    report: str | None
     method: str
     keep_loops: bool
     as_json: bool
@@ -106,6 +107,10 @@ class _Run:
     result: object = None
     files: dict = field(default_factory=dict)
     minima: dict | None = None      # envelope minima [Hz] per output, under a chirp
+    curves: dict | None = None      # the chirp's envelopes (envelope.chirp_sweep)
+    linear: object = None           # its linear picture (linear.LinearView), if it has one
+    linear_error: str | None = None  # why there is none (not at rest, no excitation, ...)
+    explained: dict | None = None   # name -> (anti-resonances, transients) of the minima
     noise: dict = field(default_factory=dict)   # name -> peak of outputs that are noise
     units: dict = field(default_factory=dict)   # name -> unit the model declares
 
@@ -150,6 +155,9 @@ def output_points(st: Settings, t_end: float | None) -> int:
 @click.option("--zoom", type=(NUMBER, NUMBER), metavar="T0 T1",
               help="with --plot: also <plot>_zoom.png over [T0, T1], outputs that differ "
                    "only by a number (F_A1_z, F_A2_z) in one panel")
+@click.option("--report", type=click.Path(dir_okay=False),
+              help="an HTML report of the run (bgc report): zoomable plots, the frequency "
+                   "response and modes, the mechanism in 3D")
 @method_option
 @loops_option
 @json_option
@@ -161,10 +169,10 @@ def simulate(**options):
     Without MODEL: the main job, the run `make run` makes, from any directory: the SARIB
     shipped with bgc under its chirp along pumping (--excitation and --direction choose
     others: roll, pitch; sine, constant), native Radau; it writes
-    results/sarib_<direction>_<kind>.csv (outputs only), .png, _envelope.png and
-    _zoom.png (17.8..18.2 s, when the run reaches it) under the current directory, and the
-    module to generated/. --out, --plot, --zoom, --states, --solver and the other options
-    override those choices.
+    results/sarib_<direction>_<kind>.csv (outputs only), .png, _envelope.png,
+    _zoom.png (17.8..18.2 s, when the run reaches it) and .html (the report) under the
+    current directory, and the module to generated/. --out, --plot, --zoom, --report,
+    --states, --solver and the other options override those choices.
     """
     o = resolve(options, click.get_current_context())
     _check_options(o)
@@ -173,6 +181,16 @@ def simulate(**options):
     _integrate(o, run)
     _write_files(o, run)
     _report(o, run)
+
+
+def run_for(o: SimulateOptions) -> _Run:
+    """The run ``o`` asks for, its files written: what ``bgc report`` runs."""
+    _check_options(o)
+    run = _prepare(o)
+    _choose_parameters(o, run)
+    _integrate(o, run)
+    _write_files(o, run)
+    return run
 
 
 def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
@@ -188,6 +206,7 @@ def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
     reaches = o.t_end is None or o.t_end >= MAIN_ZOOM[1]    # the model's t_end: 28 s
     return replace(o, model=str(data.path("models", MAIN_MODEL)), **job,
                    out=o.out or stem + ".csv", plot=o.plot or stem + ".png",
+                   report=o.report or stem + ".html",
                    states=o.states if "states" in given else False,
                    zoom=o.zoom or (MAIN_ZOOM if reaches else None))
 
@@ -222,6 +241,7 @@ def _check_options(o: SimulateOptions) -> None:
     check_out_dir(o.out_dir)
     check_writable(o.out, "--out")       # before the run: a bad path fails at once
     check_writable(o.plot, "--plot")
+    check_writable(o.report, "--report")
     if o.plot:
         from bgc.analysis.results import plot_format
         plot_format(o.plot, "--plot")
@@ -277,7 +297,7 @@ def _prepare(o: SimulateOptions, check) -> _Run:
     def loop_beside(settings):          # the native loop compiles beside the model's build
         precompile_loop(o.solver or settings.solver)
     need_model = (o.exc_kind is not None or o.exc_dir is not None
-                  or o.parasitic_mode == "auto")
+                  or o.parasitic_mode == "auto" or o.report is not None)
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
                                             open_loops=not o.keep_loops, on_load=loop_beside,
@@ -354,8 +374,10 @@ def _integrate(o: SimulateOptions, run: _Run) -> None:
 
 def _write_files(o: SimulateOptions, run: _Run) -> None:
     """--out's CSV, --plot's PNG and beside it, under a chirp, the envelopes against the
-    instantaneous frequency (and their minima) and, with --zoom, a window. Outputs below
-    their noise floor (``bgc.analysis.noise``) are named, not drawn, and have no minima."""
+    instantaneous frequency (their minima told from the sweep's transients by the
+    linearization's anti-resonances) and, with --zoom, a window; --report's HTML. Outputs
+    below their noise floor (``bgc.analysis.noise``) are named, not drawn, and have no
+    minima."""
     from bgc.analysis import noise
     from bgc.analysis.results import output_units, write_csv
     from bgc.analysis.results import plot as plot_png
@@ -370,17 +392,60 @@ def _write_files(o: SimulateOptions, run: _Run) -> None:
         files["png"] = str(plot_png(result, o.plot, title=title, units=units, floor=floor))
     if exc:         # the Model is loaded (need_model)
         from bgc.analysis.envelope import chirp_sweep, minima_hz
+        run.curves = chirp_sweep(run.model.excitation, exc, result, floor)
+        run.minima = minima_hz(run.curves, 2)
+    if run.curves is not None or o.report:
+        _linear(run)
+    if run.curves is not None and o.plot:
         from bgc.analysis.results import plot_envelopes
-        curves = chirp_sweep(run.model.excitation, exc, result, floor)
-        run.minima = minima_hz(curves, 2)
-        if curves is not None and o.plot:
-            path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
-            files["envelope_png"] = str(plot_envelopes(curves, path, title, units, floor))
+        path = Path(o.plot).with_name(Path(o.plot).stem + "_envelope.png")
+        frf_anti = run.linear.anti if run.linear is not None else None
+        files["envelope_png"] = str(plot_envelopes(run.curves, path, title, units, floor,
+                                                   run.explained, frf_anti))
     if o.zoom and o.plot:
         t0, t1 = o.zoom
         path = Path(o.plot).with_name(Path(o.plot).stem + "_zoom.png")
         files["zoom_png"] = str(plot_png(result, path, title=title, window=(t0, t1),
                                          overlay=True, units=units, floor=floor))
+    if o.report:
+        from bgc.analysis import report
+        with progress.stage("report") as stage:
+            data = report.collect(run.module, run.model, result, run.p, o.method, title,
+                                  exc, run.curves, run.linear, run.linear_error,
+                                  run.explained, units, floor, run.noise)
+            files["report"] = str(report.write(o.report, data))
+            stage.done(f"{Path(o.report).stat().st_size / 1e6:.1f} MB")
+
+
+def _linear(run: _Run) -> None:
+    """The run's linear picture (``analysis.linear``): modes and the frequency response
+    to its excitation direction over the chirp's band (else a band around the modes);
+    under a chirp, which envelope minima it explains. Where the model has none (not at
+    rest at its start, no excitation), why, in ``run.linear_error``."""
+    from bgc.analysis import envelope, linear, mechanism
+    from bgc.errors import BgcError
+    exc, m = run.excitation, run.model
+    chirp = m.excitation.kinds[exc["kind"]].numbers \
+        if exc and m.excitation.kinds[exc["kind"]].kind == "chirp" else None
+    band = (min(chirp["f_start"], chirp["f_end"]), max(chirp["f_start"], chirp["f_end"])) \
+        if chirp else (None, None)
+    try:
+        with progress.stage("linearize") as stage:
+            mech = mechanism.of_model(m, run.module, run.p)
+            run.linear = linear.analyse(run.module, m, exc["direction"] if exc else None,
+                                        run.p, *band, mechanism=mech,
+                                        skip=tuple(run.noise))
+            stage.done(f"{progress.count(len(run.linear.modal.modes), 'mode')}"
+                       + (f", {progress.count(len(run.linear.f), 'frequency', 'frequencies')}"
+                          if exc else ""))
+    except (BgcError, np.linalg.LinAlgError) as err:
+        run.linear_error = str(err)
+        return
+    if run.curves is not None:
+        view = run.linear
+        quiet = {n: [] for n in run.noise}
+        run.explained = envelope.explain(run.curves, chirp, {**view.anti, **quiet},
+                                         view.lag(*band))
 
 
 def _report(o: SimulateOptions, run: _Run) -> None:
@@ -396,6 +461,15 @@ def _report(o: SimulateOptions, run: _Run) -> None:
                                "parasitic": choice.to_dict() if choice else None,
                                "excitation": run.excitation,
                                "envelope_minima_hz": run.minima,
+                               "envelope_transients_hz": {
+                                   n: [round(f, 2) for f in t]
+                                   for n, (_, t) in run.explained.items()
+                               } if run.explained else None,
+                               "frf_antiresonances_hz": {
+                                   n: [round(f, 2) for f in a]
+                                   for n, a in run.linear.anti.items()
+                               } if run.linear is not None and run.excitation else None,
+                               "linear_error": run.linear_error,
                                "noise_outputs": run.noise,
                                "compiled": run.compiled is not None, "stages": run.stages,
                                "files": run.files}, indent=2))
@@ -417,8 +491,21 @@ def _report(o: SimulateOptions, run: _Run) -> None:
         click.echo(f"  {name}: numerical noise (peak {peak:.2g} {run.units[name]}), no "
                    f"minima, stated in the plots")
     for name, fs in (run.minima or {}).items():
-        if name not in run.noise:
-            click.echo(f"  envelope minima of {name} over the chirp: "
-                       f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz")
+        if name in run.noise:
+            continue
+        line = f"  envelope minima of {name} over the chirp: " \
+               f"{', '.join(f'{f:.2f}' for f in fs[:3]) or 'none'} Hz"
+        if run.explained:
+            anti, trans = run.explained[name]
+            fa = run.linear.anti.get(name, [])
+            line += (f"; anti-resonance{'s' if len(anti) != 1 else ''} "
+                     f"{', '.join(f'{f:.2f}' for f in anti) or 'none'} (the FRF's: "
+                     f"{', '.join(f'{f:.2f}' for f in fa) or 'none'})")
+            if trans:
+                line += (f"; {', '.join(f'{f:.2f}' for f in trans[:3])} the sweep's "
+                         "transient")
+        click.echo(line)
+    if run.linear_error and run.minima:
+        click.echo(f"  (minima not checked against the FRF: {run.linear_error})")
     for kind, f in run.files.items():
         click.echo(f"  {kind}: {f}")

@@ -109,7 +109,7 @@ def sweep(**o):
         from bgc.analysis.results import plot_format
         plot_format(o.plot, "--plot")
     pl = splan.plan(axes, o.samples, o.seed)
-    job, module = _job(o, axes, fixed, frfs, windows)
+    job, module, punits = _job(o, axes, fixed, frfs, windows)
     source = Path(job.module_path).read_bytes()
     with progress.use(progress.Silent()) if o.as_json else nullcontext(), \
             progress.stage("sweep", total=len(pl)) as st:
@@ -123,7 +123,7 @@ def sweep(**o):
         failed = sum(p.error is not None for p in points)
         st.done(f"{progress.count(len(pl), 'point')} on {progress.count(workers, 'worker')}"
                 f", {failed} with an error")
-    files = _write(o, points, pl.names, job.metrics, module)
+    files = _write(o, points, pl.names, job.metrics, module, punits)
     _report(o, pl, points, workers, wall, files, module)
 
 
@@ -201,7 +201,9 @@ def _job(o, axes, fixed, frfs, windows):
     metrics = Metrics(frfs, windows, o.f_min, o.f_max, run)
     job = Job(module.__file__, module.MODEL_HASH, model if frfs else None, p,
               tuple(a.name for a in axes), tuple(names.index(a.name) for a in axes), metrics)
-    return job, module
+    from bgc.analysis.results import parameter_unit
+    units = {a.name: parameter_unit(model, a.name) for a in axes}
+    return job, module, units
 
 
 def _await_loop(solver: str) -> None:
@@ -214,8 +216,9 @@ def _await_loop(solver: str) -> None:
         native.await_precompiled(loop)
 
 
-def _write(o, points, names, metrics, module) -> dict:
-    """The CSV (and Parquet) and the plots asked for; their paths."""
+def _write(o, points, names, metrics, module, punits) -> dict:
+    """The CSV (and Parquet) and the plots asked for (``punits``: the swept parameters'
+    units); their paths."""
     from bgc.analysis.results import output_units
     from bgc.sweep import write
     files: dict = {}
@@ -229,7 +232,7 @@ def _write(o, points, names, metrics, module) -> dict:
             files["parquet"] = str(parquet)
     if o.plot:
         paths = write.plots(o.plot, cols, names, metrics, output_units(module),
-                            module.MODEL_NAME)
+                            module.MODEL_NAME, punits)
         files["plots"] = {k: str(v) for k, v in paths.items()}
     return files
 

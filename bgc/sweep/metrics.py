@@ -106,13 +106,14 @@ def evaluate(metrics: Metrics, module, model, p: np.ndarray) -> tuple[dict, str 
     """The metrics at parameters ``p``: ``{label: value}`` (an FRF's value is
     ``{"antiresonances_hz": [...], "resonances_hz": [...]}``; a window's a number; None
     where it failed) and the failures' messages (None if none)."""
-    from bgc.analysis import frf
+    from bgc.analysis import frf, modes
     values: dict = {}
     errors = []
     for m in metrics.frf:
         try:
             lin = frf.linearize(module, model, m.direction, p)
-            anti, res = frf.extrema(lin, m.output, metrics.f_min, metrics.f_max)
+            anti, res, _ = modes.resonances(module, model, lin, m.output, metrics.f_min,
+                                            metrics.f_max)
             values[m.label] = {"antiresonances_hz": [round(f, 4) for f in anti],
                                "resonances_hz": [round(f, 4) for f in res]}
         except (BgcError, np.linalg.LinAlgError, FloatingPointError) as exc:

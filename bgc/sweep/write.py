@@ -73,10 +73,12 @@ def slug(label: str) -> str:
 
 
 def plots(path: str | Path, cols: dict[str, list], names: tuple[str, ...],
-          metrics: Metrics, units: dict[str, str], title: str) -> dict[str, Path]:
+          metrics: Metrics, units: dict[str, str], title: str,
+          param_units: dict[str, str | None] | None = None) -> dict[str, Path]:
     """One PNG per metric, ``<stem>_<metric>.png`` beside ``path``: a panel per swept
-    parameter, the metric's values at every point against it (an FRF's anti-resonances
-    as downward, its resonances as upward triangles). Returns label -> path."""
+    parameter (``param_units``: its unit, ``results.parameter_unit``), the metric's values
+    at every point against it (an FRF's anti-resonances as downward, its resonances as
+    upward triangles). Returns label -> path."""
     from bgc.analysis.results import axis_label, panels, save_figure
     path = Path(path)
     out = {}
@@ -96,7 +98,8 @@ def plots(path: str | Path, cols: dict[str, list], names: tuple[str, ...],
             else:
                 ax.plot(x, cols[m.label], "o", ms=4)
                 ax.set_ylabel(axis_label(f"{m.kind} of {m.output}", units.get(m.output)))
-            ax.set_xlabel(name)
+            ax.set_xlabel(axis_label(name, (param_units or {}).get(name))
+                          if (param_units or {}).get(name) else f"{name} [unit not declared]")
             ax.grid(True, alpha=0.3)
         target = path.with_name(f"{path.stem}_{slug(m.label)}{path.suffix or '.png'}")
         out[m.label] = save_figure(fig, target, f"{title}: {m.label}")

@@ -66,3 +66,17 @@ def test_the_ends_of_the_sweep_are_no_minima():
     assert found == [pytest.approx(17.0, abs=0.06)]
     assert minima(f[::-1], amp[::-1]) == found            # a downward sweep alike
     assert minima(np.empty(0), np.empty(0)) == []
+
+
+def test_minima_an_frf_anti_resonance_explains_and_the_sweeps_transients():
+    """A minimum at most the sweep's lag after an anti-resonance of the FRF (or two
+    envelope periods before it) is that anti-resonance; one elsewhere is the sweep's own
+    transient. The window follows the sweep's direction."""
+    from bgc.analysis.envelope import explain
+    up = {"t2": 0.0, "t3": 10.0, "f_start": 5.0, "f_end": 25.0}        # 2 Hz/s
+    curves = {"y": (None, None, [10.5, 9.5, 13.0, 10.05]), "quiet": (None, None, [])}
+    out = explain(curves, up, {"y": [10.0]}, lag=0.5)      # late by up to 1 Hz (+0.4)
+    assert out["y"] == ([10.5, 10.05], [9.5, 13.0]) and out["quiet"] == ([], [])
+    down = dict(up, f_start=25.0, f_end=5.0)
+    assert explain(curves, down, {"y": [10.0]}, lag=0.5)["y"] == ([9.5, 10.05], [10.5, 13.0])
+    assert explain(curves, up, {}, lag=0.5)["y"] == ([], [10.5, 9.5, 13.0, 10.05])

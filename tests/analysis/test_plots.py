@@ -95,3 +95,37 @@ def test_minima_labels_cannot_overlap(mins):
     assert all(inside.x0 <= b.x0 and b.x1 <= inside.x1 for b in boxes), (boxes, inside)
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+def test_the_title_sits_above_every_panel(tmp_path):
+    """The figure's title stays clear of every panel (frame, tick labels, axis labels):
+    the main job's eight panels put tight_layout's title 2 px into the top one."""
+    from bgc.analysis.results import save_figure
+    fig, axes = panels(8, 1.9)
+    for ax in axes[:, 0]:
+        ax.plot([0, 1], [0, 1e4])
+        ax.set_ylabel("F [N]")
+    save_figure(fig, tmp_path / "t.png", "sarib (zcp, native, chirp pumping)")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    canvas = FigureCanvasAgg(fig)           # the saved figure, closed: drawn again as saved
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    title = fig._suptitle.get_window_extent(renderer)
+    assert title.y0 > max(ax.get_tightbbox(renderer).y1 for ax in axes[:, 0]) + 2
+
+
+def test_a_dimensionless_unit_and_a_parameters_unit_are_named():
+    from bgc.analysis.results import axis_label, parameter_unit
+    from bgc.model.load import loads
+    assert axis_label("g", "1") == "g [-]" and axis_label("x", None) == "x"
+    m = loads("""
+name: u
+parameters: {m_t: {value: 0.6, unit: kg}, bare: 1.0}
+bodies: {b: {mass: m_t, com: [0, 0, 0], inertia: [1, 1, 1]}}
+joints:
+  j: {type: revolute, between: [fixed_frame, b], at: [0, 0, 0], axis: [1, 0, 0],
+      spring: {k: 5.0, c: 0.1}}
+""", "u.yaml")
+    assert [parameter_unit(m, n) for n in ("m_t", "bare", "j__stiffness", "j__rot_damping",
+                                           "j__rx_k", "j__rx_c", "j__tx_load", "nope")] == \
+        ["kg", None, "N/m", "N m s/rad", "N m/rad", "N m s/rad", "N", None]

@@ -52,13 +52,14 @@ def test_no_model_is_the_run_the_makefile_makes():
 def test_options_given_win_over_the_main_jobs():
     o = resolved("--direction", "roll", "--out", "x.csv", "--states", "--t-end", "6",
                  "--solver", "bdf")
-    assert (o.exc_kind, o.exc_dir, o.solver, o.out, o.plot, o.states, o.zoom) == \
-        ("chirp", "roll", "bdf", "x.csv", "results/sarib_roll_chirp.png", True, None)
+    assert (o.exc_kind, o.exc_dir, o.solver, o.out, o.plot, o.states, o.zoom, o.report) == \
+        ("chirp", "roll", "bdf", "x.csv", "results/sarib_roll_chirp.png", True, None,
+         "results/sarib_roll_chirp.html")
     assert resolved("--t-end", "6", "--zoom", "1", "2").zoom == (1.0, 2.0)
     assert resolved("--excitation", "sine").out == "results/sarib_pumping_sine.csv"
     given = resolved(MODELS / "rlc.yaml")            # with MODEL: nothing of the main job
-    assert (given.exc_kind, given.out, given.plot, given.states, given.zoom) == \
-        (None, None, None, True, None)
+    assert (given.exc_kind, given.out, given.plot, given.states, given.zoom,
+            given.report) == (None, None, None, True, None, None)
 
 
 def test_no_model_writes_the_main_jobs_files_in_the_current_directory(
@@ -72,6 +73,7 @@ def test_no_model_writes_the_main_jobs_files_in_the_current_directory(
     assert "sarib: native to t = 0.02 s" in r.output
     files = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
     assert files == ["results", "results/sarib_pumping_chirp.csv",
+                     "results/sarib_pumping_chirp.html",      # the report
                      "results/sarib_pumping_chirp.png"]       # no zoom: the run ends first
     csv = tmp_path / "results/sarib_pumping_chirp.csv"
     header = csv.read_text().splitlines()[0].split(",")

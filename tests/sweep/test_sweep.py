@@ -163,7 +163,7 @@ def test_sweep_command_writes_the_frf_and_window_metrics_and_reports_failing_poi
     extrema as ``bgc frf`` finds them, and the peak of a_OF_z in a window of a sine run,
     at each point. A preload that no longer holds the weight is no equilibrium: the FRF
     and the run fail at those points, their row says why, and the sweep goes on."""
-    from bgc.analysis import frf
+    from bgc.analysis import frf, modes
     from bgc.cli import main
     from bgc.model import load
     from bgc.simulate import simulate
@@ -191,7 +191,7 @@ def test_sweep_command_writes_the_frf_and_window_metrics_and_reports_failing_poi
         held = p["params"]["attach_pumping__tx_preload"] == 305.5815
         if held:
             lin = frf.linearize(mod, model, "pumping", at)
-            anti, res = frf.extrema(lin, "a_OF_z", 5.0, 25.0)
+            anti, res, _ = modes.resonances(mod, model, lin, "a_OF_z", 5.0, 25.0)
             assert p["metrics"]["pumping:a_OF_z"] == {
                 "antiresonances_hz": [round(f, 4) for f in anti],
                 "resonances_hz": [round(f, 4) for f in res]}

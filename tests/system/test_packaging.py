@@ -90,7 +90,8 @@ def test_an_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path):
     assert r.returncode == 0, r.stderr
     files = json.loads(r.stdout)["files"]
     assert files == {"csv": "results/sarib_pumping_chirp.csv",
-                     "png": "results/sarib_pumping_chirp.png"}
+                     "png": "results/sarib_pumping_chirp.png",
+                     "report": "results/sarib_pumping_chirp.html"}   # its template shipped
     assert (work / "generated" / "sarib.py").is_file()
     where = subprocess.run([py, "-c", "from bgc import data; print(data.folder('models'))"],
                            cwd=work, capture_output=True, text=True, check=True,

@@ -24,8 +24,8 @@ from bgc.cli.options import (
     out_dir_option,
     parasitic_option,
     params_option,
-    parse_params,
     progress_option,
+    run_parameters,
 )
 from bgc.fileio import check_writable
 from bgc.pipeline import ensure_module
@@ -57,7 +57,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
     from bgc.analysis import frf as bfrf
     from bgc.analysis import modes
     bfrf.check_band(f_min, f_max)
-    check_method_options(method, keep_loops, parasitic_mode)
+    check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
     check_out_dir(out_dir)
     check_writable(out, "--out")
 
@@ -68,7 +68,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
         check_overrides(model, params, decl.model)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
                                  check=check)
-    p, choice = parameters(module, m, method, params, parasitic_mode)
+    p, choice = run_parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
         lin = bfrf.linearize(module, m, direction, p)
         f, h = grid = bfrf.sweep(lin, output, f_min, f_max)
@@ -100,14 +100,3 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
                f"{', '.join(f'{f:.2f}' for f in peaks) or 'none'} Hz)")
     if out:
         click.echo(f"  csv: {report['files']['csv']}")
-
-
-def parameters(module, model, method, params, mode):
-    """The module's parameters with ``-p`` applied; under ``--parasitic auto`` the joints'
-    stiffness and damping chosen first (the explicit ``-p`` values still win)."""
-    p = parse_params(module, params)
-    if mode != "auto":
-        return p, None
-    from bgc.methods import parasitic
-    p, choice = parasitic.auto(module, model, module.initial_state(p), p)
-    return parse_params(module, params, base=p), choice

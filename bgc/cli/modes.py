@@ -13,12 +13,18 @@ from bgc import progress
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import (
     NUMBER,
+    check_method_options,
+    check_out_dir,
     check_overrides,
+    check_params,
     json_option,
+    loops_option,
     method_option,
     out_dir_option,
+    parasitic_option,
     params_option,
     progress_option,
+    run_parameters,
 )
 from bgc.errors import BgcError
 from bgc.pipeline import ensure_module
@@ -32,28 +38,30 @@ from bgc.pipeline import ensure_module
 @params_option("override a parameter (no recompilation)")
 @out_dir_option
 @method_option
-@click.option("--parasitic", "parasitic_mode", type=click.Choice(["given", "auto"]),
-              default="given", show_default=True,
-              help="method parasitic: the joints' stiffness as the model gives it, or chosen "
-                   "by bgc.methods.parasitic.auto (as bgc simulate --parasitic auto)")
+@parasitic_option
+@loops_option
 @json_option
 @user_errors
 @progress_option
-def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, as_json):
+def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, keep_loops, as_json):
     """Modes of MODEL about its static equilibrium: natural frequency, damping ratio,
     kind (functional; parasitic: the joints' stiff springs; overdamped) and the bodies
     with the largest share of each mode's kinetic energy; --json adds each shape over the
     bodies' pose coordinates."""
     from bgc.analysis import frf, mechanism
     from bgc.analysis import modes as bmodes
-    from bgc.cli.frf import parameters
     f_max = math.inf if f_max is None else f_max
     if not 0 <= f_min < f_max:
-        raise BgcError(f"need 0 <= --f-min < --f-max, got {f_min} and {f_max}",
-                       key="--f-min")
-    module, m, _ = ensure_module(model, out_dir, method)
-    check_overrides(model, params)
-    p, choice = parameters(module, m, method, params, parasitic_mode)
+        raise BgcError(f"need 0 <= --f-min < --f-max, got {f_min:g} and {f_max:g}",
+                       key="--f-min", hint="give the band's start first")
+    check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
+    check_out_dir(out_dir)
+
+    def check(decl):            # against the model, before any compile
+        check_params(decl, params)
+        check_overrides(model, params, decl.model)
+    module, m, _ = ensure_module(model, out_dir, method, check=check)
+    p, choice = run_parameters(module, m, method, params, parasitic_mode)
     with progress.stage("modes") as stage:
         lin = frf.linearize(module, m, None, p)
         mech = mechanism.of_model(m, module, lin.p)

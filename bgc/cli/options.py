@@ -169,10 +169,17 @@ def check_solver(name: str, step, key: str = "--solver") -> None:
 
 
 def check_method_options(method: str, keep_loops: bool = False, parasitic: str = "given",
-                         separation: float | None = None) -> None:
+                         separation: float | None = None, linearizes: bool = False) -> None:
     """Options that apply to some constraint methods only: ``--keep-loops`` (those that
-    can keep loops closed), ``--parasitic auto`` and ``--separation`` (parasitic, which
-    has compliant joints); refused with the method that would take them."""
+    can keep loops closed; not for a command that ``linearizes``: a closed loop's module
+    is a DAE whose Jacobian alone is not its dynamics), ``--parasitic auto`` and
+    ``--separation`` (parasitic, which has compliant joints); refused with the method
+    that would take them."""
+    if keep_loops and linearizes:
+        raise BgcError("--keep-loops: a linearization needs the kinematic loops opened "
+                       "(a closed loop's module is an index-2 DAE)", key="--keep-loops",
+                       hint="drop --keep-loops (the loops opened with break variables give "
+                            "the same dynamics)")
     if keep_loops and method not in methods.CLOSES_LOOPS:
         raise BgcError(f"--keep-loops applies to --method {' or '.join(methods.CLOSES_LOOPS)}"
                        f", not {method}", key="--keep-loops",
@@ -250,3 +257,17 @@ def retired_option(flag: str, instead: str, nargs: int = 1):
     return click.option(flag, f"_retired_{flag.strip('-').replace('-', '_')}", hidden=True,
                         multiple=nargs == 1, expose_value=False, callback=refuse,
                         is_eager=True)
+
+
+def run_parameters(module, model, method, params, parasitic_mode, separation=None):
+    """The module's parameters with ``-p`` applied; under ``--parasitic auto`` the joints'
+    stiffness and damping chosen first (the explicit ``-p`` values still win): what a
+    command that runs or linearizes a module starts from. (values, the parasitic choice or
+    None)"""
+    p = parse_params(module, params)
+    if parasitic_mode != "auto":
+        return p, None
+    from bgc.methods import parasitic
+    args = () if separation is None else (separation,)
+    p, choice = parasitic.auto(module, model, module.initial_state(p), p, *args)
+    return parse_params(module, params, base=p), choice

@@ -186,7 +186,7 @@ def simulate(**options):
 def run_for(o: SimulateOptions) -> _Run:
     """The run ``o`` asks for, its files written: what ``bgc report`` runs."""
     _check_options(o)
-    run = _prepare(o)
+    run = _prepare(o, functools.partial(_check_declared, o))
     _choose_parameters(o, run)
     _integrate(o, run)
     _write_files(o, run)

@@ -24,9 +24,9 @@ from bgc.cli.options import (
     out_dir_option,
     param_items,
     parasitic_option,
-    parse_params,
     progress_option,
     retired_option,
+    run_parameters,
 )
 from bgc.errors import BgcError
 from bgc.pipeline import ensure_module
@@ -98,7 +98,7 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
         raise BgcError(f"need --f-min < F < --f-max, got {band[0]:g}, {target:g}, "
                        f"{band[1]:g}", key="--f-min")
     bfrf.check_band(*band)
-    check_method_options(method, keep_loops, parasitic_mode)
+    check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
     check_out_dir(out_dir)
 
     def check(decl):            # against the model, before any compile
@@ -115,11 +115,7 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
             _check_ends(model, params, name, bracket)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
                                  check=check)
-    p = parse_params(module, params)
-    if parasitic_mode == "auto":
-        from bgc.methods import parasitic
-        p, _ = parasitic.auto(module, m, module.initial_state(p), p)
-        p = parse_params(module, params, base=p)
+    p, _ = run_parameters(module, m, method, params, parasitic_mode)
     if bracket is None:
         bracket = btune.default_bracket(p[module.PARAM_NAMES.index(name)], name)
         _check_ends(model, params, name, bracket)

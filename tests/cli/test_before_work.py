@@ -86,7 +86,7 @@ TUNE = ("tune", "excited.yaml", "-o", "gen", "--input", "rotor", "--output", "a_
     (FRF[:-4] + ("--input", "pull", "--output", "a_cabin"), "--input", ("rotor",)),
     (FRF + ("--f-max", "1e12"), "--f-max", ("narrow the band",)),
     (FRF + ("--f-min", "30", "--f-max", "20"), "--f-min", ("--f-min <",)),
-    (FRF + ("--keep-loops",), "--keep-loops", ("zcp",)),
+    (FRF + ("--keep-loops",), "--keep-loops", ("linearization",)),
     (TUNE + ("--tune", "mm"), "--tune", ("can be tuned",)),
     (TUNE + ("--tune", "m_t", "-p", "kk=1"), "--param", ("unknown parameter 'kk'",)),
     (TUNE + ("--tune", "m_t", "--set", "k_t=1"), "--set", ("-p NAME=VALUE",)),

@@ -5,6 +5,7 @@ continues it on the next line) is a command; the lines after it, up to the next 
 the end of the block, are what it prints on stdout. In them ``...`` stands for any text
 within a line, and a line that is only ``...`` for any number of lines; everything else
 is compared as written, so a number an example shows is the number the command prints.
+A last line ``(exit status N)`` says the command fails with that status (else: 0).
 
 ``DocRuns`` runs a command once per test session, in a fresh directory of its own where
 ``models/``, ``scenes/`` and ``docs/`` are the repository's (read-only) and

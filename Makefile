@@ -1,6 +1,6 @@
 # bgc: the README's two commands are `make run` and `make test`.
 PYTHON ?= python3
-# the main job's settings: README, "The main job at reference accuracy"
+# the main job's settings, and why: docs/main-job.md
 SARIB = bgc simulate models/sarib.yaml --excitation chirp --no-states --solver native --method zcp --rtol 1e-4 --atol 1e-4
 
 .PHONY: install run demo semiactive test test-all bench generated clean

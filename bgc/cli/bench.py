@@ -30,8 +30,8 @@ from bgc.fileio import check_writable
 @click.option("--budget", type=POSITIVE, default=60.0, show_default=True,
               help="work-precision: a series stops after a run longer than this [s]")
 @click.option("--build", type=click.Path(file_okay=False),
-              help="where the benchmarks' generated modules go (default: bench/build, "
-                   "--quick: OUT/build)")
+              help="where the benchmarks' generated modules go (default: build/ beside the "
+                   "--results directory, bench/build; --quick: build/ inside it)")
 @json_option
 @user_errors
 def bench(out, parts, quick, repeats, budget, build, as_json):

@@ -51,9 +51,9 @@ from bgc.simulate import SOLVERS
 
 # The main job, `make run`, what `bgc simulate` runs without MODEL: the SARIB shipped with
 # bgc (bgc.data) under its chirp along pumping, with ideal joints (method zcp) and native
-# Radau at rtol = atol = 1e-4 (within 2.3e-4 of the ideal joints' reference; the README
-# says why); the CSV (outputs only), the PNG, the envelopes and a zoom on the
-# anti-resonance in results/ under the current directory. tests/cli/test_main_job.py
+# Radau at rtol = atol = 1e-4 (within 2.3e-4 of the ideal joints' reference;
+# docs/main-job.md says why); the CSV (outputs only), the PNG, the envelopes and a zoom
+# on the anti-resonance in results/ under the current directory. tests/cli/test_main_job.py
 # checks this is the run the Makefile's `run` makes.
 MAIN_MODEL = "sarib.yaml"
 MAIN_JOB = {"exc_kind": "chirp", "exc_dir": "pumping", "solver": "native", "method": "zcp",

@@ -63,14 +63,15 @@ class Example:
 
 def is_slow(argv: list[str]) -> bool:
     """Whether a command runs the SARIB (a SARIB model, a scene: all of them are the
-    SARIB's, the main job: bgc simulate without MODEL) or the benchmarks: a slow
+    SARIB's, the main job: bgc simulate or bgc report without MODEL), the benchmarks or
+    builds an FMU (a C compile and link; tests/export has fast tests of its own): a slow
     test's."""
-    if argv[0] in ("run", "bench"):
+    if argv[0] in ("run", "bench", "export"):
         return True
     if any(Path(a).stem in SLOW_MODELS or Path(a).parts[0] == "scenes"
            for a in argv if a.endswith(".yaml")):
         return True
-    return argv[0] == "simulate" and not any(a.endswith(".yaml") for a in argv)
+    return argv[0] in ("simulate", "report") and not any(a.endswith(".yaml") for a in argv)
 
 
 def examples(doc: str) -> list[Example]:
@@ -199,13 +200,15 @@ class DocRuns:
         from bgc.model import load
         from bgc.pipeline import compile_model
         cmd = main.commands[argv[0]]
-        if argv[0] not in ("simulate", "frf", "tune", "sweep"):
+        if argv[0] not in ("simulate", "report", "frf", "modes", "tune", "sweep"):
             return
         ctx = cmd.make_context(argv[0], list(argv[1:]), resilient_parsing=True)
         p = ctx.params
         if p.get("out_dir") != "generated":
             return
         model, method = p.get("model"), p["method"]
+        if model is None and argv[0] == "report":
+            return                          # (its main job compiles as bgc simulate's)
         if model is None:                  # the main job
             from bgc.cli.simulate import resolve
             o = resolve(p, ctx)

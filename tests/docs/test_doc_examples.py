@@ -18,7 +18,8 @@ def test_the_documents_show_examples():
     shown = {ex.doc for ex in EXAMPLES}
     assert shown >= {"docs/cli.md", "docs/tutorial.md", "docs/main-job.md"}, shown
     assert {ex.argv[0] for ex in EXAMPLES if ex.doc == "docs/cli.md"} >= {
-        "check", "compile", "simulate", "frf", "tune", "sweep", "run", "draw", "bench"}
+        "check", "compile", "simulate", "report", "frf", "modes", "tune", "sweep", "run",
+        "draw", "export", "bench"}
 
 
 @pytest.mark.parametrize("example", [

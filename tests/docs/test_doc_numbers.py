@@ -28,6 +28,8 @@ ABSORBER = "docs/tutorial/absorber.yaml"
 # The commands whose output the checks read: as the documents show them (docs/cli.md's,
 # docs/tutorial.md's and docs/main-job.md's examples run the same, so each runs once).
 FRF = f"bgc frf {ABSORBER} --input rotor --output a_cabin"
+FRF_TUNED = f"bgc frf {ABSORBER} --input rotor --output x_tuned"
+MODES = f"bgc modes {ABSORBER} --json"
 CHIRP = (f"bgc simulate {ABSORBER} --excitation chirp --direction rotor --out chirp.csv "
          "--plot chirp.png")
 TUNE = (f"bgc tune {ABSORBER} --target-frequency 17.5 --tune m_t --input rotor "
@@ -56,6 +58,11 @@ CLAIMS = {
     "suspension resonance": (TUTORIAL, r"suspension resonance near (\d+) Hz"),
     "chirp minimum": (TUTORIAL, r"falls to its minimum at ([\d.]+) Hz"),
     "frf anti-resonance": (TUTORIAL, r"([\d.]+) Hz: `sqrt"),
+    "chirp transient": (TUTORIAL, r"It dips again at ([\d.]+) Hz"),
+    "displacement peak 1": (TUTORIAL, r"peaks at ([\d.]+) and [\d.]+ Hz\)"),
+    "displacement peak 2": (TUTORIAL, r"peaks at [\d.]+ and ([\d.]+) Hz\)"),
+    "suspension damping": (TUTORIAL, r"\((\d+) % damped by its"),
+    "parasitic modes": (TUTORIAL, r"\(([\d.]+) Hz and up, kind `parasitic`"),
     "undamped formula": (TUTORIAL, r"`sqrt\(7700 / 0\.6\) / 2 pi` = ([\d.]+) Hz"),
     "formula mass": (TUTORIAL, r"`7700 / \(2 pi 17\.5\)\^2` = ([\d.]+) kg"),
     "formula sensitivity": (TUTORIAL, r"`dF/dm = -F / 2m` = (-[\d.]+) Hz/kg"),
@@ -101,8 +108,8 @@ CLAIMS = {
 # checked against the model or the code by test_the_inputs_the_documents_state; or, in
 # main-job.md, measured timings (not tested: the page says where they were measured).
 INPUTS = {
-    README: {"5", "25", "1e-4"},
-    TUTORIAL: {"0", "3", "5", "25", "40", "11", "4", "17.5", "15", "20", "30", "2"},
+    README: {"5", "25", "1e-4", "2.0"},
+    TUTORIAL: {"0", "3", "5", "25", "40", "11", "4", "17.5", "15", "20", "30", "2", "200"},
     MAIN_JOB: {"200", "5", "25", "28", "1e-4", "17.8", "18.2", "1e-9", "3e7", "1e-6", "1",
                "8", "0.005", "1e-3", "1e-5"},
 }
@@ -134,9 +141,14 @@ def output_line(ran, pattern: str) -> tuple[str, ...]:
 def test_the_tutorials_frequency_response(doc_run):
     ran = doc_run(FRF)
     anti = [float(f) for f in output_line(ran, r"\s+anti-resonances: (.*) Hz")[0].split(",")]
-    res = [float(f) for f in output_line(ran, r"\s+resonances: (.*) Hz")[0].split(",")]
+    res = [float(f) for f in output_line(ran, r"\s+resonances: ([\d., ]+) Hz")[0].split(",")]
     check("frf anti-resonance", anti[0])
     check("suspension resonance", res[0])
+    ran = doc_run(FRF_TUNED)
+    peaks = output_line(ran, r"\s+resonances: ([\d., ]+) Hz \(.*, at ([\d., ]+) Hz\)")
+    assert peaks[0] == output_line(doc_run(FRF), r"\s+resonances: ([\d., ]+) Hz")[0]
+    for i, f in enumerate(peaks[1].split(","), 1):     # the same modes, other peaks
+        check(f"displacement peak {i}", float(f))
     from bgc.model.load import load
     p = load(ROOT / ABSORBER).parameters
     undamped = math.sqrt(p["k_t"].value / p["m_t"].value) / (2 * math.pi)
@@ -148,7 +160,41 @@ def test_the_tutorials_chirp(doc_run):
     ran = doc_run(CHIRP)
     minima = output_line(ran, r"\s+envelope minima of a_cabin over the chirp: (.*) Hz")[0]
     check("chirp minimum", float(minima.split(",")[0]))
+    transient = output_line(ran, r"\s+envelope minima of a_cabin .*; ([\d.]+) the sweep's "
+                                 r"transient$")[0]
+    check("chirp transient", float(transient))
     assert (ran.cwd / "chirp_envelope.png").stat().st_size > 10_000
+
+
+def two_mass_modes() -> list[tuple[float, float]]:
+    """(natural frequency [Hz], damping ratio) of the absorber as the two-mass M, C, K
+    system the tutorial says its modes are, from the model file's values."""
+    import yaml
+    model = yaml.safe_load((ROOT / ABSORBER).read_text())
+    m1, m2 = model["bodies"]["cabin"]["mass"], model["parameters"]["m_t"]["value"]
+    k1, c1 = (model["joints"]["suspension"]["spring"][k] for k in ("k", "c"))
+    k2, c2 = model["parameters"]["k_t"]["value"], model["joints"]["flap"]["spring"]["c"]
+    M = np.diag([m1, m2])
+    K = np.array([[k1 + k2, -k2], [-k2, k2]])
+    C = np.array([[c1 + c2, -c2], [-c2, c2]])
+    A = np.block([[np.zeros((2, 2)), np.eye(2)],
+                  [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
+    return sorted((abs(z) / (2 * np.pi), -z.real / abs(z)) for z in np.linalg.eigvals(A)
+                  if z.imag > 0)
+
+
+def test_the_tutorials_modes(doc_run):
+    """The absorber's two functional modes are the M, C, K system's to the digits --json
+    prints, the suspension's damping and where the parasitic joints' own modes start."""
+    modes = doc_run(MODES).json()["modes"]
+    functional = [m for m in modes if m["kind"] == "functional"]
+    for m, (f, zeta) in zip(functional, two_mass_modes(), strict=True):
+        assert m["frequency_hz"] == float(f"{f:.9g}") and \
+            m["damping_ratio"] == float(f"{zeta:.9g}"), (m, f, zeta)
+    check("suspension damping", 100 * functional[0]["damping_ratio"])
+    check("parasitic modes", min(m["frequency_hz"] for m in modes
+                                 if m["kind"] == "parasitic"))
+    assert {m["kind"] for m in modes} == {"functional", "parasitic"}
 
 
 def test_the_tutorials_tuning_against_its_formula(doc_run):
@@ -221,6 +267,11 @@ def test_the_inputs_the_documents_state():
     tutorial = re.sub(r"\s+", " ", (ROOT / TUTORIAL).read_text())
     assert (f"from {c['f_start']:g} to {c['f_end']:g} Hz in {c['t3'] - c['t2']:g} s"
             in tutorial)
+    import yaml
+    damper = yaml.safe_load((ROOT / ABSORBER).read_text())["joints"]["suspension"]["spring"]
+    assert f"damped by its {damper['c']:g} N s/m" in tutorial
+    from bgc.export.fmu import FMI_VERSIONS
+    assert FMI_VERSIONS == (2,) and "an FMU (FMI 2.0, " in readme
 
 
 def _k(model) -> float:
@@ -320,6 +371,18 @@ def test_the_main_jobs_systems(doc_run):
     blocks = [int(n) for n in re.findall(r"^\s+linear block \d+: (\d+) unknowns", zcp.stdout,
                                          re.M)]
     check("constraint block", max(blocks))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_the_tutorials_modes_under_ideal_joints(doc_run, method):
+    """'to the digits --json prints, under every method': the ideal joints' too (slow:
+    two more modules of the absorber)."""
+    modes = doc_run(f"{MODES} --method {method}").json()["modes"]
+    assert len(modes) == 2
+    for m, (f, zeta) in zip(modes, two_mass_modes(), strict=True):
+        assert m["frequency_hz"] == float(f"{f:.9g}") and \
+            m["damping_ratio"] == float(f"{zeta:.9g}"), (method, m, f, zeta)
 
 
 @pytest.mark.slow

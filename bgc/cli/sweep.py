@@ -101,7 +101,7 @@ def sweep(**o):
         raise BgcError("--excitation and --direction go together",
                        key="--excitation" if o.exc_kind is None else "--direction",
                        hint="give both, e.g. --excitation chirp --direction pumping")
-    check_method_options(o.method, o.keep_loops, o.parasitic_mode)
+    check_method_options(o.method, o.keep_loops, o.parasitic_mode, linearizes=bool(frfs))
     check_out_dir(o.out_dir)
     check_writable(o.out, "--out")
     check_writable(o.plot, "--plot")

@@ -45,9 +45,9 @@ from bgc.pipeline import ensure_module
 @progress_option
 def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, keep_loops, as_json):
     """Modes of MODEL about its static equilibrium: natural frequency, damping ratio,
-    kind (functional; parasitic: the joints' stiff springs; overdamped; unstable) and the bodies
-    with the largest share of each mode's kinetic energy; --json adds each shape over the
-    bodies' pose coordinates."""
+    kind (functional; parasitic: the joints' stiff springs; overdamped; unstable) and the
+    bodies with the largest share of each mode's kinetic energy; --json adds each shape
+    over the bodies' pose coordinates."""
     from bgc.analysis import frf, mechanism
     from bgc.analysis import modes as bmodes
     f_max = math.inf if f_max is None else f_max

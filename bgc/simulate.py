@@ -276,7 +276,8 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
                 f"nothing was run (t = {t_start:g})",
                 hint="keep redundancy handling (the default: redundant constraints share "
                      "the load by least squares) or remove the redundant joint directions")
-        p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
+        if consistent.RANK_PARAM in module.PARAM_NAMES:
+            p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
     return x, p, projection
 
 
@@ -419,7 +420,8 @@ def _events(module, x, p, t_start: float, projection):
             raise SimulationError(f"{module.GUARD_NAMES[k]} at the initial state (margin "
                                   f"{margins[k]:.3g})", hint=_GUARD_HINT)
     monitor = None
-    if projection is not None and projection.rank > int(np.sum(module.IMPOSED)):
+    if projection is not None and projection.rank > int(np.sum(module.IMPOSED)) \
+            and not getattr(module, "PASSES_SINGULAR", False):
         monitor = consistent.RankMonitor(module, x, p, projection)
         events.append(monitor)
     return events, monitor

@@ -149,6 +149,7 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
             exprs.append(item[1])
     exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
     exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
+    exprs += [e for _, e in system.projection]
     calls = set()
     for e in exprs:
         calls |= {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
@@ -165,7 +166,8 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
     return replace(system, assignments=head + body,
                    outputs=[(n, sub(e)) for n, e in system.outputs],
                    guards=[(w, sub(e)) for w, e in system.guards],
-                   constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints]), mapping
+                   constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints],
+                   projection=[(i, sub(e)) for i, e in system.projection]), mapping
 
 
 def render(system: EquationSystem) -> str:
@@ -197,12 +199,17 @@ def render(system: EquationSystem) -> str:
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
-    kern = kernels.lower(system, kernels.PLACEHOLDER, {
+    programs = {
         "rhs": (rhs_asg, list(enumerate(dx))),
         "jac": (jac_all, jt.partials),
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
-        "con": (con_asg, list(enumerate(con_exprs)))}, jt)
+        "con": (con_asg, list(enumerate(con_exprs)))}
+    if system.projection:       # every state's correction (zero where it has none)
+        corrections = dict(system.projection)
+        proj = [(i, corrections.get(i, sp.S.Zero)) for i in range(len(system.states))]
+        programs["proj"] = (cone(system.assignments, [e for _, e in proj])[0], proj)
+    kern = kernels.lower(system, kernels.PLACEHOLDER, programs, jt)
     # the kernels' names: the module's and its IR's digest (one model compiled with other
     # options is other code; two such modules in one process must not share a name)
     digest = hashlib.sha256(f"{kern.ir}\n{kern.ir_straight}".encode()).hexdigest()[:12]
@@ -241,6 +248,8 @@ def render(system: EquationSystem) -> str:
         has_position=[int(g is not None) for _, g, _ in system.constraints],
         imposed=[int(n in system.imposed) for n, _, _ in system.constraints],
         algebraic=system.algebraic,
+        projects=bool(system.projection),
+        passes_singular=bool(methods.get(system.method).passes_singular),
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
         static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),

@@ -97,6 +97,8 @@ class Block:
     k: int = 0
     kb: int = 0
     lu: int = 0         # room for its LU factors (and a column, sparse)
+    reg: int = -1       # regularized (``equations.Regularized``): eps's slot (-1: none)
+    reg_rows: tuple = ()
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
     k_at: tuple = ()
     b_at: tuple = ()
@@ -167,6 +169,9 @@ class Layout:
                             self.slot[item.unknowns[0]])
                 if item.rank is not None:
                     blk.rank = self._region(1)
+                if item.regularize is not None:
+                    blk.reg = self._region(1)
+                    blk.reg_rows = item.regularize.rows
                 if item.factors is not None:
                     blk.d = d = item.factors[0]
                     blk.k, blk.kb = self._region(n * d), self._region(d * n)
@@ -548,6 +553,8 @@ def _steps(items, outputs, layout: Layout):
                 yield ("store", blk.b + i, e)
         if item.rank is not None:
             yield ("store", blk.rank, item.rank)
+        if item.regularize is not None:
+            yield ("store", blk.reg, item.regularize.eps)
         yield ("solve", item.index)
     for out in outputs:
         if isinstance(out[1], list):          # (e, [(slot, w)]): pv[slot] = d e / d w
@@ -1365,15 +1372,21 @@ class _Module:
         """``@<prefix>_block<index>(m, A, K, F, X, LU, assemble)``: A X = B for B (n x m)
         in X, in place (``assemble``: first form A = -K F where A is non-zero): on the
         block's plan, or, where it has none or its pivots grow, with partial pivoting (A
-        then formed in full)."""
+        then formed in full). A regularized block (``reg``: an argument ``R``, eps) raises
+        the diagonal of its rows by eps times itself as it forms A."""
         P, n, i = self.prefix, blk.n, blk.index
         if blk.d:
             self._form(blk)
         form = (f"  call void @{P}_block{i}_form(double* %A, double* %K, double* %F, i1 "
                 "{})")
+        reg = ""
+        if blk.reg >= 0:
+            form += f"\n  call void @{P}_block{i}_reg(double* %A, double* %R)"
+            reg = ", double* noalias %R"
+            self._regularize(blk)
         body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
                 f"double* noalias %F, double* noalias %X, double* noalias %LU, "
-                f"i1 %assemble) nounwind {{", "entry:"]
+                f"i1 %assemble{reg}) nounwind {{", "entry:"]
         if blk.d and blk.plan is not None:
             body += ["  br i1 %assemble, label %form, label %sparse", "form:",
                      form.format("false")]
@@ -1392,6 +1405,24 @@ class _Module:
         body += [f"  call void @{P}_lu(i64 {n}, i64 %m, double* %A, double* %X, double* %LU)",
                  "  br label %done", "done:", "  ret void", "}"]
         self.functions.append("\n".join(body))
+
+    def _regularize(self, blk: Block):
+        """``@<prefix>_block<index>_reg(A, R)``: A[r, r] += R[0] A[r, r] on the block's
+        regularized rows."""
+        n, i = blk.n, blk.index
+        diag = self.array(f"block{i}_diag", "i64", [r * n + r for r in blk.reg_rows])
+        diag = diag[len("i64* "):]          # the constant's address, as an operand
+        a = _Asm(f"define internal void @{self.prefix}_block{i}_reg(double* noalias %A, "
+                 f"double* noalias %R) nounwind {{", ["e"])
+        eps = a.op("load double, double* %R, align 8")
+
+        def raise_(e):
+            at = _index(a, diag, e)
+            v = a.load("%A", at)
+            a.store(a.op(f"fadd double {v}, {a.op(f'fmul double {eps}, {v}')}"), "%A", at)
+        a.loop("e", "0", str(len(blk.reg_rows)), raise_)
+        a("ret void")
+        self.functions.append(a.text())
 
     def _form(self, blk: Block):
         """``@<prefix>_block<index>_form(A, K, F, full)``: a constraint block's A = -K F
@@ -1421,9 +1452,10 @@ class _Module:
         P, n = self.prefix, blk.n
         B, A = fn.ptr("%w", at), fn.ptr("%w", blk.a)
         K, F = (fn.ptr("%w", blk.k), fn.ptr("%w", blk.kb)) if blk.d else (A, A)
+        reg = f", double* {fn.ptr('%w', blk.reg)}" if blk.reg >= 0 else ""
         call = (f"  call void @{P}_block{blk.index}(i64 {columns}, double* {A}, double* {K}, "
                 f"double* {F}, double* {B}, double* {fn.ptr('%w', blk.lu)}, "
-                f"i1 {'true' if assemble else 'false'})")
+                f"i1 {'true' if assemble else 'false'}{reg})")
         if blk.rank < 0:
             fn.body.append(call)
             return
@@ -1586,9 +1618,11 @@ def _declaration(definition: str) -> str:
     return f"declare {m.group(2)} @{m.group(3)}({m.group(4)})"
 
 
-# the programs a module has, and the C entry points of the native integrators
-PROGRAMS = ("rhs", "jac", "out", "guard", "con")
-ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"))
+# the programs a module has (``proj``: method augmented's projection, where it has one),
+# and the C entry points of the native integrators
+PROGRAMS = ("rhs", "jac", "out", "guard", "con", "proj")
+ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"),
+           ("proj_entry", "proj"))
 
 
 def lower(system, prefix: str, programs: dict, jt) -> Kernels:
@@ -1617,10 +1651,12 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
         mod.functions.append(_lstsq_ir(prefix))
     mod.tables(system.tables)
     for name in PROGRAMS:
-        mod.program(name, *programs[name])
+        if name in programs:
+            mod.program(name, *programs[name])
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:
-        mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
+        if program in programs or program == "jac_full":
+            mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
     return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
 

@@ -106,8 +106,10 @@ class NativeSolver(Solver):
             from bgc.solvers import radau5
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
+            project = getattr(problem.module, "projection_entry_point", lambda: 0)()
             system = radau5.System(model, mass, index2, problem.lu_plan,
-                                   monitor if monitor is not None else rank.none())
+                                   monitor if monitor is not None else rank.none(),
+                                   int(project))
             settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
                                        GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))

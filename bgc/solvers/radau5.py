@@ -88,12 +88,15 @@ class System(NamedTuple):
     the mass matrix (empty: the identity), 1.0 where a state is an algebraic variable of
     index 2 (empty: none), ``sparse_lu.analyse``'s elimination plan for the Newton
     matrices (``sparse_lu.DENSE``: dense) and the rank monitor of a constrained run
-    (``rank.Monitor``; ``rank.none()``: none)."""
+    (``rank.Monitor``; ``rank.none()``: none); ``project``: the address of the module's
+    projection onto its constraints (method augmented; 0: none), applied twice after
+    every accepted step."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
     plan: tuple
     monitor: rank.Monitor
+    project: int
 
 
 class Settings(NamedTuple):
@@ -636,6 +639,11 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         h_next = min(h_abs * factor, max_step)
         if recompute_jac or h_next != h_abs:
             have_lu = False
+        if system.project != 0:         # back onto the constraints (two Newton steps)
+            for _ in range(2):
+                call_entry(system.project, t_new, y_new, p, work)
+                for k in range(n):
+                    y_new[k] += work[k]
         f_new = evaluate(rhs, t_new, y_new, p, n)
         stats[ST_RHS] += 1
         if not _finite(y_new):
@@ -705,7 +713,7 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE, rank.none())
+                    sparse_lu.DENSE, rank.none(), 0)
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

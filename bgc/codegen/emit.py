@@ -176,8 +176,11 @@ def render(system: EquationSystem) -> str:
     m = system.model
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = cone(system.assignments, dx)
+    a_patterns = {it.index: kernels.factor_pattern(len(it.unknowns), *it.factors)
+                  for it in rhs_asg if isinstance(it, LinearBlock)
+                  and it.regularize is not None}
     with progress.stage("jacobian") as st:
-        jt = tape(rhs_asg, system.states)
+        jt = tape(rhs_asg, system.states, a_patterns)
         st.done(f"{progress.count(len(jt.pattern), 'entry', 'entries')}, "
                 f"{progress.count(jt.n_colours, 'colour')}, "
                 f"{progress.count(len(jt.src), 'partial')}")
@@ -244,6 +247,7 @@ def render(system: EquationSystem) -> str:
         p0=[_float(v) for _, _, v in system.params],
         breakpoints=[_float(b) for b in system.breakpoints],
         n=len(system.states),
+        n_jac=len(system.states) + jt.n_aug,
         constraint_names=[n for n, _, _ in system.constraints],
         has_position=[int(g is not None) for _, g, _ in system.constraints],
         imposed=[int(n in system.imposed) for n, _, _ in system.constraints],

@@ -179,7 +179,9 @@ class Layout:
                     blk.b_at = tuple((i, j) for i, j, _ in item.factors[2])
                 else:
                     blk.a_at = tuple((i, j) for i, j, _ in item.A)
-                if n >= SPARSE_MIN:
+                if n >= SPARSE_MIN and item.regularize is not None:   # pivots: its diagonal
+                    blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK, diagonal=True)
+                elif n >= SPARSE_MIN:
                     start = start if start is not None else block_matrices(system)
                     blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK,
                                                    start.get(item.index))
@@ -1218,14 +1220,40 @@ def _assemble_ir(P: str) -> str:
     return a.text()
 
 
-def _splu_ir(P: str) -> str:
+def _negate_ir(P: str) -> str:
+    """``@<P>_negate(J, w, k, src, dst)``: J[dst[e]] = -w[src[e]] for e < k."""
+    a = _Asm(f"define internal void @{P}_negate(double* noalias %J, double* noalias %w, "
+             f"i64 %k, i64* %src, i64* %dst) nounwind {{", ["e"])
+    a.loop("e", "0", "%k", lambda e: a.store(
+        a.op(f"fneg double {a.load('%w', _index(a, '%src', e))}"), "%J",
+        _index(a, "%dst", e)))
+    a("ret void")
+    return a.text()
+
+
+def factor_pattern(n: int, d: int, K, B) -> np.ndarray:
+    """The structure of ``A = -K B`` (n x n) from the non-zeros of K (n x d) and B (d x
+    n), as ``(i, j, ...)`` triples, with its diagonal."""
+    k = np.zeros((n, d), dtype=np.int64)
+    b = np.zeros((d, n), dtype=np.int64)
+    for i, j, *_ in K:
+        k[i, j] = 1
+    for i, j, *_ in B:
+        b[i, j] = 1
+    return ((k @ b) != 0) | np.eye(n, dtype=bool)
+
+
+def _splu_ir(P: str, spd: bool = False) -> str:
     """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: solve A X = B
     (X holds B, n x m row-major; overwritten) by LU of ``A[rows][:, cols]`` on its
     diagonal along an ``elimination.Plan``, touching only the filled structure. False,
     X untouched, on a pivot not above 1e-13 of the largest |A| (what the dense LU calls
     singular) or an entry grown past ``GROWTH_LIMIT`` times it: the caller then pivots.
-    LU holds n^2 + n doubles (the factors, held dense in the plan's order; a column)."""
-    a = _Asm(f"define i1 @{P}_splu(i64 %n, i64 %m, double* noalias %A, double* noalias "
+    LU holds n^2 + n doubles (the factors, held dense in the plan's order; a column).
+    ``spd`` (``@<P>_splu_spd``, a regularized constraint block, symmetric positive
+    definite): the multipliers of L are not bounded (they reach 1/sqrt(eps) there while
+    the reduced matrices do not grow: elimination is as stable as Cholesky), U is."""
+    a = _Asm(f"define i1 @{P}_splu{'_spd' if spd else ''}(i64 %n, i64 %m, double* noalias %A, double* noalias "
              f"%X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, i64* %lidx, "
              f"i64* %uptr, i64* %uidx) nounwind {{", ["k", "q", "r", "c"])
     a("%big = alloca double")
@@ -1291,8 +1319,9 @@ def _splu_ir(P: str) -> str:
 
         def bounded(v):
             check(a.op(f"fcmp ole double {a.op(fabs.format(v))}, {limit}"))
-        a.loop("q", *span("%lptr", k), lambda q: bounded(a.load(
-            a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n")), k)))
+        if not spd:
+            a.loop("q", *span("%lptr", k), lambda q: bounded(a.load(
+                a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n")), k)))
         a.loop("r", *span("%uptr", k), lambda r: bounded(a.load(rk, _index(a, "%uidx", r))))
     a.loop("k", "0", "%n", grown)
 
@@ -1394,8 +1423,9 @@ class _Module:
         if blk.plan is not None:
             tables = ", ".join(self.array(f"block{i}_{k}", "i64", getattr(blk.plan, k))
                                for k in elimination.Plan._fields)
-            body += [f"  %ok = call i1 @{P}_splu(i64 {n}, i64 %m, double* %A, double* %X, "
-                     f"double* %LU, {tables})", "  br i1 %ok, label %done, label %dense"]
+            spd = "_spd" if blk.reg >= 0 else ""
+            body += [f"  %ok = call i1 @{P}_splu{spd}(i64 {n}, i64 %m, double* %A, double* "
+                     f"%X, double* %LU, {tables})", "  br i1 %ok, label %done, label %dense"]
         else:
             body += ["  br label %dense"]
         body += ["dense:"]
@@ -1549,8 +1579,10 @@ class _Module:
 
     def jacobian(self, jt, n: int):
         """``@<prefix>_jac_full(t, x, p, w, J)``: the run-time partials (program jac)
-        into w, the tape through them, J (n x n) scattered from its compressed rows."""
+        into w, the tape through them, J (N x N, N = n + the open blocks' unknowns)
+        scattered from its compressed rows, and each open block's -A from its matrix."""
         P, lay = self.prefix, self.layout
+        na = n + (jt.n_aug or 0)
         nc = jt.n_colours
         ptr = self.array("tape_ptr", "i64", jt.ptr)
         src = self.array("tape_src", "i64", jt.src)
@@ -1568,14 +1600,27 @@ class _Module:
                 blk = lay.blocks[b.index]
                 self.copy(fn, lay.d + (b.start + b.n) * nc, lay.d + b.start * nc, b.n * nc)
                 self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, False)
-        self.zero(fn, "%J", 0, n * n)
-        pattern = jt.pattern
+        self.zero(fn, "%J", 0, na * na)
+        pattern = [e for e in jt.pattern if e[2] >= 0]
         args = [self.array(k, "i64", v) for k, v in (
             ("jac_i", [i for i, _, _ in pattern]), ("jac_j", [j for _, j, _ in pattern]),
             ("jac_row", [r for _, _, r in pattern]),
             ("jac_col", [jt.colours[j] for _, j, _ in pattern]))]
         fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
-                       f"i64 {len(pattern)}, i64 {n}, i64 {nc}, {', '.join(args)})")
+                       f"i64 {len(pattern)}, i64 {na}, i64 {nc}, {', '.join(args)})")
+        # the open blocks' rows on their own unknowns: -A (as regularized when formed)
+        src, dst = [], []
+        for index, _, m, at in jt.opened or ():
+            blk = lay.blocks[index]
+            for i, j, r in jt.pattern:
+                if r < 0 and at <= i < at + m:
+                    src.append(blk.a + (i - at) * m + (j - at))
+                    dst.append(i * na + j)
+        if src:
+            self.functions.append(_negate_ir(P))
+            fn.body.append(f"  call void @{P}_negate(double* %J, double* %w, i64 {len(src)}, "
+                           f"{self.array('jac_a_src', 'i64', src)}, "
+                           f"{self.array('jac_a_dst', 'i64', dst)})")
         self.functions.append(_TAPE.replace("{P}", P))
         self.functions.append(fn.text(linkage="")
                               .replace("double* noalias %out", "double* noalias %J", 1))
@@ -1641,8 +1686,10 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     if any(b.d for b in blocks):
         mod.decls.add(_MEMSET)
         mod.functions.append(_assemble_ir(prefix))
-    if any(b.plan is not None for b in blocks):
+    if any(b.plan is not None and b.reg < 0 for b in blocks):
         mod.functions.append(_splu_ir(prefix))
+    if any(b.plan is not None and b.reg >= 0 for b in blocks):
+        mod.functions.append(_splu_ir(prefix, spd=True))
     for blk in blocks:
         mod.block(blk)
     if any(b.rank >= 0 for b in blocks):

@@ -131,16 +131,42 @@ def equilibrate(J: np.ndarray, scales=None) -> np.ndarray:
     return J * r[:, None] * c[None, :]
 
 
-def _dependent(J: np.ndarray, names, rank: int) -> list[str]:
-    """A minimal redundant set of the rows of ``J``: exactly ``len(names) - rank`` of
-    them, whose removal leaves ``rank`` independent rows. Rank-revealing QR with column
-    pivoting on J^T (Businger & Golub) takes the rows one at a time, each the one farthest
-    from those taken; the rows it leaves are the redundant ones (named in model order)."""
+# two rows whose distances from the rows taken are within this share of each other are a
+# tie, broken by model order: the choice must not hang on the last digits (the simulator
+# measures the rows by differences, ``bgc check`` from the joints' exact rows)
+TIE = 1e-6
+
+
+def independent_rows(J: np.ndarray, rank: int, first: int = 0) -> np.ndarray:
+    """The ``rank`` rows of ``J`` a rank-revealing QR with column pivoting on J^T
+    (Businger & Golub) takes: one at a time, the row farthest from the span of those
+    taken (ties within ``TIE``: the first in order), as indices; the ``first`` rows are
+    taken first whatever their distance (method zcp's imposed directions)."""
+    V = np.array(J, dtype=np.float64)
+    left = np.ones(len(V), dtype=bool)
+    taken = []
+    for step in range(min(rank, len(V))):
+        norms = np.where(left, np.einsum("ij,ij->i", V, V), -1.0)
+        top = norms.max()
+        if top <= 0.0:
+            break
+        k = step if step < first else int(np.flatnonzero(norms >= top * (1.0 - TIE))[0])
+        top = max(norms[k], 1e-300)
+        taken.append(k)
+        left[k] = False
+        q = V[k] / np.sqrt(top)
+        V -= np.outer(V @ q, q)
+    return np.asarray(taken, dtype=np.int64)
+
+
+def _dependent(J: np.ndarray, names, rank: int, first: int = 0) -> list[str]:
+    """A minimal redundant set of the rows of ``J`` (equilibrated): exactly
+    ``len(names) - rank`` of them, whose removal leaves ``rank`` independent rows (those
+    ``independent_rows`` takes; the ``first`` rows, held independent, are not named)."""
     if rank >= len(names):
         return []
-    import scipy.linalg  # (0.25 s to import: only where there is redundancy)
-    piv = scipy.linalg.qr(J.T, mode="r", pivoting=True)[1]
-    return [names[i] for i in sorted(piv[rank:])]
+    kept = set(independent_rows(J, rank, first).tolist())
+    return [n for i, n in enumerate(names) if i not in kept and i >= first]
 
 
 def _rank(J: np.ndarray) -> int:

@@ -109,12 +109,13 @@ class NativeSolver(Solver):
             project = getattr(problem.module, "projection_entry_point", lambda: 0)()
             system = radau5.System(model, mass, index2, problem.lu_plan,
                                    monitor if monitor is not None else rank.none(),
-                                   int(project))
+                                   int(project), problem.aug_mass)
             settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
                                        GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))
             res = radau5.radau5(system, settings, t0, t1, x0, t_eval, counts, self.diag,
-                                keep if keep is not None else radau5.carry(len(x0)))
+                                keep if keep is not None else
+                                radau5.carry(len(x0), problem.jac_size))
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
@@ -173,7 +174,7 @@ class NativeSolver(Solver):
         keep = None
         if self.loop == "radau5":      # and its Jacobian, factors and predictor
             from bgc.solvers import radau5
-            keep = radau5.carry(len(x))
+            keep = radau5.carry(len(x), problem.jac_size)
         before = [e(t0, x) for _, e in watched]
         while True:
             sel = t_eval[done:]

@@ -90,13 +90,17 @@ class System(NamedTuple):
     matrices (``sparse_lu.DENSE``: dense) and the rank monitor of a constrained run
     (``rank.Monitor``; ``rank.none()``: none); ``project``: the address of the module's
     projection onto its constraints (method augmented; 0: none), applied twice after
-    every accepted step."""
+    every accepted step. ``aug_mass``: the mass matrix of the Jacobian kept open
+    (``JAC_SIZE`` > n: a constraint block's unknowns as algebraic rows, zero there; empty:
+    none), on which the Newton matrices are formed and factored: their solves take the
+    states' rows and read the states' part."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
     plan: tuple
     monitor: rank.Monitor
     project: int
+    aug_mass: np.ndarray
 
 
 class Settings(NamedTuple):
@@ -135,10 +139,13 @@ class Carry(NamedTuple):
     state: np.ndarray
 
 
-def carry(n: int) -> Carry:
-    """An empty ``Carry`` for n states (a fresh start)."""
-    return Carry(np.empty((n, n)), np.empty((n, n)), np.empty((n, n), dtype=np.complex128),
-                 np.empty(n, dtype=F_INT_nptype), np.empty(n, dtype=F_INT_nptype),
+def carry(n: int, na: int | None = None) -> Carry:
+    """An empty ``Carry`` for n states (a fresh start); ``na``: the size of the Jacobian
+    (``JAC_SIZE``, n unless a constraint block is kept open)."""
+    na = n if na is None else na
+    return Carry(np.empty((na, na)), np.empty((na, na)),
+                 np.empty((na, na), dtype=np.complex128),
+                 np.empty(na, dtype=F_INT_nptype), np.empty(na, dtype=F_INT_nptype),
                  np.zeros((n, 3)), np.empty(n), np.zeros(11))
 
 
@@ -221,11 +228,28 @@ def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
 
 
 @inner
-def _solve(lu, piv, b, plan, kind):
-    """Solve with the factors ``_newton_matrices`` made (of either kind)."""
+def _solve_full(lu, piv, b, plan, kind):
     if kind == SPARSE_LU:
         return sparse_lu.solve(lu, plan, b)
     return _lu_solve(lu, piv, b)
+
+
+@inner
+def _solve(lu, piv, b, plan, kind):
+    """Solve with the factors ``_newton_matrices`` made (of either kind); factors of the
+    open Jacobian (larger than b) take b on the states' rows, zero on the others, and
+    give the states' part."""
+    n, na = b.shape[0], lu.shape[0]
+    if na == n:
+        return _solve_full(lu, piv, b, plan, kind)
+    full = np.zeros(na, dtype=b.dtype)
+    for i in range(n):
+        full[i] = b[i]
+    x = _solve_full(lu, piv, full, plan, kind)
+    out = np.empty(n, dtype=b.dtype)
+    for i in range(n):
+        out[i] = x[i]
+    return out
 
 
 # The loop below is written in scalar loops over arrays it allocates once, not numpy
@@ -461,6 +485,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     the rate measured since the last check, at most ``MONITOR_MAX``."""
     rhs, jac, guards, n_guards, p = system.model
     M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
+    aug = system.aug_mass.shape[0] > 0
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
                                      settings.h_start)
     guard_tol, max_steps, stop = settings.guard_tol, settings.max_steps, settings.stop
@@ -568,7 +593,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             while not converged:
                 if not have_lu:
                     stats[ST_LU] += 2
-                    lu_kind = _newton_matrices(J, M, h, lu_real, lu_complex, piv_real,
+                    lu_kind = _newton_matrices(J, system.aug_mass if aug else M, h,
+                                               lu_real, lu_complex, piv_real,
                                                piv_complex, plan)
                     if lu_kind == NO_LU:
                         singular = True
@@ -713,7 +739,7 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE, rank.none(), 0)
+                    sparse_lu.DENSE, rank.none(), 0, np.empty((0, 0)))
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

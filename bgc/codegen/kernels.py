@@ -1578,15 +1578,20 @@ class _Module:
                 f"@{self.prefix}_{name}, i64 0, i64 0)")
 
     def jacobian(self, jt, n: int):
-        """``@<prefix>_jac_full(t, x, p, w, J)``: the run-time partials (program jac)
-        into w, the tape through them, J (N x N, N = n + the open blocks' unknowns)
-        scattered from its compressed rows, and each open block's -A from its matrix."""
+        """The Jacobian from the run-time partials (program jac) and the tape through
+        them (``@<prefix>_jac_tape(t, x, p, w)``), in two forms: ``@<prefix>_jac_full(t,
+        x, p, w, J)``, J dense (N x N, N = n + the open blocks' unknowns) scattered from
+        the tape's compressed rows, each open block's -A from its matrix; and
+        ``@<prefix>_jac_vals(t, x, p, w, V)``, the same entries as values in the order of
+        the pattern (``JAC_I``, ``JAC_J``): what the native integrator's sparse LU reads,
+        whose cost follows the non-zeros (a dense N x N is 20 MB for IFToMM A02 at N = 40
+        under method augmented, and writing it cost most of a Jacobian)."""
         P, lay = self.prefix, self.layout
         na = n + (jt.n_aug or 0)
         nc = jt.n_colours
         ptr = self.array("tape_ptr", "i64", jt.ptr)
         src = self.array("tape_src", "i64", jt.src)
-        fn = _Function(f"{P}_jac_full", lay, {}, {}, self.decls)
+        fn = _Function(f"{P}_jac_tape", lay, {}, {}, self.decls)
         pv, d = fn.ptr("%w", lay.pv), fn.ptr("%w", lay.d)
         fn.body.append(f"  call void @{P}_jac(double %t, double* %x, double* %p, "
                        f"double* %w, double* {pv})")
@@ -1600,30 +1605,48 @@ class _Module:
                 blk = lay.blocks[b.index]
                 self.copy(fn, lay.d + (b.start + b.n) * nc, lay.d + b.start * nc, b.n * nc)
                 self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, False)
-        self.zero(fn, "%J", 0, na * na)
-        pattern = [e for e in jt.pattern if e[2] >= 0]
-        args = [self.array(k, "i64", v) for k, v in (
-            ("jac_i", [i for i, _, _ in pattern]), ("jac_j", [j for _, j, _ in pattern]),
-            ("jac_row", [r for _, _, r in pattern]),
-            ("jac_col", [jt.colours[j] for _, j, _ in pattern]))]
-        fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
-                       f"i64 {len(pattern)}, i64 {na}, i64 {nc}, {', '.join(args)})")
-        # the open blocks' rows on their own unknowns: -A (as regularized when formed)
-        src, dst = [], []
+        self.functions.append(_TAPE.replace("{P}", P))
+        self.functions.append(fn.text().replace(", double* noalias %out", "", 1))
+        # the entries: from the tape's rows (k: their place in the pattern), and the open
+        # blocks' rows on their own unknowns, -A (as regularized when formed)
+        tape_at = [k for k, e in enumerate(jt.pattern) if e[2] >= 0]
+        a_src, a_at = [], []
         for index, _, m, at in jt.opened or ():
             blk = lay.blocks[index]
-            for i, j, r in jt.pattern:
+            for k, (i, j, r) in enumerate(jt.pattern):
                 if r < 0 and at <= i < at + m:
-                    src.append(blk.a + (i - at) * m + (j - at))
-                    dst.append(i * na + j)
-        if src:
+                    a_src.append(blk.a + (i - at) * m + (j - at))
+                    a_at.append(k)
+        if a_src:
             self.functions.append(_negate_ir(P))
-            fn.body.append(f"  call void @{P}_negate(double* %J, double* %w, i64 {len(src)}, "
-                           f"{self.array('jac_a_src', 'i64', src)}, "
-                           f"{self.array('jac_a_dst', 'i64', dst)})")
-        self.functions.append(_TAPE.replace("{P}", P))
-        self.functions.append(fn.text(linkage="")
-                              .replace("double* noalias %out", "double* noalias %J", 1))
+        tables = {k: self.array(k, "i64", v) for k, v in (
+            ("jac_row", [jt.pattern[k][2] for k in tape_at]),
+            ("jac_col", [jt.colours[jt.pattern[k][1]] for k in tape_at]),
+            ("jac_zero", [0] * len(tape_at)), ("jac_k", tape_at),
+            ("jac_i", [jt.pattern[k][0] for k in tape_at]),
+            ("jac_j", [jt.pattern[k][1] for k in tape_at]))}
+        for name, dense in (("jac_full", True), ("jac_vals", False)):
+            fn = _Function(f"{P}_{name}", lay, {}, {}, self.decls)
+            d = fn.ptr("%w", lay.d)
+            fn.body.append(f"  call void @{P}_jac_tape(double %t, double* %x, double* %p, "
+                           "double* %w)")
+            if dense:               # J[i, j]: row i's offset i * na (zeroed first)
+                self.zero(fn, "%J", 0, na * na)
+                rows, cols, stride = tables["jac_i"], tables["jac_j"], na
+            else:                   # V[k]: "row" 0, "column" k
+                rows, cols, stride = tables["jac_zero"], tables["jac_k"], 0
+            fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
+                           f"i64 {len(tape_at)}, i64 {stride}, i64 {nc}, {rows}, {cols}, "
+                           f"{tables['jac_row']}, {tables['jac_col']})")
+            if a_src:
+                dst = [jt.pattern[k][0] * na + jt.pattern[k][1] for k in a_at] if dense \
+                    else a_at
+                fn.body.append(
+                    f"  call void @{P}_negate(double* %J, double* %w, i64 {len(a_src)}, "
+                    f"{self.array(f'{name}_a_src', 'i64', a_src)}, "
+                    f"{self.array(f'{name}_a_dst', 'i64', dst)})")
+            self.functions.append(fn.text(linkage="")
+                                  .replace("double* noalias %out", "double* noalias %J", 1))
 
     def entry(self, name: str, program: str, n_work: int):
         """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
@@ -1667,7 +1690,7 @@ def _declaration(definition: str) -> str:
 # and the C entry points of the native integrators
 PROGRAMS = ("rhs", "jac", "out", "guard", "con", "proj")
 ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"),
-           ("proj_entry", "proj"))
+           ("proj_entry", "proj"), ("jacv_entry", "jac_vals"))
 
 
 def lower(system, prefix: str, programs: dict, jt) -> Kernels:
@@ -1702,8 +1725,8 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
             mod.program(name, *programs[name])
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:
-        if program in programs or program == "jac_full":
-            mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
+        if program in programs or program.startswith("jac_"):
+            mod.entry(name, program, layout.size if program.startswith("jac_") else n_eval)
     return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
 

@@ -93,7 +93,9 @@ class System(NamedTuple):
     every accepted step. ``aug_mass``: the mass matrix of the Jacobian kept open
     (``JAC_SIZE`` > n: a constraint block's unknowns as algebraic rows, zero there; empty:
     none), on which the Newton matrices are formed and factored: their solves take the
-    states' rows and read the states' part."""
+    states' rows and read the states' part. ``jacv``: the address of the Jacobian as
+    values in the order of its pattern (``rows``, ``cols``: JAC_I, JAC_J), which a
+    sparse plan's Newton matrices are formed from (0: the dense Jacobian, ``model.jac``)."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
@@ -101,6 +103,9 @@ class System(NamedTuple):
     monitor: rank.Monitor
     project: int
     aug_mass: np.ndarray
+    jacv: int
+    rows: np.ndarray
+    cols: np.ndarray
 
 
 class Settings(NamedTuple):
@@ -122,6 +127,16 @@ class Settings(NamedTuple):
 MONITOR_NEAR, MONITOR_MAX = 0.5, 16
 
 
+@inner
+def _jacobian(system, t, y, p, J, V):
+    """The Jacobian at (t, y): its values into V (a sparse plan with a values entry),
+    else dense into J."""
+    if system.jacv != 0 and system.plan[0].shape[0] > 0:
+        call_entry(system.jacv, t, y, p, V)
+    else:
+        call_entry(system.model.jac, t, y, p, J)
+
+
 class Carry(NamedTuple):
     """What the loop keeps across a pause (``Settings.max_steps``), so that going on from
     there costs no restart: the Jacobian, the Newton matrices' factors, the last step's
@@ -130,6 +145,7 @@ class Carry(NamedTuple):
     have_sol, faccon]. A call from (t0, x0) that is not where the last one paused starts
     fresh."""
     J: np.ndarray
+    V: np.ndarray           # the Jacobian's values (``System.jacv``)
     lu_real: np.ndarray
     lu_complex: np.ndarray
     piv_real: np.ndarray
@@ -139,11 +155,12 @@ class Carry(NamedTuple):
     state: np.ndarray
 
 
-def carry(n: int, na: int | None = None) -> Carry:
+def carry(n: int, na: int | None = None, nnz: int = 0) -> Carry:
     """An empty ``Carry`` for n states (a fresh start); ``na``: the size of the Jacobian
-    (``JAC_SIZE``, n unless a constraint block is kept open)."""
+    (``JAC_SIZE``, n unless a constraint block is kept open), ``nnz`` its entries. (The
+    dense arrays are allocated, not touched: a sparse run never writes most of them.)"""
     na = n if na is None else na
-    return Carry(np.empty((na, na)), np.empty((na, na)),
+    return Carry(np.empty((na, na)), np.empty(max(nnz, 1)), np.empty((na, na)),
                  np.empty((na, na), dtype=np.complex128),
                  np.empty(na, dtype=F_INT_nptype), np.empty(na, dtype=F_INT_nptype),
                  np.zeros((n, 3)), np.empty(n), np.zeros(11))
@@ -196,18 +213,32 @@ def _lu_solve(lu, piv, b):
 
 
 @inner
-def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
+def _newton_matrices(J, V, system, M, h, lu_real, lu_complex, piv_real, piv_complex,
+                     plan):
     """Factor mu_real/h M - J and mu_complex/h M - J (M empty: the identity): along the
     sparse ``plan`` if there is one and both pass its growth check (returns SPARSE_LU),
     else dense, stored transposed for LAPACK (DENSE_LU); NO_LU if either is exactly
-    singular."""
+    singular. The Jacobian is the values V where ``_jacobian`` took them, else J."""
     n = J.shape[0]
+    values = system.jacv != 0 and plan[0].shape[0] > 0
     if plan[0].shape[0] > 0:
-        sparse_lu.newton_matrix(J, M, _MU_REAL / h, plan, lu_real)
+        if values:
+            sparse_lu.newton_matrix_values(V, M, _MU_REAL / h, plan, lu_real)
+        else:
+            sparse_lu.newton_matrix(J, M, _MU_REAL / h, plan, lu_real)
         if sparse_lu.factor(lu_real, plan):
-            sparse_lu.newton_matrix(J, M, _MU_COMPLEX / h, plan, lu_complex)
+            if values:
+                sparse_lu.newton_matrix_values(V, M, _MU_COMPLEX / h, plan, lu_complex)
+            else:
+                sparse_lu.newton_matrix(J, M, _MU_COMPLEX / h, plan, lu_complex)
             if sparse_lu.factor(lu_complex, plan):
                 return SPARSE_LU
+        if values:              # the dense fallback reads J: from the values
+            for i in range(n):
+                for j in range(n):
+                    J[i, j] = 0.0
+            for k in range(system.rows.shape[0]):
+                J[system.rows[k], system.cols[k]] = V[k]
     for i in range(n):
         for j in range(n):
             lu_real[i, j] = -J[j, i]
@@ -505,8 +536,9 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         for i in range(n):
             diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
         return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_start)
-    J, lu_real, lu_complex, piv_real, piv_complex, Q = (
-        keep.J, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex, keep.Q)
+    J, V, lu_real, lu_complex, piv_real, piv_complex, Q = (
+        keep.J, keep.V, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex,
+        keep.Q)
     kept = keep.state
     newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
     if kept[0] == 1.0 and kept[1] == t0 and h_start > 0.0:     # going on from a pause
@@ -525,7 +557,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
         h_abs = min(h_abs, t1 - t0, max_step)
         h_abs_old, err_old = -1.0, -1.0
-        call_entry(jac, t, y, p, J)
+        _jacobian(system, t, y, p, J, V)
         stats[ST_JAC] += 1
         current_jac = True
         have_lu = False
@@ -593,7 +625,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             while not converged:
                 if not have_lu:
                     stats[ST_LU] += 2
-                    lu_kind = _newton_matrices(J, system.aug_mass if aug else M, h,
+                    lu_kind = _newton_matrices(J, V, system,
+                                               system.aug_mass if aug else M, h,
                                                lu_real, lu_complex, piv_real,
                                                piv_complex, plan)
                     if lu_kind == NO_LU:
@@ -607,7 +640,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
                     stats, diag, faccon)
                 if converged or not finite or current_jac:
                     break
-                call_entry(jac, t, y, p, J)    # slow convergence: a fresh Jacobian
+                _jacobian(system, t, y, p, J, V)    # slow convergence: a fresh Jacobian
                 stats[ST_JAC] += 1
                 current_jac = True
                 have_lu = False
@@ -675,7 +708,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         if not _finite(y_new):
             return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_abs)
         if recompute_jac:
-            call_entry(jac, t_new, y_new, p, J)
+            _jacobian(system, t_new, y_new, p, J, V)
             stats[ST_JAC] += 1
             current_jac = True
         else:
@@ -739,7 +772,8 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE, rank.none(), 0, np.empty((0, 0)))
+                    sparse_lu.DENSE, rank.none(), 0, np.empty((0, 0)), 0,
+                    np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

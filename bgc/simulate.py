@@ -270,7 +270,7 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
         if not redundancy and projection.rank < projection.n_constraints:
             raise SimulationError(
                 f"{projection.n_constraints - projection.rank} redundant constraint(s) "
-                f"among {', '.join(projection.redundant)}: without redundancy handling "
+                f"({', '.join(projection.redundant)}): without redundancy handling "
                 f"the constraint block is singular (rank {projection.rank} of "
                 f"{projection.n_constraints}) and the joint forces are undetermined; "
                 f"nothing was run (t = {t_start:g})",

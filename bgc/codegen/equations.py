@@ -87,6 +87,9 @@ class LinearBlock:
     # a block solved with the diagonal of A raised by eps times itself on these rows
     # (``Regularized``: method augmented's projections), regular whatever the rank
     regularize: "Regularized | None" = None
+    # right-hand sides solved at once (``b`` holds n x columns, row-major; the unknowns
+    # likewise): method augmented's projection solves its velocities and positions so
+    columns: int = 1
 
     @property
     def free_symbols(self) -> set:
@@ -120,7 +123,7 @@ class LinearBlock:
                            (self.factors[0],
                             tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[1]),
                             tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[2])),
-                           self.regularize)
+                           self.regularize, self.columns)
 
 
 @dataclass(frozen=True)
@@ -659,8 +662,8 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
                         + (f" and {n_acc} twist rates of bodies of negligible mass"
                            if n_acc else "")]
         block = _kkt_block(b, tears, order, block_index)
-        block, extra = methods.get(b.g.method).constraint_block(b, block)
-        return [block] + [(v, eqs[v]) for v in order] + extra, loop
+        before, block, after = methods.get(b.g.method).constraint_block(b, block)
+        return before + [block] + [(v, eqs[v]) for v in order] + after, loop
     if multipliers:
         loop.kind = "constraint"
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "

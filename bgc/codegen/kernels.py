@@ -99,6 +99,7 @@ class Block:
     lu: int = 0         # room for its LU factors (and a column, sparse)
     reg: int = -1       # regularized (``equations.Regularized``): eps's slot (-1: none)
     reg_rows: tuple = ()
+    columns: int = 1    # right-hand sides (b: n x columns, row-major)
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
     k_at: tuple = ()
     b_at: tuple = ()
@@ -164,9 +165,10 @@ class Layout:
         start = None
         for item in system.assignments:
             if isinstance(item, LinearBlock):
-                n = len(item.unknowns)
-                blk = Block(item.index, n, self._region(n * n), self._region(n),
-                            self.slot[item.unknowns[0]])
+                n = len(item.unknowns) // item.columns
+                blk = Block(item.index, n, self._region(n * n),
+                            self._region(n * item.columns), self.slot[item.unknowns[0]],
+                            columns=item.columns)
                 if item.rank is not None:
                     blk.rank = self._region(1)
                 if item.regularize is not None:
@@ -1523,8 +1525,8 @@ class _Module:
             kind = step[0]
             if kind == "solve":
                 blk = self.layout.blocks[step[1]]
-                self.solve(fn, blk, blk.b, 1, True)
-                self.copy(fn, blk.u, blk.b, blk.n)
+                self.solve(fn, blk, blk.b, blk.columns, True)
+                self.copy(fn, blk.u, blk.b, blk.n * blk.columns)
                 flush()                 # what follows reads the unknowns from w
                 continue
             if count >= CHUNK or fn.n >= CHUNK_OPS:

@@ -50,14 +50,17 @@ EPS = "augmented__eps"
 DEFAULT_EPS = 1e-8
 
 
-def regularize_and_project(b, block: LinearBlock) -> tuple[LinearBlock, list]:
+def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, list]:
     """The constraint block regularized (``Regularized`` on the multipliers' rows, its
-    tear equations with the same term for the Jacobian) and, after it, the projection:
-    two regularized blocks on the same factors (velocities: ``b = dg/dt``; positions:
-    ``b = g``), the pose motions of the position impulse, and each state's correction
-    (``b.projection``)."""
+    tear equations with the same term for the Jacobian), its factors' sensitivities
+    assigned before it (the projection reads them without solving the block), and after
+    it the projection: one regularized block on the same factors with two right-hand
+    sides (velocities: ``dg/dt``; positions: ``g``), the pose motions of the position
+    impulse, and each state's correction (``b.projection``)."""
     tears = block.unknowns
     rows = tuple(i for i, u in enumerate(tears) if symbols.kind(u) == "multiplier")
+    if len(rows) != len(tears):         # (bodies of negligible mass: refused before)
+        raise AssertionError("augmented: a constraint block with other unknowns")
     d, K, B = block.factors
     eps = symbols.param(EPS)
     # diag(K B), each row's scale: the tear equations carry eps (K B)_ii u_i, so that the
@@ -72,32 +75,32 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[LinearBlock, list]:
             raise EquationError(f"method augmented: the constraint "
                                 f"{b.display.get(tears[i], tears[i])} acts on no body's "
                                 "momentum", hint="use --method lagrange")
-    tear = tuple(e + eps * diag[i] * tears[i] if i in rows else e
-                 for i, e in enumerate(block.tear_eqs))
+    tear = tuple(e + eps * diag[i] * tears[i] for i, e in enumerate(block.tear_eqs))
     reg = Regularized(eps, rows)
+    loop = set(tears) | {v for v, _ in block.chain}
+    before = []
+    if not any(e.has(*loop) for _, e in block.pre):     # (linear: they never do)
+        before, block = list(block.pre), replace(block, pre=())
     block = replace(block, rank=None, regularize=reg, tear_eqs=tear)
-    lams = [tears[i] for i in rows]
-    if len(lams) != len(tears):         # (bodies of negligible mass: refused before)
-        raise AssertionError("augmented: a constraint block with other unknowns")
     dynamic = sorted({x for t in tears for x in b.kkt_rows[t]}, key=lambda x: x.name)
-    extra, mus = [], {}
-    for k, (tag, which) in enumerate((("V", 1), ("G", 0))):
-        mu = tuple(sp.Symbol(f"MU{tag}_{lam.name[len('LAM_'):]}", real=True) for lam in lams)
-        mus[tag] = mu
-        rhs = tuple(b.kkt_constraint[lam][which] for lam in lams)
-        extra.append(LinearBlock(block.index + 1 + k, mu, (), rhs,
-                                 tuple(sp.S.Zero for _ in mu), factors=(d, K, B),
-                                 regularize=reg))
+    names = [t.name[len("LAM_"):] for t in tears]
+    mu = {tag: [sp.Symbol(f"MU{tag}_{n}", real=True) for n in names] for tag in "VG"}
+    unknowns = tuple(u for pair in zip(mu["V"], mu["G"]) for u in pair)
+    rhs = tuple(e for t in tears for e in (b.kkt_constraint[t][1], b.kkt_constraint[t][0]))
+    after = [LinearBlock(block.index + 1, unknowns, (), rhs,
+                         tuple(sp.S.Zero for _ in unknowns), factors=(d, K, B),
+                         regularize=reg, columns=2)]
     # the impulses B mu on the dynamic states (velocities: the momenta's correction;
     # positions: the momenta whose pose rates move the poses onto the constraints)
     impulse = {"V": {}, "G": {}}
     for j, k, e in B:
         for tag in impulse:
-            impulse[tag][dynamic[j]] = impulse[tag].get(dynamic[j], sp.S.Zero) + e * mus[tag][k]
+            impulse[tag][dynamic[j]] = impulse[tag].get(dynamic[j], sp.S.Zero) \
+                + e * mu[tag][k]
     push = {}
     for x, e in sorted(impulse["G"].items(), key=lambda kv: kv[0].name):
         v = sp.Symbol(f"PG_{x.name}", real=True)
-        extra.append((v, e))
+        after.append((v, e))
         push[x] = v
     for x, e in impulse["V"].items():
         b.projection[x] = e
@@ -105,7 +108,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[LinearBlock, list]:
         e = sum((c * push[x] for x, c in prow.items() if x in push), sp.S.Zero)
         if e != 0:
             b.projection[q] = e
-    return block, extra
+    return before, block, after
 
 
 class Augmented(Lagrange):

@@ -74,9 +74,9 @@ class ConstraintMethod(abc.ABC):
 
     def constraint_block(self, builder, block) -> tuple:
         """The constraint block (``equations.LinearBlock`` of the multipliers) as the
-        method solves it, and the assignments it adds after the block's chain (method
-        augmented: its regularization and the projection's blocks)."""
-        return block, []
+        method solves it, with the assignments it adds before it and after the block's
+        chain (method augmented: its regularization and the projection's block)."""
+        return [], block, []
 
     def parameters(self, model, constraints) -> list[tuple[str, float]]:
         """Parameters the method adds to the module (name, default value)."""

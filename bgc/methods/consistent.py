@@ -52,9 +52,9 @@ class Projection:
                f"correction {self.position_correction:.3g}, velocity correction "
                f"{self.velocity_correction:.3g} ({self.iterations} Newton iterations)")
         if self.rank < self.n_constraints:
-            out += (f"; rank {self.rank}, {self.n_constraints - self.rank} redundant: "
-                    f"{', '.join(self.redundant)} (consistent, load shared by least "
-                    "squares)")
+            out += (f"; rank {self.rank}: {self.n_constraints - self.rank} redundant "
+                    f"constraint(s) ({', '.join(self.redundant)}; consistent, load shared "
+                    "by least squares)")
         return out
 
 

@@ -99,8 +99,8 @@ _FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model f
 
 
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
-                  "change its geometry or initial state, or use --method parasitic to pass "
-                  "through it")
+                  "use --method augmented, whose ideal joints pass singular configurations "
+                  "(redundant constraints too), or change its geometry or initial state")
 
 
 def _singular(monitor, seg: Segment, drop: float) -> str | None:

@@ -99,6 +99,8 @@ class NativeSolver(Solver):
             # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
+            if problem.jac_size != len(x0):     # a Jacobian kept open: its complement is
+                check = 0                       # formed in Python only (checked there)
             settings = rk4.settings(problem.step, GUARD_TOLERANCE, check, max_steps,
                                     problem.interrupt.flag)
             res = rk4.rk4(model, settings, t0, t1, x0, t_eval, counts)

@@ -95,7 +95,7 @@ class LinearBlock:
     def free_symbols(self) -> set:
         out = set(self.rank.free_symbols) if self.rank is not None else set()
         if self.regularize is not None:
-            out |= self.regularize.eps.free_symbols
+            out |= self.regularize.free_symbols
         exprs = [e for _, _, e in self.A] + [e for _, e in self.pre]
         if self.factors is not None:
             exprs += [e for _, _, e in self.factors[1] + self.factors[2]]
@@ -123,16 +123,25 @@ class LinearBlock:
                            (self.factors[0],
                             tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[1]),
                             tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[2])),
-                           self.regularize, self.columns)
+                           None if self.regularize is None else
+                           self.regularize.xreplace(mapping), self.columns)
 
 
 @dataclass(frozen=True)
 class Regularized:
-    """A linear block solved as ``(A + eps diag(A)) u = b`` on the rows ``rows`` (Tikhonov
-    in the scale of each row): regular where A is not (redundant constraints, a singular
-    configuration), within eps of A's solution on its well-conditioned part."""
-    eps: sp.Expr
+    """A linear block solved as ``(A + diag(w)) u = b``, ``w[k]`` added on row
+    ``rows[k]`` (Tikhonov, each row in its own scale: method augmented), regular where A
+    is not (redundant constraints, a singular configuration), within the weights of A's
+    solution on its well-conditioned part."""
+    weights: tuple[sp.Expr, ...]
     rows: tuple[int, ...]
+
+    @property
+    def free_symbols(self) -> set:
+        return set().union(*(w.free_symbols for w in self.weights))
+
+    def xreplace(self, mapping) -> "Regularized":
+        return Regularized(tuple(w.xreplace(mapping) for w in self.weights), self.rows)
 
 
 @dataclass

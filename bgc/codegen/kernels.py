@@ -172,7 +172,7 @@ class Layout:
                 if item.rank is not None:
                     blk.rank = self._region(1)
                 if item.regularize is not None:
-                    blk.reg = self._region(1)
+                    blk.reg = self._region(len(item.regularize.rows))
                     blk.reg_rows = item.regularize.rows
                 if item.factors is not None:
                     blk.d = d = item.factors[0]
@@ -393,7 +393,9 @@ class _Function:
         visit(e)
         adj = {e: double(1.0)}
         for node in reversed(order):
-            a = adj.pop(node)
+            a = adj.pop(node, None)
+            if a is None:       # reached only through a zero derivative (sign, a step)
+                continue
             for child, local in self._local(node, dep):
                 if local is None:
                     c = a
@@ -558,7 +560,8 @@ def _steps(items, outputs, layout: Layout):
         if item.rank is not None:
             yield ("store", blk.rank, item.rank)
         if item.regularize is not None:
-            yield ("store", blk.reg, item.regularize.eps)
+            for k, w in enumerate(item.regularize.weights):
+                yield ("store", blk.reg + k, w)
         yield ("solve", item.index)
     for out in outputs:
         if isinstance(out[1], list):          # (e, [(slot, w)]): pv[slot] = d e / d w
@@ -1293,7 +1296,10 @@ def _splu_ir(P: str, spd: bool = False) -> str:
     a.loop("k", "0", "%n", copy)
     big = a.op("load double, double* %big")
     limit = a.op(f"fmul double {double(elimination.GROWTH_LIMIT)}, {big}")
-    tiny = a.op(f"fmul double {double(1e-13)}, {big}")
+    # (spd: a regularized block is regular by construction, its smallest pivots the
+    # weights on its redundant directions, which may lie 12 decades below its largest
+    # entry: only a zero or non-finite pivot fails)
+    tiny = a.op(f"fmul double {double(1e-300 if spd else 1e-13)}, {big}")
 
     def pivot(k):
         rk = a.at("%LU", a.op(f"mul i64 {k}, %n"))          # row k
@@ -1439,19 +1445,16 @@ class _Module:
         self.functions.append("\n".join(body))
 
     def _regularize(self, blk: Block):
-        """``@<prefix>_block<index>_reg(A, R)``: A[r, r] += R[0] A[r, r] on the block's
-        regularized rows."""
+        """``@<prefix>_block<index>_reg(A, R)``: A[r, r] += R[k] on the block's
+        regularized rows r = ``reg_rows[k]``."""
         n, i = blk.n, blk.index
         diag = self.array(f"block{i}_diag", "i64", [r * n + r for r in blk.reg_rows])
         diag = diag[len("i64* "):]          # the constant's address, as an operand
         a = _Asm(f"define internal void @{self.prefix}_block{i}_reg(double* noalias %A, "
                  f"double* noalias %R) nounwind {{", ["e"])
-        eps = a.op("load double, double* %R, align 8")
-
         def raise_(e):
             at = _index(a, diag, e)
-            v = a.load("%A", at)
-            a.store(a.op(f"fadd double {v}, {a.op(f'fmul double {eps}, {v}')}"), "%A", at)
+            a.store(a.op(f"fadd double {a.load('%A', at)}, {a.load('%R', e)}"), "%A", at)
         a.loop("e", "0", str(len(blk.reg_rows)), raise_)
         a("ret void")
         self.functions.append(a.text())

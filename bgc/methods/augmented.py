@@ -63,24 +63,36 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
         raise AssertionError("augmented: a constraint block with other unknowns")
     d, K, B = block.factors
     eps = symbols.param(EPS)
-    # diag(K B), each row's scale: the tear equations carry eps (K B)_ii u_i, so that the
-    # Jacobian's solve is the regularized one (u = 0 in b: the right-hand side as it was)
+    # each row's scale: its diagonal (K B)_ii, the sum of its terms K_ij B_ji (one per
+    # coordinate of the bodies it joins: 1/m, l^2/I, ...; they share a sign). (A body
+    # whose inertia is decades below m l^2, a point mass, makes that sum, and the
+    # softening, large against the translation the row constrains: IFToMM A01's point
+    # mass is given the inertia of a 3 cm ball, docs/methods.md)
     k_of = {(i, j): e for i, j, e in K}
-    diag = {}
+    terms: dict = {}
     for j, k, e in B:
         if (k, j) in k_of:
-            diag[k] = diag.get(k, sp.S.Zero) + k_of[(k, j)] * e
+            terms.setdefault(k, []).append(k_of[(k, j)] * e)
+    before, weights = [], []
     for i in rows:
-        if diag.get(i, sp.S.Zero) == 0:
+        if not terms.get(i):
             raise EquationError(f"method augmented: the constraint "
                                 f"{b.display.get(tears[i], tears[i])} acts on no body's "
                                 "momentum", hint="use --method lagrange")
-    tear = tuple(e + eps * diag[i] * tears[i] for i, e in enumerate(block.tear_eqs))
-    reg = Regularized(eps, rows)
+        w = sp.Symbol(f"REG_{tears[i].name}", real=True)
+        # A = -K B: w = eps A_ii raises |A_ii|
+        before.append((w, -eps * sp.Add(*terms[i])))
+        weights.append(w)
+    # the tear equations carry -w_i u_i, so that the Jacobian's solve is the regularized
+    # one (u = 0 in b: the right-hand side as it was)
+    tear = tuple(e - weights[i] * tears[i] for i, e in enumerate(block.tear_eqs))
+    reg = Regularized(tuple(weights), rows)
     loop = set(tears) | {v for v, _ in block.chain}
-    before = []
     if not any(e.has(*loop) for _, e in block.pre):     # (linear: they never do)
-        before, block = list(block.pre), replace(block, pre=())
+        before, block = list(block.pre) + before, replace(block, pre=())
+    else:
+        raise AssertionError("augmented: the constraint block's sensitivities read its "
+                             "unknowns (a nonlinear loop)")
     block = replace(block, rank=None, regularize=reg, tear_eqs=tear)
     dynamic = sorted({x for t in tears for x in b.kkt_rows[t]}, key=lambda x: x.name)
     names = [t.name[len("LAM_"):] for t in tears]

@@ -56,11 +56,11 @@ def test_a02_reference_is_the_reduced_equation_in_closed_form():
         x, y = A02.reference(n, t)
         assert np.allclose(np.hypot(x, y), 1.0, atol=1e-12)
         th = A02.theta_exact(n, t)
-        a, b = A02.coefficients(n)
-        other = solve_ivp(lambda _, z: [z[1], b / a * np.sin(z[0])], (0.0, 20.0), [0.0, 1.0],
-                          method="Radau", t_eval=t, rtol=1e-11, atol=1e-11).y[0]
-        assert np.abs(other - th).max() < 1e-6
         assert th[-1] / (2 * np.pi) > 10          # it goes round ten times in 20 s
+    a, b = A02.coefficients(2)
+    other = solve_ivp(lambda _, z: [z[1], b / a * np.sin(z[0])], (0.0, 20.0), [0.0, 1.0],
+                      method="LSODA", t_eval=t, rtol=1e-11, atol=1e-11).y[0]
+    assert np.abs(other - A02.theta_exact(2, t)).max() < 1e-6
 
 
 def test_a02_generator_writes_any_n(tmp_path):
@@ -161,3 +161,48 @@ def test_a02_failed_run_json_keeps_stats_projection_and_partial_results(tmp_path
     assert rep["stats"]["steps"] > 0 and 0.6 < rep["t_reached"] < 2.0
     assert rep["projection"]["rank"] == 29 and len(rep["projection"]["redundant"]) == 6
     assert rep["partial_results"] == str(out) and out.exists()
+
+
+def a01_reference(t, inertia: float):
+    """A01: (m L^2 + I) phi'' = -m g L sin phi from phi = 90 deg at rest, to 1e-13; P1."""
+    from scipy.integrate import solve_ivp
+    m, length, g = 1.0, 1.0, 9.81
+    s = solve_ivp(lambda _, z: [z[1], -m * g * length * np.sin(z[0]) /
+                                (m * length ** 2 + inertia)], (0.0, float(t[-1])),
+                  [np.pi / 2, 0.0], method="DOP853", t_eval=t, rtol=1e-13, atol=1e-13)
+    return -length * np.sin(s.y[0]), -length * np.cos(s.y[0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["augmented", "lagrange", "zcp", "parasitic"])
+def test_a01_simple_pendulum_against_its_exact_solution(compiled, method):
+    """P1 through 10 s of swinging from the horizontal: the ideal-joint methods within
+    2e-5 m at rtol 1e-8 (augmented: its regularization's bias, eps times the ball's l^2/I
+    against its mass, measured 1.4e-5; lagrange 1e-9), parasitic within its modelling
+    error (the default stiffness: 1e-4)."""
+    mod = compiled("simple_pendulum", method)
+    r = simulate(mod, t_end=10.0, rtol=1e-8, atol=1e-10, points=501)
+    x, y = a01_reference(r.t, 4e-4)
+    err = np.hypot(r.column("P1_x") - x, r.column("P1_y") - y).max()
+    assert err < (2e-4 if method == "parasitic" else 2e-5), err
+
+
+@pytest.mark.slow
+def test_a05_flyball_governor_every_ideal_method_agrees():
+    """A05: the slider's height s rises from 0.5 m as the governor's balls fly out and the
+    shaft's spin slows (its angular momentum conserved about the axis): lagrange at rtol
+    1e-9 is the reference (s(10 s) = 0.61962423 m); augmented and zcp at 1e-6 within
+    2e-5 m of it over the 10 s. (The library's reference files are not reachable offline;
+    the definition is the OpenSim reimplementation's, cited in the model.)"""
+    from bgc.pipeline import ensure_module
+    import tempfile
+    with tempfile.TemporaryDirectory() as gen:
+        ref = simulate(ensure_module(MODELS / "flyball_governor.yaml", gen, "lagrange")[0],
+                       t_end=10.0, rtol=1e-9, atol=1e-11, points=201)
+        s = ref.column("s")
+        assert abs(s[-1] - 0.61962423) < 1e-6 and s[0] == pytest.approx(0.5)
+        assert ref.column("spin_rate")[-1] < 2 * np.pi
+        for method in ("augmented", "zcp"):
+            r = simulate(ensure_module(MODELS / "flyball_governor.yaml", gen, method)[0],
+                         t_end=10.0, rtol=1e-6, atol=1e-8, points=201)
+            assert np.abs(r.column("s") - s).max() < 2e-5, method

@@ -18,7 +18,7 @@ from bgc.fileio import check_writable
               type=click.Path(file_okay=False), help="where CSV, PNG and summary.md go")
 @click.option("--part", "parts", multiple=True,
               type=click.Choice(["peers", "precision", "stiffness", "stability", "compile",
-                                 "symmetry", "scenes"]),
+                                 "symmetry", "scenes", "iftomm"]),
               help="run only this part (repeatable; default: all)")
 @click.option("--quick", is_flag=True,
               help="every part at small scale (a slider-crank, a pendulum): minutes")

@@ -100,7 +100,8 @@ _FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model f
 
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
                   "use --method augmented, whose ideal joints pass singular configurations "
-                  "(redundant constraints too), or change its geometry or initial state")
+                  "(redundant constraints too), or --method parasitic (compliant joints), or "
+                  "change its geometry or initial state")
 
 
 def _singular(monitor, seg: Segment, drop: float) -> str | None:
@@ -239,7 +240,7 @@ def check_start(module, x, p, t, projection=None):
         kept = _block_rank(module, x, p, t)
         if kept:
             n, rank = projection.n_constraints, projection.rank
-            red = (f", {n - rank} redundant among {', '.join(projection.redundant)}"
+            red = (f", {n - rank} redundant ({', '.join(projection.redundant)})"
                    if rank < n else "")
             raise SimulationError(
                 f"{states}: the constraint block is singular there; its {n} constraints "

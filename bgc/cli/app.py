@@ -75,6 +75,9 @@ def user_errors(fn):
             if kwargs.get("as_json"):
                 click.echo(json.dumps(exc.to_dict()))
             click.echo(f"{'interrupted' if interrupted else 'error'}: {exc}", err=True)
+            if getattr(exc, "partial", None):
+                click.echo(f"partial results up to t = {exc.result.t[-1]:.6g} written to "
+                           f"{exc.partial}", err=True)
             sys.exit(EXIT_INTERRUPTED if interrupted else 2)
         except KeyboardInterrupt:
             click.echo("interrupted (Ctrl-C): nothing was written", err=True)
@@ -89,8 +92,6 @@ def _save_partial(result, kwargs) -> str | None:
     out = kwargs.get("out")
     if out and len(result.t):
         write_csv(result, out, kwargs.get("states", True))
-        click.echo(f"partial results up to t = {result.t[-1]:.6g} written to {out}",
-                   err=True)
         return str(out)
     return None
 

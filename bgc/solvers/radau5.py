@@ -122,6 +122,11 @@ class Settings(NamedTuple):
     stop: np.ndarray
 
 
+# Newton steps of the projection onto the constraints after a step (method augmented):
+# one leaves the positions within the square of the step's drift and the velocities
+# within the regularization of the joints' rates
+PROJECTIONS = 1
+
 # the rank monitor's minor is checked every step below this (its determinant, 1 where it was
 # picked), else after at most MONITOR_MAX steps (``radau5``)
 MONITOR_NEAR, MONITOR_MAX = 0.5, 16
@@ -698,8 +703,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         h_next = min(h_abs * factor, max_step)
         if recompute_jac or h_next != h_abs:
             have_lu = False
-        if system.project != 0:         # back onto the constraints (two Newton steps)
-            for _ in range(2):
+        if system.project != 0:         # back onto the constraints (Newton steps)
+            for _ in range(PROJECTIONS):
                 call_entry(system.project, t_new, y_new, p, work)
                 for k in range(n):
                     y_new[k] += work[k]

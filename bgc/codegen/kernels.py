@@ -100,6 +100,12 @@ class Block:
     reg: int = -1       # regularized (``equations.Regularized``): eps's slot (-1: none)
     reg_rows: tuple = ()
     columns: int = 1    # right-hand sides (b: n x columns, row-major)
+    # packed (a regularized constraint block with a plan): K, B and A hold only their
+    # entries, K's and B's in their lists' order, A's in ``a_slot``'s (the entries sparse
+    # LU reads): a few hundred kB where n x n and n x d regions spread over megabytes,
+    # and each rhs touched them at random (IFToMM A02, N = 40: 2.9 MB for A, 4.7 MB for K)
+    packed: bool = False
+    a_slot: dict | None = None
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
     k_at: tuple = ()
     b_at: tuple = ()
@@ -166,17 +172,15 @@ class Layout:
         for item in system.assignments:
             if isinstance(item, LinearBlock):
                 n = len(item.unknowns) // item.columns
-                blk = Block(item.index, n, self._region(n * n),
-                            self._region(n * item.columns), self.slot[item.unknowns[0]],
-                            columns=item.columns)
+                blk = Block(item.index, n, -1, self._region(n * item.columns),
+                            self.slot[item.unknowns[0]], columns=item.columns)
                 if item.rank is not None:
                     blk.rank = self._region(1)
                 if item.regularize is not None:
                     blk.reg = self._region(len(item.regularize.rows))
                     blk.reg_rows = item.regularize.rows
                 if item.factors is not None:
-                    blk.d = d = item.factors[0]
-                    blk.k, blk.kb = self._region(n * d), self._region(d * n)
+                    blk.d = item.factors[0]
                     blk.k_at = tuple((i, j) for i, j, _ in item.factors[1])
                     blk.b_at = tuple((i, j) for i, j, _ in item.factors[2])
                 else:
@@ -187,6 +191,17 @@ class Layout:
                     start = start if start is not None else block_matrices(system)
                     blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK,
                                                    start.get(item.index))
+                blk.packed = bool(item.regularize is not None and item.factors is not None
+                                  and blk.plan is not None)
+                if blk.packed:
+                    blk.a_slot = {rc: k for k, rc in enumerate(sorted(blk.touched()))}
+                    blk.a = self._region(len(blk.a_slot))
+                    blk.k, blk.kb = self._region(len(blk.k_at)), self._region(len(blk.b_at))
+                else:
+                    blk.a = self._region(n * n)
+                    if item.factors is not None:
+                        blk.k, blk.kb = (self._region(n * blk.d),
+                                         self._region(blk.d * n))
                 blk.lu = self._region(n * n + (n if blk.plan is not None else 0))
                 if item.rank is not None:
                     blk.ls = self._region(lstsq_work(n, columns))
@@ -539,10 +554,10 @@ def _steps(items, outputs, layout: Layout):
             yield ("set", v, e)
         if item.factors is not None:        # A = -K B, formed from their non-zeros
             _, K, B = item.factors
-            for i, j, e in K:
-                yield ("store", blk.k + i * blk.d + j, e)
-            for i, j, e in B:
-                yield ("store", blk.kb + i * n + j, e)
+            for k, (i, j, e) in enumerate(K):
+                yield ("store", blk.k + (k if blk.packed else i * blk.d + j), e)
+            for k, (i, j, e) in enumerate(B):
+                yield ("store", blk.kb + (k if blk.packed else i * n + j), e)
         else:
             yield ("zero", blk.a, n * n)
             for i, j, e in item.A:
@@ -1248,7 +1263,47 @@ def factor_pattern(n: int, d: int, K, B) -> np.ndarray:
     return ((k @ b) != 0) | np.eye(n, dtype=bool)
 
 
-def _splu_ir(P: str, spd: bool = False) -> str:
+def _packed_ir(P: str) -> str:
+    """What packed blocks share: ``@<P>_assemble_packed(A, K, F, ne, kq, bptr, bidx,
+    tgt)``, A[tgt[t]] -= K[e] F[bidx[r]] over K's entries e and B's row kq[e] (t counts
+    the products); ``@<P>_raise(A, R, k, diag)``, A[diag[e]] += R[e]; ``@<P>_nanfill(X, n,
+    m)``."""
+    a = _Asm(f"define internal void @{P}_assemble_packed(double* noalias %A, double* "
+             f"noalias %K, double* noalias %F, i64 %ne, i64* %kq, i64* %bptr, i64* %bidx, "
+             f"i64* %tgt) nounwind {{", ["e", "r", "t"])
+    a("store i64 0, i64* %t")
+
+    def entry(e):
+        c = a.load("%K", e)
+        q = _index(a, "%kq", e)
+
+        def product(r):
+            t = a.op("load i64, i64* %t")
+            at = _index(a, "%tgt", t)
+            f = a.load("%F", _index(a, "%bidx", r))
+            a.store(a.op(f"fsub double {a.load('%A', at)}, {a.op(f'fmul double {c}, {f}')}"),
+                    "%A", at)
+            a(f"store i64 {a.op(f'add i64 {t}, 1')}, i64* %t")
+        a.loop("r", _index(a, "%bptr", q), _index(a, "%bptr", a.op(f"add i64 {q}, 1")),
+               product)
+    a.loop("e", "0", "%ne", entry)
+    a("ret void")
+    b = _Asm(f"define internal void @{P}_raise(double* noalias %A, double* noalias %R, "
+             f"i64 %k, i64* %diag) nounwind {{", ["e"])
+
+    def raise_(e):
+        at = _index(b, "%diag", e)
+        b.store(b.op(f"fadd double {b.load('%A', at)}, {b.load('%R', e)}"), "%A", at)
+    b.loop("e", "0", "%k", raise_)
+    b("ret void")
+    c = _Asm(f"define internal void @{P}_nanfill(double* noalias %X, i64 %n, i64 %m) "
+             f"nounwind {{", ["e"])
+    c.loop("e", "0", c.op("mul i64 %n, %m"), lambda e: c.store(double(float("nan")), "%X", e))
+    c("ret void")
+    return "\n\n".join((a.text(), b.text(), c.text()))
+
+
+def _splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
     """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: solve A X = B
     (X holds B, n x m row-major; overwritten) by LU of ``A[rows][:, cols]`` on its
     diagonal along an ``elimination.Plan``, touching only the filled structure. False,
@@ -1258,9 +1313,12 @@ def _splu_ir(P: str, spd: bool = False) -> str:
     ``spd`` (``@<P>_splu_spd``, a regularized constraint block, symmetric positive
     definite): the multipliers of L are not bounded (they reach 1/sqrt(eps) there while
     the reduced matrices do not grow: elimination is as stable as Cholesky), U is."""
-    a = _Asm(f"define i1 @{P}_splu{'_spd' if spd else ''}(i64 %n, i64 %m, double* noalias %A, double* noalias "
-             f"%X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, i64* %lidx, "
-             f"i64* %uptr, i64* %uidx) nounwind {{", ["k", "q", "r", "c"])
+    name = "_packed" if packed else "_spd" if spd else ""
+    extra = ", i64* %sd, i64* %sl, i64* %su" if packed else ""
+    a = _Asm(f"define i1 @{P}_splu{name}(i64 %n, i64 %m, double* noalias %A, double* "
+             f"noalias %X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, "
+             f"i64* %lidx, i64* %uptr, i64* %uidx{extra}) nounwind {{",
+             ["k", "q", "r", "c"])
     a("%big = alloca double")
     a("%acc = alloca double")
     a("store double 0.0, double* %big")
@@ -1279,7 +1337,8 @@ def _splu_ir(P: str, spd: bool = False) -> str:
         a.label(go)
 
     def take(i, j, ri, cj):             # LU[i, j] = A[ri, cj]; track the largest
-        v = a.load("%A", at(ri, cj))
+        # (packed: A's entry from its slot, ``ri`` the slot and ``cj`` None)
+        v = a.load("%A", ri if cj is None else at(ri, cj))
         a.store(v, "%LU", at(i, j))
         mag, big = a.op(fabs.format(v)), a.op("load double, double* %big")
         more = a.op(f"fcmp ogt double {mag}, {big}")
@@ -1287,6 +1346,13 @@ def _splu_ir(P: str, spd: bool = False) -> str:
           "double* %big")
 
     def copy(k):
+        if packed:
+            take(k, k, _index(a, "%sd", k), None)
+            a.loop("q", *span("%lptr", k), lambda q: take(
+                _index(a, "%lidx", q), k, _index(a, "%sl", q), None))
+            a.loop("r", *span("%uptr", k), lambda r: take(
+                k, _index(a, "%uidx", r), _index(a, "%su", r), None))
+            return
         rk, ck = _index(a, "%rows", k), _index(a, "%cols", k)
         take(k, k, rk, ck)
         a.loop("q", *span("%lptr", k), lambda q: (
@@ -1299,6 +1365,7 @@ def _splu_ir(P: str, spd: bool = False) -> str:
     # (spd: a regularized block is regular by construction, its smallest pivots the
     # weights on its redundant directions, which may lie 12 decades below its largest
     # entry: only a zero or non-finite pivot fails)
+    spd = spd or packed
     tiny = a.op(f"fmul double {double(1e-300 if spd else 1e-13)}, {big}")
 
     def pivot(k):
@@ -1412,6 +1479,9 @@ class _Module:
         then formed in full). A regularized block (``reg``: an argument ``R``, eps) raises
         the diagonal of its rows by eps times itself as it forms A."""
         P, n, i = self.prefix, blk.n, blk.index
+        if blk.packed:
+            self._packed_block(blk)
+            return
         if blk.d:
             self._form(blk)
         form = (f"  call void @{P}_block{i}_form(double* %A, double* %K, double* %F, i1 "
@@ -1442,6 +1512,56 @@ class _Module:
                      "  br label %lu", "lu:"] if blk.plan is None else [form.format("true")]
         body += [f"  call void @{P}_lu(i64 {n}, i64 %m, double* %A, double* %X, double* %LU)",
                  "  br label %done", "done:", "  ret void", "}"]
+        self.functions.append("\n".join(body))
+
+    def _packed_block(self, blk: Block):
+        """A packed block's function (same arguments as ``block``'s): A = -K F into its
+        slots where ``assemble``, its diagonal raised by the weights, then sparse LU (SPD,
+        pivots on the diagonal) on its plan; a zero or non-finite pivot gives NaN."""
+        P, n, i, pl = self.prefix, blk.n, blk.index, blk.plan
+        slot = blk.a_slot
+        # the products K[e] F[b]: B's entries by row, each product's target slot in order
+        by_row: dict = {}
+        for e, (q, j) in enumerate(blk.b_at):
+            by_row.setdefault(q, []).append((j, e))
+        bptr, bidx = [0], []
+        for q in range(blk.d):
+            bidx += [e for _, e in by_row.get(q, [])]
+            bptr.append(len(bidx))
+        kq, tgt = [], []
+        for r, q in blk.k_at:
+            kq.append(q)
+            tgt += [slot[(r, j)] for j, _ in by_row.get(q, [])]
+        rows, cols = pl.rows, pl.cols
+        src = {"sd": [slot[(int(rows[k]), int(cols[k]))] for k in range(n)],
+               "sl": [slot[(int(rows[pl.lidx[q]]), int(cols[k]))] for k in range(n)
+                      for q in range(pl.lptr[k], pl.lptr[k + 1])],
+               "su": [slot[(int(rows[k]), int(cols[pl.uidx[r]]))] for k in range(n)
+                      for r in range(pl.uptr[k], pl.uptr[k + 1])]}
+        t = {k: self.array(f"block{i}_{k}", "i64", v) for k, v in (
+            ("kq", kq), ("bptr", bptr), ("bidx", bidx), ("tgt", tgt),
+            ("diag", [slot[(r, r)] for r in blk.reg_rows]),
+            *[(k, v) for k, v in src.items()],
+            *[(k, getattr(pl, k)) for k in elimination.Plan._fields])}
+        plan_args = ", ".join(t[k] for k in elimination.Plan._fields)
+        self.decls.add(_MEMSET)
+        body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
+                f"double* noalias %F, double* noalias %X, double* noalias %LU, "
+                f"i1 %assemble, double* noalias %R) nounwind {{", "entry:",
+                "  br i1 %assemble, label %form, label %solve", "form:",
+                f"  %a8 = bitcast double* %A to i8*",
+                f"  call void @llvm.memset.p0i8.i64(i8* %a8, i8 0, i64 {8 * len(slot)}, "
+                "i1 false)",
+                f"  call void @{P}_assemble_packed(double* %A, double* %K, double* %F, "
+                f"i64 {len(kq)}, {t['kq']}, {t['bptr']}, {t['bidx']}, {t['tgt']})",
+                f"  call void @{P}_raise(double* %A, double* %R, i64 {len(blk.reg_rows)}, "
+                f"{t['diag']})",
+                "  br label %solve", "solve:",
+                f"  %ok = call i1 @{P}_splu_packed(i64 {n}, i64 %m, double* %A, double* %X, "
+                f"double* %LU, {plan_args}, {t['sd']}, {t['sl']}, {t['su']})",
+                "  br i1 %ok, label %done, label %nan", "nan:",
+                f"  call void @{P}_nanfill(double* %X, i64 {n}, i64 %m)",
+                "  br label %done", "done:", "  ret void", "}"]
         self.functions.append("\n".join(body))
 
     def _regularize(self, blk: Block):
@@ -1620,7 +1740,8 @@ class _Module:
             blk = lay.blocks[index]
             for k, (i, j, r) in enumerate(jt.pattern):
                 if r < 0 and at <= i < at + m:
-                    a_src.append(blk.a + (i - at) * m + (j - at))
+                    a_src.append(blk.a + (blk.a_slot[(i - at, j - at)] if blk.packed
+                                          else (i - at) * m + (j - at)))
                     a_at.append(k)
         if a_src:
             self.functions.append(_negate_ir(P))
@@ -1716,8 +1837,11 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
         mod.functions.append(_assemble_ir(prefix))
     if any(b.plan is not None and b.reg < 0 for b in blocks):
         mod.functions.append(_splu_ir(prefix))
-    if any(b.plan is not None and b.reg >= 0 for b in blocks):
+    if any(b.plan is not None and b.reg >= 0 and not b.packed for b in blocks):
         mod.functions.append(_splu_ir(prefix, spd=True))
+    if any(b.packed for b in blocks):
+        mod.functions.append(_splu_ir(prefix, packed=True))
+        mod.functions.append(_packed_ir(prefix))
     for blk in blocks:
         mod.block(blk)
     if any(b.rank >= 0 for b in blocks):

@@ -88,7 +88,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     tear = tuple(e - weights[i] * tears[i] for i, e in enumerate(block.tear_eqs))
     reg = Regularized(tuple(weights), rows)
     loop = set(tears) | {v for v, _ in block.chain}
-    if not any(e.has(*loop) for _, e in block.pre):     # (linear: they never do)
+    if not any(e.free_symbols & loop for _, e in block.pre):     # (linear: never)
         before, block = list(block.pre) + before, replace(block, pre=())
     else:
         raise AssertionError("augmented: the constraint block's sensitivities read its "

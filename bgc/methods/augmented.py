@@ -67,7 +67,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     # coordinate of the bodies it joins: 1/m, l^2/I, ...; they share a sign). (A body
     # whose inertia is decades below m l^2, a point mass, makes that sum, and the
     # softening, large against the translation the row constrains: IFToMM A01's point
-    # mass is given the inertia of a 3 cm ball, docs/methods.md)
+    # mass is given the inertia of a 3 cm ball: README, which method)
     k_of = {(i, j): e for i, j, e in K}
     terms: dict = {}
     for j, k, e in B:

@@ -79,7 +79,22 @@ class EquationError(BgcError):
 
 
 class SimulationError(BgcError):
-    """The integrator failed; the partial result is attached as ``result``."""
+    """The integrator failed; the partial result is attached as ``result`` (and, once
+    written, where: ``partial``)."""
+    partial: str | None = None
+
+    def to_dict(self) -> dict:
+        """As any error's, with what the failed run keeps: how far it got, its
+        statistics, the projection of its start, and where its results so far were
+        written (None: nowhere)."""
+        out = super().to_dict()
+        r = self.result
+        if r is not None:
+            out["t_reached"] = float(r.t[-1]) if len(r.t) else None
+            out["stats"] = r.stats.to_dict()
+            out["projection"] = r.projection.to_dict() if r.projection is not None else None
+            out["partial_results"] = self.partial
+        return out
 
     def __init__(self, message: str, result=None, **kw):
         super().__init__(message, **kw)

@@ -101,8 +101,9 @@ _FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model f
 
 
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
-                  "change its geometry or initial state, or use --method parasitic to pass "
-                  "through it")
+                  "use --method augmented, whose ideal joints pass singular configurations "
+                  "(redundant constraints too), or --method parasitic (compliant joints), or "
+                  "change its geometry or initial state")
 
 
 def _singular(monitor, seg: Segment, drop: float) -> str | None:
@@ -241,7 +242,7 @@ def check_start(module, x, p, t, projection=None):
         kept = _block_rank(module, x, p, t)
         if kept:
             n, rank = projection.n_constraints, projection.rank
-            red = (f", {n - rank} redundant among {', '.join(projection.redundant)}"
+            red = (f", {n - rank} redundant ({', '.join(projection.redundant)})"
                    if rank < n else "")
             raise SimulationError(
                 f"{states}: the constraint block is singular there; its {n} constraints "
@@ -272,13 +273,14 @@ def prepare(module, x, p, t_start: float = 0.0, redundancy: bool = True):
         if not redundancy and projection.rank < projection.n_constraints:
             raise SimulationError(
                 f"{projection.n_constraints - projection.rank} redundant constraint(s) "
-                f"among {', '.join(projection.redundant)}: without redundancy handling "
+                f"({', '.join(projection.redundant)}): without redundancy handling "
                 f"the constraint block is singular (rank {projection.rank} of "
                 f"{projection.n_constraints}) and the joint forces are undetermined; "
                 f"nothing was run (t = {t_start:g})",
                 hint="keep redundancy handling (the default: redundant constraints share "
                      "the load by least squares) or remove the redundant joint directions")
-        p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
+        if consistent.RANK_PARAM in module.PARAM_NAMES:
+            p[list(module.PARAM_NAMES).index(consistent.RANK_PARAM)] = projection.rank
     return x, p, projection
 
 
@@ -440,7 +442,8 @@ def _events(module, x, p, t_start: float, projection):
             raise SimulationError(f"{module.GUARD_NAMES[k]} at the initial state (margin "
                                   f"{margins[k]:.3g})", hint=_GUARD_HINT)
     monitor = None
-    if projection is not None and projection.rank > int(np.sum(module.IMPOSED)):
+    if projection is not None and projection.rank > int(np.sum(module.IMPOSED)) \
+            and not getattr(module, "PASSES_SINGULAR", False):
         monitor = consistent.RankMonitor(module, x, p, projection)
         events.append(monitor)
     return events, monitor

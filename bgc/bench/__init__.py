@@ -16,7 +16,10 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
 - ``symmetry``: the one-leg SARIB against the full rig under pumping, its error next to
   its speed (``symmetry.py``);
 - ``scenes``: each shipped scene's reduced module against the full model: states,
-  compile and run time, output difference (``scenes.py``).
+  compile and run time, output difference (``scenes.py``);
+- ``iftomm``: the IFToMM basic benchmark problems (A01 pendulum, A02 N-four-bar at N = 2,
+  10, 40, A03 Andrews, A04 Bricard, A05 flyball governor) under every method against their
+  exact or published references, work-precision per problem (``iftomm.py``).
 
 ``quick=True`` runs every part at small scale (a slider-crank, a pendulum, chains of 5
 and 10 links) for the tests.
@@ -35,13 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from bgc import methods as constraint_methods
-from bgc.bench import charts, compile_cost, precision, scenes, stability, startup, symmetry
+from bgc.bench import charts, compile_cost, iftomm, precision, scenes, stability, startup, symmetry
 from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
 from bgc.bench.peers import at_equal_error, peers
 from bgc.fileio import atomic_write
 
 PARTS = ("peers", "precision", "stiffness", "stability", "compile", "startup", "symmetry",
-         "scenes")
+         "scenes", "iftomm")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 METHODS = constraint_methods.NAMES
 
@@ -338,6 +341,11 @@ class Run:
                           "run_gain", "output_difference", "integration_error_full"],
                    {"run_gain": lambda v: f"{v:.3g}x"})
         self.data["scenes"] = rows
+
+    def iftomm(self):
+        """The IFToMM benchmark problems under every method (quick: A01 and A02 at N = 2,
+        two tolerances)."""
+        iftomm.report(self)
 
     def run_part(self, part: str) -> None:
         """Run one part and keep what it says in ``out/parts/<part>.json``, so a part

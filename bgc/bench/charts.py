@@ -8,13 +8,16 @@ import numpy as np
 
 from bgc.analysis.results import panels, save_figure
 
-_MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^"}
+_MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^", "augmented": "D"}
 _LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, (5, 1)),
           "ida": (0, (3, 1, 1, 1)), "rk4": (0, (1, 2))}
 
 
-def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
-    """Wall time against error, log-log, one series per method x integrator."""
+def work_precision(rows, path: Path, title: str, note: str = "",
+                   xlabel: str = "error against the reference (largest relative output "
+                                 "error)", limit: float | None = None) -> Path:
+    """Wall time against error, log-log, one series per method x integrator (``limit``:
+    a benchmark's limit on the error, drawn as a vertical line)."""
     fig, axes = panels(1, 5.2)
     ax = axes[0, 0]
     series = {}
@@ -30,7 +33,9 @@ def work_precision(rows, path: Path, title: str, note: str = "") -> Path:
         e, w = np.array(sorted(pts, key=lambda q: -q[0])).T
         ax.loglog(e, w, marker=_MARKERS.get(method, "o"), ls=_LINES.get(integrator, "-"),
                   color=c, ms=4, lw=1.1, label=f"{method} / {integrator}")
-    ax.set_xlabel("error against the reference (largest relative output error)")
+    if limit is not None:
+        ax.axvline(limit, color="0.4", ls="--", lw=0.9, label=f"limit {limit:g}")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("wall time [s]")
     ax.invert_xaxis()
     ax.grid(True, which="both", alpha=0.3)

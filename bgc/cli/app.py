@@ -106,12 +106,15 @@ def user_errors(fn):
         try:
             return fn(*args, **kwargs)
         except BgcError as exc:
+            interrupted = isinstance(exc, Interrupted)
+            if isinstance(exc, SimulationError) and exc.result is not None:
+                exc.partial = _save_partial(exc.result, kwargs)
             if kwargs.get("as_json"):
                 click.echo(json.dumps(exc.to_dict()))
-            interrupted = isinstance(exc, Interrupted)
             click.echo(f"{'interrupted' if interrupted else 'error'}: {exc}", err=True)
-            if isinstance(exc, SimulationError) and exc.result is not None:
-                _save_partial(exc.result, kwargs)
+            if getattr(exc, "partial", None):
+                click.echo(f"partial results up to t = {exc.result.t[-1]:.6g} written to "
+                           f"{exc.partial}", err=True)
             sys.exit(EXIT_INTERRUPTED if interrupted else 2)
         except KeyboardInterrupt:
             click.echo("interrupted (Ctrl-C): nothing was written", err=True)
@@ -127,14 +130,15 @@ def user_errors(fn):
     return wrapper
 
 
-def _save_partial(result, kwargs):
-    """A failed run's results so far, to the command's ``--out`` (if it has one)."""
+def _save_partial(result, kwargs) -> str | None:
+    """A failed run's results so far, to the command's ``--out`` (if it has one); the
+    file written, or None."""
     from bgc.analysis.results import write_csv
     out = kwargs.get("out")
     if out and len(result.t):
         write_csv(result, out, kwargs.get("states", True))
-        click.echo(f"partial results up to t = {result.t[-1]:.6g} written to {out}",
-                   err=True)
+        return str(out)
+    return None
 
 
 @click.group(cls=_Bgc)

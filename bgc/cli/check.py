@@ -115,6 +115,12 @@ def _report(c, model: str, method: str) -> tuple[dict, list[str]]:
         report["constraints"] = sum(len(JOINT_KINDS[j.kind].blocked)
                                     for j in c.model.joints.values())
         report["dof"] = report["coordinates"] - report["constraints"]
+        # and what the constraints are at the initial configuration: their numerical
+        # rank, the mobility it implies, a minimal redundant set (the simulator's too)
+        from bgc.mechanics import mobility
+        found = mobility.analyse(c.causal.graph, s)
+        report.update(rank=found["rank"], mobility=found["mobility"],
+                      redundant=found["redundant"])
     report.update(own)
     return report, own_lines
 
@@ -129,10 +135,13 @@ def _print_report(c, report: dict, method_lines: list[str], model: str, method: 
                f"{report['bonds']} bonds, "
                f"{len(s.states)} states ({', '.join(report['states']) or 'none'})")
     if c.model.bodies:
+        red = report["redundant"]
         click.echo(f"mechanism: {report['coordinates']} absolute coordinates, "
-                   f"{report['constraints']} scalar constraints, {report['dof']} degrees of "
-                   f"freedom (Gruebler count: redundant constraints make the real mobility "
-                   f"larger)")
+                   f"{report['constraints']} scalar constraints of rank {report['rank']} at "
+                   f"the initial configuration: mobility {report['mobility']} (Gruebler "
+                   f"count {report['dof']})" + (
+                       f"; {len(red)} redundant: {', '.join(red)}" if red else
+                       "; no redundant constraint"))
     click.echo("causality: no conflicts")
     for name, cz in rep["storage"].items():
         kind = c.causal.graph.elements[name].kind

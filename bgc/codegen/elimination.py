@@ -144,16 +144,21 @@ def lists(filled: np.ndarray) -> tuple[np.ndarray, ...]:
 MATCH_LEVELS = (1e-2, 1e-6, 0.0)
 
 
-def analyse(pattern: np.ndarray, max_work: float, start: np.ndarray | None = None
-            ) -> Plan | None:
+def analyse(pattern: np.ndarray, max_work: float, start: np.ndarray | None = None,
+            diagonal: bool = False) -> Plan | None:
     """The elimination plan of a structure: its rows matched to its columns, then in
     minimum-degree order; None where the structure is singular or elimination would take
     more than ``max_work`` times dense LU's multiply-adds. ``start``: the matrix's values
     at the model's start, so that the pivots are entries that are not zero there (a term
-    in the sine of an angle that starts at 0 is structurally non-zero)."""
+    in the sine of an angle that starts at 0 is structurally non-zero). ``diagonal``: the
+    pivots on the diagonal, each row matched to its own column (a symmetric positive
+    definite matrix, as a regularized constraint block: stable, as Cholesky is)."""
     pattern = np.asarray(pattern, dtype=bool)
-    match = None
-    for level in MATCH_LEVELS if start is not None else (0.0,):
+    if diagonal:
+        pattern = pattern | np.eye(pattern.shape[0], dtype=bool)
+        start = None
+    match = np.arange(pattern.shape[0], dtype=np.int64) if diagonal else None
+    for level in (() if diagonal else MATCH_LEVELS if start is not None else (0.0,)):
         allowed = pattern
         if level:
             mag = np.abs(start)

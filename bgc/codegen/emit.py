@@ -149,6 +149,7 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
             exprs.append(item[1])
     exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
     exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
+    exprs += [e for _, e in system.projection]
     calls = set()
     for e in exprs:
         calls |= {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
@@ -165,7 +166,8 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
     return replace(system, assignments=head + body,
                    outputs=[(n, sub(e)) for n, e in system.outputs],
                    guards=[(w, sub(e)) for w, e in system.guards],
-                   constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints]), mapping
+                   constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints],
+                   projection=[(i, sub(e)) for i, e in system.projection]), mapping
 
 
 def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
@@ -175,8 +177,11 @@ def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
     system, hoisted = hoist_calls(system)
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = cone(system.assignments, dx)
+    a_patterns = {it.index: kernels.factor_pattern(len(it.unknowns), *it.factors)
+                  for it in rhs_asg if isinstance(it, LinearBlock)
+                  and it.regularize is not None}
     with progress.stage("jacobian") as st:
-        jt = tape(rhs_asg, system.states)
+        jt = tape(rhs_asg, system.states, a_patterns)
         st.done(f"{progress.count(len(jt.pattern), 'entry', 'entries')}, "
                 f"{progress.count(jt.n_colours, 'colour')}, "
                 f"{progress.count(len(jt.src), 'partial')}")
@@ -192,12 +197,17 @@ def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
     con_asg, _ = cone(system.assignments, con_exprs)
-    return system, {
+    progs = {
         "rhs": (rhs_asg, list(enumerate(dx))),
         "jac": (jac_all, jt.partials),
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
-        "con": (con_asg, list(enumerate(con_exprs)))}, jt
+        "con": (con_asg, list(enumerate(con_exprs)))}
+    if system.projection:       # every state's correction (zero where it has none)
+        corrections = dict(system.projection)
+        proj = [(i, corrections.get(i, sp.S.Zero)) for i in range(len(system.states))]
+        progs["proj"] = (cone(system.assignments, [e for _, e in proj])[0], proj)
+    return system, progs, jt
 
 
 def render(system: EquationSystem) -> str:
@@ -246,10 +256,13 @@ def render(system: EquationSystem) -> str:
         p0=[_float(v) for _, _, v in system.params],
         breakpoints=[_float(b) for b in system.breakpoints],
         n=len(system.states),
+        n_jac=len(system.states) + jt.n_aug,
         constraint_names=[n for n, _, _ in system.constraints],
         has_position=[int(g is not None) for _, g, _ in system.constraints],
         imposed=[int(n in system.imposed) for n, _, _ in system.constraints],
         algebraic=system.algebraic,
+        projects=bool(system.projection),
+        passes_singular=bool(methods.get(system.method).passes_singular),
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
         static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),

@@ -84,10 +84,18 @@ class LinearBlock:
     rank: sp.Expr | None = None
     # constraint blocks: A = -K B with K (n x d) and B (d x n) sparse, d dynamic states
     factors: tuple | None = None
+    # a block solved with the diagonal of A raised by eps times itself on these rows
+    # (``Regularized``: method augmented's projections), regular whatever the rank
+    regularize: "Regularized | None" = None
+    # right-hand sides solved at once (``b`` holds n x columns, row-major; the unknowns
+    # likewise): method augmented's projection solves its velocities and positions so
+    columns: int = 1
 
     @property
     def free_symbols(self) -> set:
         out = set(self.rank.free_symbols) if self.rank is not None else set()
+        if self.regularize is not None:
+            out |= self.regularize.free_symbols
         exprs = [e for _, _, e in self.A] + [e for _, e in self.pre]
         if self.factors is not None:
             exprs += [e for _, _, e in self.factors[1] + self.factors[2]]
@@ -114,7 +122,26 @@ class LinearBlock:
                            None if self.factors is None else
                            (self.factors[0],
                             tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[1]),
-                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[2])))
+                            tuple((i, j, e.xreplace(mapping)) for i, j, e in self.factors[2])),
+                           None if self.regularize is None else
+                           self.regularize.xreplace(mapping), self.columns)
+
+
+@dataclass(frozen=True)
+class Regularized:
+    """A linear block solved as ``(A + diag(w)) u = b``, ``w[k]`` added on row
+    ``rows[k]`` (Tikhonov, each row in its own scale: method augmented), regular where A
+    is not (redundant constraints, a singular configuration), within the weights of A's
+    solution on its well-conditioned part."""
+    weights: tuple[sp.Expr, ...]
+    rows: tuple[int, ...]
+
+    @property
+    def free_symbols(self) -> set:
+        return set().union(*(w.free_symbols for w in self.weights))
+
+    def xreplace(self, mapping) -> "Regularized":
+        return Regularized(tuple(w.xreplace(mapping) for w in self.weights), self.rows)
 
 
 @dataclass
@@ -138,6 +165,9 @@ class EquationSystem:
     # a DAE M dx/dt = rhs: the states whose row of M is zero (index 2: zcp, loops kept
     # closed); empty for an ODE
     algebraic: list[int] = field(default_factory=list)
+    # method augmented: the projection onto the constraints after a step, as (state
+    # index, its correction) (``methods.augmented``)
+    projection: list[tuple[int, sp.Expr]] = field(default_factory=list)
     loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
     scene: str = ""                 # reduced for a scene (bgc/scene.py): its name
 
@@ -176,8 +206,11 @@ class Builder:
         self.guards: list[tuple[str, sp.Expr]] = []
         self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
         self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
+        self.kkt_constraint: dict = {}  # lagrange: multiplier -> (g, dg/dt)
+        self.pose_rows: dict = {}       # augmented: pose state -> {dynamic state: d rate/d x}
         self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
         self.algebraic: list = []       # states of a DAE whose row of M is zero
+        self.projection: dict = {}      # state -> its correction after a step
         self._columns: dict = {}        # (bond, effort | flow) -> its column of symbols
 
     # --- helpers --------------------------------------------------------------------
@@ -637,7 +670,9 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
         loop.tearing = [f"numeric SVD of the {len(tears) - n_acc} Lagrange multipliers"
                         + (f" and {n_acc} twist rates of bodies of negligible mass"
                            if n_acc else "")]
-        return [_kkt_block(b, tears, order, block_index)] + [(v, eqs[v]) for v in order], loop
+        block = _kkt_block(b, tears, order, block_index)
+        before, block, after = methods.get(b.g.method).constraint_block(b, block)
+        return before + [block] + [(v, eqs[v]) for v in order] + after, loop
     if multipliers:
         loop.kind = "constraint"
         loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
@@ -744,6 +779,9 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
                             imposed={c.name for c in cg.graph.constraints if c.imposed},
                             algebraic=[i for i, st in enumerate(b.states)
                                        if st.sym in set(b.algebraic)],
+                            projection=[(i, b.projection[st.sym].xreplace(aliases))
+                                        for i, st in enumerate(b.states)
+                                        if st.sym in b.projection],
                             loops_closed=bool(cg.graph.zcp is not None
                                               and cg.graph.zcp.closed))
     for name in b.dependent:

@@ -12,13 +12,21 @@ large expression. The result is exact (no differencing).
 
 Through a numeric linear block ``A u = b`` the rows of ``u`` are ``A^-1 R`` with
 ``R = d(b - A u)/dx`` at fixed ``u``: the loop's own equations differentiated through
-its chain with the tears held fixed, then one LU solve with the block's matrix.
+its chain with the tears held fixed, then one LU solve with the block's matrix. Those
+rows are dense wherever the block couples the whole model (a closed-loop mechanism's
+multipliers): the Jacobian then has n^2 entries. A block that is regular by construction
+(``LinearBlock.regularize``: method augmented) is instead kept **open**: its unknowns
+are extra columns (the rows after it depend on them, ``Fu``) and its equations extra
+rows ``[R, -A]``, a sparse Jacobian of the DAE ``x' = f(x, u), 0 = b(x) - A(x) u``
+whose Schur complement ``Fx + Fu A^-1 R`` is the model's. Radau factors its Newton
+matrices on that augmented structure (``radau5``); ``jac`` forms the complement.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import sympy as sp
 
 from bgc.codegen.equations import LinearBlock
@@ -45,6 +53,10 @@ class JacobianTape:
     partials: list[tuple[sp.Expr, list[tuple[int, sp.Symbol]]]]
     blocks: list[Block]
     pattern: list[tuple[int, int, int]]      # (i, j, row of dx_i)
+    # open blocks (index, first row of their R, size, their first column and row in the
+    # augmented Jacobian: n + offset); the extra columns and rows they add
+    opened: list[tuple[int, int, int, int]] = None
+    n_aug: int = 0
 
     @property
     def segments(self) -> list:
@@ -90,15 +102,29 @@ class _Recorder:
             self.cols[v] = got[1]
 
 
-def tape(assignments, states) -> JacobianTape:
-    """Record the Jacobian tape of ``assignments`` (in causal order) w.r.t. ``states``."""
+def tape(assignments, states, a_patterns: dict | None = None) -> JacobianTape:
+    """Record the Jacobian tape of ``assignments`` (in causal order) w.r.t. ``states``.
+    A regularized block is kept open (module docstring); ``a_patterns``: each such
+    block's structure of A (index -> boolean matrix), for the pattern of its rows."""
     rec = _Recorder(states)
+    n = len(states)
+    opened, n_aug = [], 0
     for item in assignments:
         if isinstance(item, LinearBlock):
             fixed = dict(rec.rows)          # the tears have no rows yet: held fixed
             for v, e in item.chain:         # (their columns are reset when assigned after)
                 rec.assign(v, e, fixed)
             got = [rec.record(e, fixed) for e in item.tear_eqs]
+            if item.regularize is not None:     # open: u are columns n + ...
+                start = len(rec.entries)
+                for g in got:
+                    rec.new_row(g[0] if g else (None, []), g[1] if g else frozenset())
+                for k, u in enumerate(item.unknowns):
+                    rec.state_index[u] = n + n_aug + k
+                    rec.cols[u] = frozenset([n + n_aug + k])
+                opened.append((item.index, start, len(item.unknowns), n + n_aug))
+                n_aug += len(item.unknowns)
+                continue
             if not any(got):
                 continue
             cols = frozenset().union(*(g[1] for g in got if g))
@@ -111,13 +137,21 @@ def tape(assignments, states) -> JacobianTape:
             rec.blocks.append(Block(item.index, start, len(item.unknowns)))
             continue
         rec.assign(item[0], item[1], rec.rows)
-    # the pattern: rows of dx_i; then colour the columns
+    # the pattern: rows of dx_i, then the open blocks' rows (R from the tape; A's
+    # entries, row -1, from the block's own matrix); then colour the columns
     pattern = []
     for i, st in enumerate(states):
         if st.dsym in rec.rows:
             r = rec.rows[st.dsym]
             pattern += [(i, j, r) for j in sorted(rec.row_cols[r])]
-    colours, n_colours = _colour(len(states), pattern)
+    for index, start, m, at in opened:
+        a = a_patterns[index]
+        for i in range(m):
+            cols = set(rec.row_cols[start + i]) | {at + k for k in np.flatnonzero(a[i])}
+            cols.add(at + i)
+            pattern += [(at + i, j, start + i if j < at or j >= at + m else -1)
+                        for j in sorted(cols)]
+    colours, n_colours = _colour(n + n_aug, [e for e in pattern if e[2] >= 0])
     # flatten the tape: each edge its own run-time partial
     ptr, src, partials = [0], [], []
     for e, edges in rec.entries:
@@ -126,7 +160,7 @@ def tape(assignments, states) -> JacobianTape:
         src += [r if r >= 0 else -1 - colours[-1 - r] for r, _ in edges]
         ptr.append(len(src))
     return JacobianTape(colours, n_colours, len(rec.entries), ptr, src, partials,
-                        rec.blocks, pattern)
+                        rec.blocks, pattern, opened, n_aug)
 
 
 def _colour(n: int, pattern) -> tuple[list[int], int]:

@@ -97,6 +97,15 @@ class Block:
     k: int = 0
     kb: int = 0
     lu: int = 0         # room for its LU factors (and a column, sparse)
+    reg: int = -1       # regularized (``equations.Regularized``): eps's slot (-1: none)
+    reg_rows: tuple = ()
+    columns: int = 1    # right-hand sides (b: n x columns, row-major)
+    # packed (a regularized constraint block with a plan): K, B and A hold only their
+    # entries, K's and B's in their lists' order, A's in ``a_slot``'s (the entries sparse
+    # LU reads): a few hundred kB where n x n and n x d regions spread over megabytes,
+    # and each rhs touched them at random (IFToMM A02, N = 40: 2.9 MB for A, 4.7 MB for K)
+    packed: bool = False
+    a_slot: dict | None = None
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
     k_at: tuple = ()
     b_at: tuple = ()
@@ -162,22 +171,37 @@ class Layout:
         start = None
         for item in system.assignments:
             if isinstance(item, LinearBlock):
-                n = len(item.unknowns)
-                blk = Block(item.index, n, self._region(n * n), self._region(n),
-                            self.slot[item.unknowns[0]])
+                n = len(item.unknowns) // item.columns
+                blk = Block(item.index, n, -1, self._region(n * item.columns),
+                            self.slot[item.unknowns[0]], columns=item.columns)
                 if item.rank is not None:
                     blk.rank = self._region(1)
+                if item.regularize is not None:
+                    blk.reg = self._region(len(item.regularize.rows))
+                    blk.reg_rows = item.regularize.rows
                 if item.factors is not None:
-                    blk.d = d = item.factors[0]
-                    blk.k, blk.kb = self._region(n * d), self._region(d * n)
+                    blk.d = item.factors[0]
                     blk.k_at = tuple((i, j) for i, j, _ in item.factors[1])
                     blk.b_at = tuple((i, j) for i, j, _ in item.factors[2])
                 else:
                     blk.a_at = tuple((i, j) for i, j, _ in item.A)
-                if n >= SPARSE_MIN:
+                if n >= SPARSE_MIN and item.regularize is not None:   # pivots: its diagonal
+                    blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK, diagonal=True)
+                elif n >= SPARSE_MIN:
                     start = start if start is not None else block_matrices(system)
                     blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK,
                                                    start.get(item.index))
+                blk.packed = bool(item.regularize is not None and item.factors is not None
+                                  and blk.plan is not None)
+                if blk.packed:
+                    blk.a_slot = {rc: k for k, rc in enumerate(sorted(blk.touched()))}
+                    blk.a = self._region(len(blk.a_slot))
+                    blk.k, blk.kb = self._region(len(blk.k_at)), self._region(len(blk.b_at))
+                else:
+                    blk.a = self._region(n * n)
+                    if item.factors is not None:
+                        blk.k, blk.kb = (self._region(n * blk.d),
+                                         self._region(blk.d * n))
                 blk.lu = self._region(n * n + (n if blk.plan is not None else 0))
                 if item.rank is not None:
                     blk.ls = self._region(lstsq_work(n, columns))
@@ -384,7 +408,9 @@ class _Function:
         visit(e)
         adj = {e: double(1.0)}
         for node in reversed(order):
-            a = adj.pop(node)
+            a = adj.pop(node, None)
+            if a is None:       # reached only through a zero derivative (sign, a step)
+                continue
             for child, local in self._local(node, dep):
                 if local is None:
                     c = a
@@ -528,10 +554,10 @@ def _steps(items, outputs, layout: Layout):
             yield ("set", v, e)
         if item.factors is not None:        # A = -K B, formed from their non-zeros
             _, K, B = item.factors
-            for i, j, e in K:
-                yield ("store", blk.k + i * blk.d + j, e)
-            for i, j, e in B:
-                yield ("store", blk.kb + i * n + j, e)
+            for k, (i, j, e) in enumerate(K):
+                yield ("store", blk.k + (k if blk.packed else i * blk.d + j), e)
+            for k, (i, j, e) in enumerate(B):
+                yield ("store", blk.kb + (k if blk.packed else i * n + j), e)
         else:
             yield ("zero", blk.a, n * n)
             for i, j, e in item.A:
@@ -548,6 +574,9 @@ def _steps(items, outputs, layout: Layout):
                 yield ("store", blk.b + i, e)
         if item.rank is not None:
             yield ("store", blk.rank, item.rank)
+        if item.regularize is not None:
+            for k, w in enumerate(item.regularize.weights):
+                yield ("store", blk.reg + k, w)
         yield ("solve", item.index)
     for out in outputs:
         if isinstance(out[1], list):          # (e, [(slot, w)]): pv[slot] = d e / d w
@@ -1211,16 +1240,85 @@ def _assemble_ir(P: str) -> str:
     return a.text()
 
 
-def _splu_ir(P: str) -> str:
+def _negate_ir(P: str) -> str:
+    """``@<P>_negate(J, w, k, src, dst)``: J[dst[e]] = -w[src[e]] for e < k."""
+    a = _Asm(f"define internal void @{P}_negate(double* noalias %J, double* noalias %w, "
+             f"i64 %k, i64* %src, i64* %dst) nounwind {{", ["e"])
+    a.loop("e", "0", "%k", lambda e: a.store(
+        a.op(f"fneg double {a.load('%w', _index(a, '%src', e))}"), "%J",
+        _index(a, "%dst", e)))
+    a("ret void")
+    return a.text()
+
+
+def factor_pattern(n: int, d: int, K, B) -> np.ndarray:
+    """The structure of ``A = -K B`` (n x n) from the non-zeros of K (n x d) and B (d x
+    n), as ``(i, j, ...)`` triples, with its diagonal."""
+    k = np.zeros((n, d), dtype=np.int64)
+    b = np.zeros((d, n), dtype=np.int64)
+    for i, j, *_ in K:
+        k[i, j] = 1
+    for i, j, *_ in B:
+        b[i, j] = 1
+    return ((k @ b) != 0) | np.eye(n, dtype=bool)
+
+
+def _packed_ir(P: str) -> str:
+    """What packed blocks share: ``@<P>_assemble_packed(A, K, F, ne, kq, bptr, bidx,
+    tgt)``, A[tgt[t]] -= K[e] F[bidx[r]] over K's entries e and B's row kq[e] (t counts
+    the products); ``@<P>_raise(A, R, k, diag)``, A[diag[e]] += R[e]; ``@<P>_nanfill(X, n,
+    m)``."""
+    a = _Asm(f"define internal void @{P}_assemble_packed(double* noalias %A, double* "
+             f"noalias %K, double* noalias %F, i64 %ne, i64* %kq, i64* %bptr, i64* %bidx, "
+             f"i64* %tgt) nounwind {{", ["e", "r", "t"])
+    a("store i64 0, i64* %t")
+
+    def entry(e):
+        c = a.load("%K", e)
+        q = _index(a, "%kq", e)
+
+        def product(r):
+            t = a.op("load i64, i64* %t")
+            at = _index(a, "%tgt", t)
+            f = a.load("%F", _index(a, "%bidx", r))
+            a.store(a.op(f"fsub double {a.load('%A', at)}, {a.op(f'fmul double {c}, {f}')}"),
+                    "%A", at)
+            a(f"store i64 {a.op(f'add i64 {t}, 1')}, i64* %t")
+        a.loop("r", _index(a, "%bptr", q), _index(a, "%bptr", a.op(f"add i64 {q}, 1")),
+               product)
+    a.loop("e", "0", "%ne", entry)
+    a("ret void")
+    b = _Asm(f"define internal void @{P}_raise(double* noalias %A, double* noalias %R, "
+             f"i64 %k, i64* %diag) nounwind {{", ["e"])
+
+    def raise_(e):
+        at = _index(b, "%diag", e)
+        b.store(b.op(f"fadd double {b.load('%A', at)}, {b.load('%R', e)}"), "%A", at)
+    b.loop("e", "0", "%k", raise_)
+    b("ret void")
+    c = _Asm(f"define internal void @{P}_nanfill(double* noalias %X, i64 %n, i64 %m) "
+             f"nounwind {{", ["e"])
+    c.loop("e", "0", c.op("mul i64 %n, %m"), lambda e: c.store(double(float("nan")), "%X", e))
+    c("ret void")
+    return "\n\n".join((a.text(), b.text(), c.text()))
+
+
+def _splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
     """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: solve A X = B
     (X holds B, n x m row-major; overwritten) by LU of ``A[rows][:, cols]`` on its
     diagonal along an ``elimination.Plan``, touching only the filled structure. False,
     X untouched, on a pivot not above 1e-13 of the largest |A| (what the dense LU calls
     singular) or an entry grown past ``GROWTH_LIMIT`` times it: the caller then pivots.
-    LU holds n^2 + n doubles (the factors, held dense in the plan's order; a column)."""
-    a = _Asm(f"define i1 @{P}_splu(i64 %n, i64 %m, double* noalias %A, double* noalias "
-             f"%X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, i64* %lidx, "
-             f"i64* %uptr, i64* %uidx) nounwind {{", ["k", "q", "r", "c"])
+    LU holds n^2 + n doubles (the factors, held dense in the plan's order; a column).
+    ``spd`` (``@<P>_splu_spd``, a regularized constraint block, symmetric positive
+    definite): the multipliers of L are not bounded (they reach 1/sqrt(eps) there while
+    the reduced matrices do not grow: elimination is as stable as Cholesky), U is."""
+    name = "_packed" if packed else "_spd" if spd else ""
+    extra = ", i64* %sd, i64* %sl, i64* %su" if packed else ""
+    a = _Asm(f"define i1 @{P}_splu{name}(i64 %n, i64 %m, double* noalias %A, double* "
+             f"noalias %X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, "
+             f"i64* %lidx, i64* %uptr, i64* %uidx{extra}) nounwind {{",
+             ["k", "q", "r", "c"])
     a("%big = alloca double")
     a("%acc = alloca double")
     a("store double 0.0, double* %big")
@@ -1239,7 +1337,8 @@ def _splu_ir(P: str) -> str:
         a.label(go)
 
     def take(i, j, ri, cj):             # LU[i, j] = A[ri, cj]; track the largest
-        v = a.load("%A", at(ri, cj))
+        # (packed: A's entry from its slot, ``ri`` the slot and ``cj`` None)
+        v = a.load("%A", ri if cj is None else at(ri, cj))
         a.store(v, "%LU", at(i, j))
         mag, big = a.op(fabs.format(v)), a.op("load double, double* %big")
         more = a.op(f"fcmp ogt double {mag}, {big}")
@@ -1247,6 +1346,13 @@ def _splu_ir(P: str) -> str:
           "double* %big")
 
     def copy(k):
+        if packed:
+            take(k, k, _index(a, "%sd", k), None)
+            a.loop("q", *span("%lptr", k), lambda q: take(
+                _index(a, "%lidx", q), k, _index(a, "%sl", q), None))
+            a.loop("r", *span("%uptr", k), lambda r: take(
+                k, _index(a, "%uidx", r), _index(a, "%su", r), None))
+            return
         rk, ck = _index(a, "%rows", k), _index(a, "%cols", k)
         take(k, k, rk, ck)
         a.loop("q", *span("%lptr", k), lambda q: (
@@ -1256,7 +1362,11 @@ def _splu_ir(P: str) -> str:
     a.loop("k", "0", "%n", copy)
     big = a.op("load double, double* %big")
     limit = a.op(f"fmul double {double(elimination.GROWTH_LIMIT)}, {big}")
-    tiny = a.op(f"fmul double {double(1e-13)}, {big}")
+    # (spd: a regularized block is regular by construction, its smallest pivots the
+    # weights on its redundant directions, which may lie 12 decades below its largest
+    # entry: only a zero or non-finite pivot fails)
+    spd = spd or packed
+    tiny = a.op(f"fmul double {double(1e-300 if spd else 1e-13)}, {big}")
 
     def pivot(k):
         rk = a.at("%LU", a.op(f"mul i64 {k}, %n"))          # row k
@@ -1284,8 +1394,9 @@ def _splu_ir(P: str) -> str:
 
         def bounded(v):
             check(a.op(f"fcmp ole double {a.op(fabs.format(v))}, {limit}"))
-        a.loop("q", *span("%lptr", k), lambda q: bounded(a.load(
-            a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n")), k)))
+        if not spd:
+            a.loop("q", *span("%lptr", k), lambda q: bounded(a.load(
+                a.at("%LU", a.op(f"mul i64 {_index(a, '%lidx', q)}, %n")), k)))
         a.loop("r", *span("%uptr", k), lambda r: bounded(a.load(rk, _index(a, "%uidx", r))))
     a.loop("k", "0", "%n", grown)
 
@@ -1365,15 +1476,24 @@ class _Module:
         """``@<prefix>_block<index>(m, A, K, F, X, LU, assemble)``: A X = B for B (n x m)
         in X, in place (``assemble``: first form A = -K F where A is non-zero): on the
         block's plan, or, where it has none or its pivots grow, with partial pivoting (A
-        then formed in full)."""
+        then formed in full). A regularized block (``reg``: an argument ``R``, eps) raises
+        the diagonal of its rows by eps times itself as it forms A."""
         P, n, i = self.prefix, blk.n, blk.index
+        if blk.packed:
+            self._packed_block(blk)
+            return
         if blk.d:
             self._form(blk)
         form = (f"  call void @{P}_block{i}_form(double* %A, double* %K, double* %F, i1 "
                 "{})")
+        reg = ""
+        if blk.reg >= 0:
+            form += f"\n  call void @{P}_block{i}_reg(double* %A, double* %R)"
+            reg = ", double* noalias %R"
+            self._regularize(blk)
         body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
                 f"double* noalias %F, double* noalias %X, double* noalias %LU, "
-                f"i1 %assemble) nounwind {{", "entry:"]
+                f"i1 %assemble{reg}) nounwind {{", "entry:"]
         if blk.d and blk.plan is not None:
             body += ["  br i1 %assemble, label %form, label %sparse", "form:",
                      form.format("false")]
@@ -1381,8 +1501,9 @@ class _Module:
         if blk.plan is not None:
             tables = ", ".join(self.array(f"block{i}_{k}", "i64", getattr(blk.plan, k))
                                for k in elimination.Plan._fields)
-            body += [f"  %ok = call i1 @{P}_splu(i64 {n}, i64 %m, double* %A, double* %X, "
-                     f"double* %LU, {tables})", "  br i1 %ok, label %done, label %dense"]
+            spd = "_spd" if blk.reg >= 0 else ""
+            body += [f"  %ok = call i1 @{P}_splu{spd}(i64 {n}, i64 %m, double* %A, double* "
+                     f"%X, double* %LU, {tables})", "  br i1 %ok, label %done, label %dense"]
         else:
             body += ["  br label %dense"]
         body += ["dense:"]
@@ -1392,6 +1513,71 @@ class _Module:
         body += [f"  call void @{P}_lu(i64 {n}, i64 %m, double* %A, double* %X, double* %LU)",
                  "  br label %done", "done:", "  ret void", "}"]
         self.functions.append("\n".join(body))
+
+    def _packed_block(self, blk: Block):
+        """A packed block's function (same arguments as ``block``'s): A = -K F into its
+        slots where ``assemble``, its diagonal raised by the weights, then sparse LU (SPD,
+        pivots on the diagonal) on its plan; a zero or non-finite pivot gives NaN."""
+        P, n, i, pl = self.prefix, blk.n, blk.index, blk.plan
+        slot = blk.a_slot
+        # the products K[e] F[b]: B's entries by row, each product's target slot in order
+        by_row: dict = {}
+        for e, (q, j) in enumerate(blk.b_at):
+            by_row.setdefault(q, []).append((j, e))
+        bptr, bidx = [0], []
+        for q in range(blk.d):
+            bidx += [e for _, e in by_row.get(q, [])]
+            bptr.append(len(bidx))
+        kq, tgt = [], []
+        for r, q in blk.k_at:
+            kq.append(q)
+            tgt += [slot[(r, j)] for j, _ in by_row.get(q, [])]
+        rows, cols = pl.rows, pl.cols
+        src = {"sd": [slot[(int(rows[k]), int(cols[k]))] for k in range(n)],
+               "sl": [slot[(int(rows[pl.lidx[q]]), int(cols[k]))] for k in range(n)
+                      for q in range(pl.lptr[k], pl.lptr[k + 1])],
+               "su": [slot[(int(rows[k]), int(cols[pl.uidx[r]]))] for k in range(n)
+                      for r in range(pl.uptr[k], pl.uptr[k + 1])]}
+        t = {k: self.array(f"block{i}_{k}", "i64", v) for k, v in (
+            ("kq", kq), ("bptr", bptr), ("bidx", bidx), ("tgt", tgt),
+            ("diag", [slot[(r, r)] for r in blk.reg_rows]),
+            *[(k, v) for k, v in src.items()],
+            *[(k, getattr(pl, k)) for k in elimination.Plan._fields])}
+        plan_args = ", ".join(t[k] for k in elimination.Plan._fields)
+        self.decls.add(_MEMSET)
+        body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
+                f"double* noalias %F, double* noalias %X, double* noalias %LU, "
+                f"i1 %assemble, double* noalias %R) nounwind {{", "entry:",
+                "  br i1 %assemble, label %form, label %solve", "form:",
+                f"  %a8 = bitcast double* %A to i8*",
+                f"  call void @llvm.memset.p0i8.i64(i8* %a8, i8 0, i64 {8 * len(slot)}, "
+                "i1 false)",
+                f"  call void @{P}_assemble_packed(double* %A, double* %K, double* %F, "
+                f"i64 {len(kq)}, {t['kq']}, {t['bptr']}, {t['bidx']}, {t['tgt']})",
+                f"  call void @{P}_raise(double* %A, double* %R, i64 {len(blk.reg_rows)}, "
+                f"{t['diag']})",
+                "  br label %solve", "solve:",
+                f"  %ok = call i1 @{P}_splu_packed(i64 {n}, i64 %m, double* %A, double* %X, "
+                f"double* %LU, {plan_args}, {t['sd']}, {t['sl']}, {t['su']})",
+                "  br i1 %ok, label %done, label %nan", "nan:",
+                f"  call void @{P}_nanfill(double* %X, i64 {n}, i64 %m)",
+                "  br label %done", "done:", "  ret void", "}"]
+        self.functions.append("\n".join(body))
+
+    def _regularize(self, blk: Block):
+        """``@<prefix>_block<index>_reg(A, R)``: A[r, r] += R[k] on the block's
+        regularized rows r = ``reg_rows[k]``."""
+        n, i = blk.n, blk.index
+        diag = self.array(f"block{i}_diag", "i64", [r * n + r for r in blk.reg_rows])
+        diag = diag[len("i64* "):]          # the constant's address, as an operand
+        a = _Asm(f"define internal void @{self.prefix}_block{i}_reg(double* noalias %A, "
+                 f"double* noalias %R) nounwind {{", ["e"])
+        def raise_(e):
+            at = _index(a, diag, e)
+            a.store(a.op(f"fadd double {a.load('%A', at)}, {a.load('%R', e)}"), "%A", at)
+        a.loop("e", "0", str(len(blk.reg_rows)), raise_)
+        a("ret void")
+        self.functions.append(a.text())
 
     def _form(self, blk: Block):
         """``@<prefix>_block<index>_form(A, K, F, full)``: a constraint block's A = -K F
@@ -1421,9 +1607,10 @@ class _Module:
         P, n = self.prefix, blk.n
         B, A = fn.ptr("%w", at), fn.ptr("%w", blk.a)
         K, F = (fn.ptr("%w", blk.k), fn.ptr("%w", blk.kb)) if blk.d else (A, A)
+        reg = f", double* {fn.ptr('%w', blk.reg)}" if blk.reg >= 0 else ""
         call = (f"  call void @{P}_block{blk.index}(i64 {columns}, double* {A}, double* {K}, "
                 f"double* {F}, double* {B}, double* {fn.ptr('%w', blk.lu)}, "
-                f"i1 {'true' if assemble else 'false'})")
+                f"i1 {'true' if assemble else 'false'}{reg})")
         if blk.rank < 0:
             fn.body.append(call)
             return
@@ -1461,8 +1648,8 @@ class _Module:
             kind = step[0]
             if kind == "solve":
                 blk = self.layout.blocks[step[1]]
-                self.solve(fn, blk, blk.b, 1, True)
-                self.copy(fn, blk.u, blk.b, blk.n)
+                self.solve(fn, blk, blk.b, blk.columns, True)
+                self.copy(fn, blk.u, blk.b, blk.n * blk.columns)
                 flush()                 # what follows reads the unknowns from w
                 continue
             if count >= CHUNK or fn.n >= CHUNK_OPS:
@@ -1516,13 +1703,20 @@ class _Module:
                 f"@{self.prefix}_{name}, i64 0, i64 0)")
 
     def jacobian(self, jt, n: int):
-        """``@<prefix>_jac_full(t, x, p, w, J)``: the run-time partials (program jac)
-        into w, the tape through them, J (n x n) scattered from its compressed rows."""
+        """The Jacobian from the run-time partials (program jac) and the tape through
+        them (``@<prefix>_jac_tape(t, x, p, w)``), in two forms: ``@<prefix>_jac_full(t,
+        x, p, w, J)``, J dense (N x N, N = n + the open blocks' unknowns) scattered from
+        the tape's compressed rows, each open block's -A from its matrix; and
+        ``@<prefix>_jac_vals(t, x, p, w, V)``, the same entries as values in the order of
+        the pattern (``JAC_I``, ``JAC_J``): what the native integrator's sparse LU reads,
+        whose cost follows the non-zeros (a dense N x N is 20 MB for IFToMM A02 at N = 40
+        under method augmented, and writing it cost most of a Jacobian)."""
         P, lay = self.prefix, self.layout
+        na = n + (jt.n_aug or 0)
         nc = jt.n_colours
         ptr = self.array("tape_ptr", "i64", jt.ptr)
         src = self.array("tape_src", "i64", jt.src)
-        fn = _Function(f"{P}_jac_full", lay, {}, {}, self.decls)
+        fn = _Function(f"{P}_jac_tape", lay, {}, {}, self.decls)
         pv, d = fn.ptr("%w", lay.pv), fn.ptr("%w", lay.d)
         fn.body.append(f"  call void @{P}_jac(double %t, double* %x, double* %p, "
                        f"double* %w, double* {pv})")
@@ -1536,17 +1730,49 @@ class _Module:
                 blk = lay.blocks[b.index]
                 self.copy(fn, lay.d + (b.start + b.n) * nc, lay.d + b.start * nc, b.n * nc)
                 self.solve(fn, blk, lay.d + (b.start + b.n) * nc, nc, False)
-        self.zero(fn, "%J", 0, n * n)
-        pattern = jt.pattern
-        args = [self.array(k, "i64", v) for k, v in (
-            ("jac_i", [i for i, _, _ in pattern]), ("jac_j", [j for _, j, _ in pattern]),
-            ("jac_row", [r for _, _, r in pattern]),
-            ("jac_col", [jt.colours[j] for _, j, _ in pattern]))]
-        fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
-                       f"i64 {len(pattern)}, i64 {n}, i64 {nc}, {', '.join(args)})")
         self.functions.append(_TAPE.replace("{P}", P))
-        self.functions.append(fn.text(linkage="")
-                              .replace("double* noalias %out", "double* noalias %J", 1))
+        self.functions.append(fn.text().replace(", double* noalias %out", "", 1))
+        # the entries: from the tape's rows (k: their place in the pattern), and the open
+        # blocks' rows on their own unknowns, -A (as regularized when formed)
+        tape_at = [k for k, e in enumerate(jt.pattern) if e[2] >= 0]
+        a_src, a_at = [], []
+        for index, _, m, at in jt.opened or ():
+            blk = lay.blocks[index]
+            for k, (i, j, r) in enumerate(jt.pattern):
+                if r < 0 and at <= i < at + m:
+                    a_src.append(blk.a + (blk.a_slot[(i - at, j - at)] if blk.packed
+                                          else (i - at) * m + (j - at)))
+                    a_at.append(k)
+        if a_src:
+            self.functions.append(_negate_ir(P))
+        tables = {k: self.array(k, "i64", v) for k, v in (
+            ("jac_row", [jt.pattern[k][2] for k in tape_at]),
+            ("jac_col", [jt.colours[jt.pattern[k][1]] for k in tape_at]),
+            ("jac_zero", [0] * len(tape_at)), ("jac_k", tape_at),
+            ("jac_i", [jt.pattern[k][0] for k in tape_at]),
+            ("jac_j", [jt.pattern[k][1] for k in tape_at]))}
+        for name, dense in (("jac_full", True), ("jac_vals", False)):
+            fn = _Function(f"{P}_{name}", lay, {}, {}, self.decls)
+            d = fn.ptr("%w", lay.d)
+            fn.body.append(f"  call void @{P}_jac_tape(double %t, double* %x, double* %p, "
+                           "double* %w)")
+            if dense:               # J[i, j]: row i's offset i * na (zeroed first)
+                self.zero(fn, "%J", 0, na * na)
+                rows, cols, stride = tables["jac_i"], tables["jac_j"], na
+            else:                   # V[k]: "row" 0, "column" k
+                rows, cols, stride = tables["jac_zero"], tables["jac_k"], 0
+            fn.body.append(f"  call void @{P}_scatter(double* %J, double* {d}, "
+                           f"i64 {len(tape_at)}, i64 {stride}, i64 {nc}, {rows}, {cols}, "
+                           f"{tables['jac_row']}, {tables['jac_col']})")
+            if a_src:
+                dst = [jt.pattern[k][0] * na + jt.pattern[k][1] for k in a_at] if dense \
+                    else a_at
+                fn.body.append(
+                    f"  call void @{P}_negate(double* %J, double* %w, i64 {len(a_src)}, "
+                    f"{self.array(f'{name}_a_src', 'i64', a_src)}, "
+                    f"{self.array(f'{name}_a_dst', 'i64', dst)})")
+            self.functions.append(fn.text(linkage="")
+                                  .replace("double* noalias %out", "double* noalias %J", 1))
 
     def entry(self, name: str, program: str, n_work: int):
         """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
@@ -1586,9 +1812,11 @@ def _declaration(definition: str) -> str:
     return f"declare {m.group(2)} @{m.group(3)}({m.group(4)})"
 
 
-# the programs a module has, and the C entry points of the native integrators
-PROGRAMS = ("rhs", "jac", "out", "guard", "con")
-ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"))
+# the programs a module has (``proj``: method augmented's projection, where it has one),
+# and the C entry points of the native integrators
+PROGRAMS = ("rhs", "jac", "out", "guard", "con", "proj")
+ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"),
+           ("proj_entry", "proj"), ("jacv_entry", "jac_vals"))
 
 
 def lower(system, prefix: str, programs: dict, jt) -> Kernels:
@@ -1608,8 +1836,13 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     if any(b.d for b in blocks):
         mod.decls.add(_MEMSET)
         mod.functions.append(_assemble_ir(prefix))
-    if any(b.plan is not None for b in blocks):
+    if any(b.plan is not None and b.reg < 0 for b in blocks):
         mod.functions.append(_splu_ir(prefix))
+    if any(b.plan is not None and b.reg >= 0 and not b.packed for b in blocks):
+        mod.functions.append(_splu_ir(prefix, spd=True))
+    if any(b.packed for b in blocks):
+        mod.functions.append(_splu_ir(prefix, packed=True))
+        mod.functions.append(_packed_ir(prefix))
     for blk in blocks:
         mod.block(blk)
     if any(b.rank >= 0 for b in blocks):
@@ -1617,11 +1850,14 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
                       "double*, double*, i32*, double*, i32*, double*, i32*, i32*, i32*)")
         mod.functions.append(_lstsq_ir(prefix))
     mod.tables(system.tables)
-    for name in programs:           # PROGRAMS, and any other a caller asks for
+    # PROGRAMS in their order, then any other a caller asks for (an FMU's indicators)
+    for name in [n for n in PROGRAMS if n in programs] + [n for n in programs
+                                                          if n not in PROGRAMS]:
         mod.program(name, *programs[name])
     mod.jacobian(jt, len(system.states))
     for name, program in ENTRIES:
-        mod.entry(name, program, layout.size if program == "jac_full" else n_eval)
+        if program in programs or program.startswith("jac_"):
+            mod.entry(name, program, layout.size if program.startswith("jac_") else n_eval)
     return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
 

@@ -39,7 +39,7 @@ def block_matrices(system) -> dict[int, np.ndarray]:
                 continue
             for v, e in item.pre:
                 env[v] = _value(e, env)
-            n = len(item.unknowns)
+            n = len(item.unknowns) // item.columns
             if item.factors is not None:
                 d, K, B = item.factors
                 k, b = np.zeros((n, d)), np.zeros((d, n))
@@ -61,8 +61,8 @@ def block_matrices(system) -> dict[int, np.ndarray]:
                 rhs = [_value(e, env) for e in item.tear_eqs]
             else:
                 rhs = [_value(e, env) for e in item.b]
-            u = np.linalg.lstsq(a, np.asarray(rhs), rcond=None)[0]
-            env.update(zip(item.unknowns, u.tolist()))
+            u = np.linalg.lstsq(a, np.asarray(rhs).reshape(n, item.columns), rcond=None)[0]
+            env.update(zip(item.unknowns, u.ravel().tolist()))
     except (TypeError, ValueError, ArithmeticError, np.linalg.LinAlgError):
         return out          # the blocks from there on: pivots from their structure alone
     return out

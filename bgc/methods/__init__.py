@@ -17,6 +17,7 @@ REGISTRY = {
     "parasitic": "bgc.methods.parasitic:Parasitic",
     "lagrange": "bgc.methods.lagrange:Lagrange",
     "zcp": "bgc.methods.zcp:Zcp",
+    "augmented": "bgc.methods.augmented:Augmented",
 }
 NAMES = tuple(REGISTRY)
 DEFAULT = NAMES[0]

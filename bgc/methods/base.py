@@ -44,6 +44,10 @@ class ConstraintMethod(abc.ABC):
     # by the equations; False: they are compliant elements, part of the model's dynamics
     # (which then also owns the joints' static loads: ``static_loads``).
     ideal: bool = False
+    # True: the method passes singular configurations (the constraints losing rank, a
+    # mechanism's dead point) and keeps its accuracy there, so the rank monitor that stops
+    # a run at one (``consistent.RankMonitor``) does not watch its runs
+    passes_singular: bool = False
 
     # --- graph ------------------------------------------------------------------------
     @abc.abstractmethod
@@ -67,6 +71,12 @@ class ConstraintMethod(abc.ABC):
         in ``builder``; return ``(name, g, dg/dt)`` of every constraint, for the generated
         module's ``constraints``."""
         return []
+
+    def constraint_block(self, builder, block) -> tuple:
+        """The constraint block (``equations.LinearBlock`` of the multipliers) as the
+        method solves it, with the assignments it adds before it and after the block's
+        chain (method augmented: its regularization and the projection's block)."""
+        return [], block, []
 
     def parameters(self, model, constraints) -> list[tuple[str, float]]:
         """Parameters the method adds to the module (name, default value)."""

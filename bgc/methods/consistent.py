@@ -37,7 +37,9 @@ class Projection:
     iterations: int
     rank: int
     n_constraints: int
-    redundant: list[str] = field(default_factory=list)   # constraints in a dependent set
+    # a minimal redundant set: n_constraints - rank names whose removal leaves the others
+    # independent at the start
+    redundant: list[str] = field(default_factory=list)
     # smallest kept over largest singular value of the measured constraint rows at the
     # start: a run that fails where this has dropped LOST_RANK-fold met a singular pose
     conditioning: float = 1.0
@@ -50,8 +52,9 @@ class Projection:
                f"correction {self.position_correction:.3g}, velocity correction "
                f"{self.velocity_correction:.3g} ({self.iterations} Newton iterations)")
         if self.rank < self.n_constraints:
-            out += (f"; {self.n_constraints - self.rank} redundant constraint(s) among "
-                     f"{', '.join(self.redundant)} (consistent, load shared by least squares)")
+            out += (f"; rank {self.rank}: {self.n_constraints - self.rank} redundant "
+                    f"constraint(s) ({', '.join(self.redundant)}; consistent, load shared "
+                    "by least squares)")
         return out
 
 
@@ -128,15 +131,42 @@ def equilibrate(J: np.ndarray, scales=None) -> np.ndarray:
     return J * r[:, None] * c[None, :]
 
 
-def _dependent(J: np.ndarray, names, rank: int) -> list[str]:
-    """The constraints that take part in the left null space of ``J`` (its rows beyond
-    ``rank``)."""
-    U, s, _ = np.linalg.svd(J)
-    null = U[:, rank:]
-    if null.size == 0:
+# two rows whose distances from the rows taken are within this share of each other are a
+# tie, broken by model order: the choice must not hang on the last digits (the simulator
+# measures the rows by differences, ``bgc check`` from the joints' exact rows)
+TIE = 1e-6
+
+
+def independent_rows(J: np.ndarray, rank: int, first: int = 0) -> np.ndarray:
+    """The ``rank`` rows of ``J`` a rank-revealing QR with column pivoting on J^T
+    (Businger & Golub) takes: one at a time, the row farthest from the span of those
+    taken (ties within ``TIE``: the first in order), as indices; the ``first`` rows are
+    taken first whatever their distance (method zcp's imposed directions)."""
+    V = np.array(J, dtype=np.float64)
+    left = np.ones(len(V), dtype=bool)
+    taken = []
+    for step in range(min(rank, len(V))):
+        norms = np.where(left, np.einsum("ij,ij->i", V, V), -1.0)
+        top = norms.max()
+        if top <= 0.0:
+            break
+        k = step if step < first else int(np.flatnonzero(norms >= top * (1.0 - TIE))[0])
+        top = max(norms[k], 1e-300)
+        taken.append(k)
+        left[k] = False
+        q = V[k] / np.sqrt(top)
+        V -= np.outer(V @ q, q)
+    return np.asarray(taken, dtype=np.int64)
+
+
+def _dependent(J: np.ndarray, names, rank: int, first: int = 0) -> list[str]:
+    """A minimal redundant set of the rows of ``J`` (equilibrated): exactly
+    ``len(names) - rank`` of them, whose removal leaves ``rank`` independent rows (those
+    ``independent_rows`` takes; the ``first`` rows, held independent, are not named)."""
+    if rank >= len(names):
         return []
-    weight = np.abs(null).max(axis=1)
-    return [n for n, w in zip(names, weight) if w > 1e-6]
+    kept = set(independent_rows(J, rank, first).tolist())
+    return [n for i, n in enumerate(names) if i not in kept and i >= first]
 
 
 def _rank(J: np.ndarray) -> int:

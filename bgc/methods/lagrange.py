@@ -54,13 +54,18 @@ def default_alpha(t_end: float | None) -> float:
     return max(10.0, 10.0 / t_end) if t_end else 10.0
 
 
-def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
+def acceleration_constraints(b, pose_rows: bool = False
+                             ) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     """Define every multiplier by its Baumgarte equation in ``b`` (an equations builder);
     return ``(name, g, dg/dt)`` of every constraint, for the generated ``constraints``.
 
     Method zcp: the flow sources' rates are already ``-alpha g`` (the dependent momenta,
     ``zcp.embed``, are leaves here with their rates from the forces), so their efforts
-    keep ``d2g/dt2 + alpha dg/dt = 0``; the break variables are multipliers as above."""
+    keep ``d2g/dt2 + alpha dg/dt = 0``; the break variables are multipliers as above.
+
+    Each multiplier's (g, dg/dt) is kept in ``b.kkt_constraint``; with ``pose_rows``
+    (method augmented's projection) the pose states' rates' rows on the dynamic states
+    too, in ``b.pose_rows``."""
     cons = b.g.constraints
     if not cons:
         return []
@@ -99,6 +104,11 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
     ksens = {x: {j: sp.S.One} for j, (x, _) in enumerate(dynamic)}
     for v, e in propagate(chain, ksens, lambda v, j: f"K_{v.name}__{j}"):
         b.define(v, e, None)
+    if pose_rows:       # dq/dt of the poses = P p: P's rows, for the position projection
+        for st in b.states:
+            if st.element in b.g.bodies:
+                b.pose_rows[st.sym] = {dynamic[j][0]: d for j, d in
+                                       directional(b.eqs[st.dsym], ksens).items()}
     out = []
     for c in cons:
         r = rates[c]
@@ -115,10 +125,10 @@ def acceleration_constraints(b) -> list[tuple[str, sp.Expr | None, sp.Expr]]:
         rdot = directional(r, pose).get(0, sp.S.Zero) + sum(
             (d * dx for x, dx in dynamic if (d := rows.get(x)) is not None), sp.S.Zero)
         g = c.g if c.g is not None else sp.S.Zero
-        if c.imposed:
-            b.eqs[lam] = lam + rdot + alpha * r
-        else:
-            b.eqs[lam] = lam + rdot + 2 * alpha * r + alpha ** 2 * g
+        residual = (rdot + alpha * r if c.imposed
+                    else rdot + 2 * alpha * r + alpha ** 2 * g)
+        b.kkt_constraint[lam] = (g, r)
+        b.eqs[lam] = lam + residual
         b.origin[lam] = (c.element, None)
         b.display[lam] = f"{c.name}.{method.role(c)}"
         out.append((c.name, c.g, r))

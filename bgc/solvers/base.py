@@ -95,9 +95,27 @@ class Problem:
         key = None if self.mass is None else self.mass.tobytes()
         if key not in plans:
             from bgc.solvers.sparse_lu import analyse
-            plans[key] = analyse(len(self.module.STATE_NAMES), self.module.JAC_I,
-                                 self.module.JAC_J, self.mass)
+            aug = self.aug_mass
+            plans[key] = analyse(self.jac_size, self.module.JAC_I, self.module.JAC_J,
+                                 aug if aug.size else self.mass)
         return plans[key]
+
+    @property
+    def jac_size(self) -> int:
+        """The size of the module's Jacobian as the native integrator factors it
+        (``JAC_SIZE``: more than the states where a constraint block is kept open)."""
+        return int(getattr(self.module, "JAC_SIZE", len(self.module.STATE_NAMES)))
+
+    @functools.cached_property
+    def aug_mass(self) -> np.ndarray:
+        """The mass matrix of the open Jacobian: the run's (or I) on the states, zero on
+        the open block's rows; empty where the Jacobian is the states' own."""
+        n, na = len(self.module.STATE_NAMES), self.jac_size
+        if na == n:
+            return np.empty((0, 0))
+        out = np.zeros((na, na))
+        out[:n, :n] = np.eye(n) if self.mass is None else self.mass
+        return out
 
     def jac(self, t, x):
         return self.module.jac(t, x, self.p)

@@ -99,6 +99,8 @@ class NativeSolver(Solver):
             # the stability check costs an eigen-decomposition (~10 n^3): every n^2 / 4
             # steps (~n^2 each) it costs about what they do
             check = max(1, len(x0) ** 2 // 4) if problem.check_stability else 0
+            if problem.jac_size != len(x0):     # a Jacobian kept open: its complement is
+                check = 0                       # formed in Python only (checked there)
             settings = rk4.settings(problem.step, GUARD_TOLERANCE, check, max_steps,
                                     problem.interrupt.flag)
             res = rk4.rk4(model, settings, t0, t1, x0, t_eval, counts)
@@ -106,13 +108,21 @@ class NativeSolver(Solver):
             from bgc.solvers import radau5
             mass = problem.mass if problem.mass is not None else np.empty((0, 0))
             index2 = problem.index2 if problem.index2 is not None else np.empty(0)
+            module = problem.module
+            project = getattr(module, "projection_entry_point", lambda: 0)()
+            jacv = getattr(module, "jacobian_values_entry_point", lambda: 0)()
             system = radau5.System(model, mass, index2, problem.lu_plan,
-                                   monitor if monitor is not None else rank.none())
+                                   monitor if monitor is not None else rank.none(),
+                                   int(project), problem.aug_mass, int(jacv),
+                                   np.ascontiguousarray(module.JAC_I, dtype=np.int64),
+                                   np.ascontiguousarray(module.JAC_J, dtype=np.int64))
             settings = radau5.settings(problem.rtol, problem.atol, problem.max_step, h_start,
                                        GUARD_TOLERANCE, max_steps, problem.interrupt.flag)
             self.diag = np.zeros(len(x0))
             res = radau5.radau5(system, settings, t0, t1, x0, t_eval, counts, self.diag,
-                                keep if keep is not None else radau5.carry(len(x0)))
+                                keep if keep is not None else
+                                radau5.carry(len(x0), problem.jac_size,
+                                             len(problem.module.JAC_I)))
         stats.steps += int(counts[native.ST_STEPS])
         stats.rhs_calls += int(counts[native.ST_RHS])
         stats.jac_calls += int(counts[native.ST_JAC])
@@ -170,7 +180,7 @@ class NativeSolver(Solver):
         keep = None
         if self.loop == "radau5":      # and its Jacobian, factors and predictor
             from bgc.solvers import radau5
-            keep = radau5.carry(len(x))
+            keep = radau5.carry(len(x), problem.jac_size, len(problem.module.JAC_I))
         before = [e(t0, x) for _, e in watched]
         while True:
             sel = t_eval[done:]

@@ -88,12 +88,24 @@ class System(NamedTuple):
     the mass matrix (empty: the identity), 1.0 where a state is an algebraic variable of
     index 2 (empty: none), ``sparse_lu.analyse``'s elimination plan for the Newton
     matrices (``sparse_lu.DENSE``: dense) and the rank monitor of a constrained run
-    (``rank.Monitor``; ``rank.none()``: none)."""
+    (``rank.Monitor``; ``rank.none()``: none); ``project``: the address of the module's
+    projection onto its constraints (method augmented; 0: none), applied twice after
+    every accepted step. ``aug_mass``: the mass matrix of the Jacobian kept open
+    (``JAC_SIZE`` > n: a constraint block's unknowns as algebraic rows, zero there; empty:
+    none), on which the Newton matrices are formed and factored: their solves take the
+    states' rows and read the states' part. ``jacv``: the address of the Jacobian as
+    values in the order of its pattern (``rows``, ``cols``: JAC_I, JAC_J), which a
+    sparse plan's Newton matrices are formed from (0: the dense Jacobian, ``model.jac``)."""
     model: Model
     mass: np.ndarray
     index2: np.ndarray
     plan: tuple
     monitor: rank.Monitor
+    project: int
+    aug_mass: np.ndarray
+    jacv: int
+    rows: np.ndarray
+    cols: np.ndarray
 
 
 class Settings(NamedTuple):
@@ -110,9 +122,24 @@ class Settings(NamedTuple):
     stop: np.ndarray
 
 
+# Newton steps of the projection onto the constraints after a step (method augmented):
+# one leaves the positions within the square of the step's drift and the velocities
+# within the regularization of the joints' rates
+PROJECTIONS = 1
+
 # the rank monitor's minor is checked every step below this (its determinant, 1 where it was
 # picked), else after at most MONITOR_MAX steps (``radau5``)
 MONITOR_NEAR, MONITOR_MAX = 0.5, 16
+
+
+@inner
+def _jacobian(system, t, y, p, J, V):
+    """The Jacobian at (t, y): its values into V (a sparse plan with a values entry),
+    else dense into J."""
+    if system.jacv != 0 and system.plan[0].shape[0] > 0:
+        call_entry(system.jacv, t, y, p, V)
+    else:
+        call_entry(system.model.jac, t, y, p, J)
 
 
 class Carry(NamedTuple):
@@ -123,6 +150,7 @@ class Carry(NamedTuple):
     have_sol, faccon]. A call from (t0, x0) that is not where the last one paused starts
     fresh."""
     J: np.ndarray
+    V: np.ndarray           # the Jacobian's values (``System.jacv``)
     lu_real: np.ndarray
     lu_complex: np.ndarray
     piv_real: np.ndarray
@@ -132,10 +160,14 @@ class Carry(NamedTuple):
     state: np.ndarray
 
 
-def carry(n: int) -> Carry:
-    """An empty ``Carry`` for n states (a fresh start)."""
-    return Carry(np.empty((n, n)), np.empty((n, n)), np.empty((n, n), dtype=np.complex128),
-                 np.empty(n, dtype=F_INT_nptype), np.empty(n, dtype=F_INT_nptype),
+def carry(n: int, na: int | None = None, nnz: int = 0) -> Carry:
+    """An empty ``Carry`` for n states (a fresh start); ``na``: the size of the Jacobian
+    (``JAC_SIZE``, n unless a constraint block is kept open), ``nnz`` its entries. (The
+    dense arrays are allocated, not touched: a sparse run never writes most of them.)"""
+    na = n if na is None else na
+    return Carry(np.empty((na, na)), np.empty(max(nnz, 1)), np.empty((na, na)),
+                 np.empty((na, na), dtype=np.complex128),
+                 np.empty(na, dtype=F_INT_nptype), np.empty(na, dtype=F_INT_nptype),
                  np.zeros((n, 3)), np.empty(n), np.zeros(11))
 
 
@@ -227,18 +259,32 @@ def _lu_solve(lu, piv, b):
 
 
 @inner
-def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
+def _newton_matrices(J, V, system, M, h, lu_real, lu_complex, piv_real, piv_complex,
+                     plan):
     """Factor mu_real/h M - J and mu_complex/h M - J (M empty: the identity): along the
     sparse ``plan`` if there is one and both pass its growth check (returns SPARSE_LU),
     else dense, stored transposed for LAPACK (DENSE_LU); NO_LU if either is exactly
-    singular."""
+    singular. The Jacobian is the values V where ``_jacobian`` took them, else J."""
     n = J.shape[0]
+    values = system.jacv != 0 and plan[0].shape[0] > 0
     if plan[0].shape[0] > 0:
-        sparse_lu.newton_matrix(J, M, _MU_REAL / h, plan, lu_real)
+        if values:
+            sparse_lu.newton_matrix_values(V, M, _MU_REAL / h, plan, lu_real)
+        else:
+            sparse_lu.newton_matrix(J, M, _MU_REAL / h, plan, lu_real)
         if sparse_lu.factor(lu_real, plan):
-            sparse_lu.newton_matrix(J, M, _MU_COMPLEX / h, plan, lu_complex)
+            if values:
+                sparse_lu.newton_matrix_values(V, M, _MU_COMPLEX / h, plan, lu_complex)
+            else:
+                sparse_lu.newton_matrix(J, M, _MU_COMPLEX / h, plan, lu_complex)
             if sparse_lu.factor(lu_complex, plan):
                 return SPARSE_LU
+        if values:              # the dense fallback reads J: from the values
+            for i in range(n):
+                for j in range(n):
+                    J[i, j] = 0.0
+            for k in range(system.rows.shape[0]):
+                J[system.rows[k], system.cols[k]] = V[k]
     for i in range(n):
         for j in range(n):
             lu_real[i, j] = -J[j, i]
@@ -259,11 +305,28 @@ def _newton_matrices(J, M, h, lu_real, lu_complex, piv_real, piv_complex, plan):
 
 
 @inner
-def _solve(lu, piv, b, plan, kind):
-    """Solve with the factors ``_newton_matrices`` made (of either kind)."""
+def _solve_full(lu, piv, b, plan, kind):
     if kind == SPARSE_LU:
         return sparse_lu.solve(lu, plan, b)
     return _lu_solve(lu, piv, b)
+
+
+@inner
+def _solve(lu, piv, b, plan, kind):
+    """Solve with the factors ``_newton_matrices`` made (of either kind); factors of the
+    open Jacobian (larger than b) take b on the states' rows, zero on the others, and
+    give the states' part."""
+    n, na = b.shape[0], lu.shape[0]
+    if na == n:
+        return _solve_full(lu, piv, b, plan, kind)
+    full = np.zeros(na, dtype=b.dtype)
+    for i in range(n):
+        full[i] = b[i]
+    x = _solve_full(lu, piv, full, plan, kind)
+    out = np.empty(n, dtype=b.dtype)
+    for i in range(n):
+        out[i] = x[i]
+    return out
 
 
 # The loop below is written in scalar loops over arrays it allocates once, not numpy
@@ -499,6 +562,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     the rate measured since the last check, at most ``MONITOR_MAX``."""
     rhs, jac, guards, n_guards, p = system.model
     M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
+    aug = system.aug_mass.shape[0] > 0
     rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
                                      settings.h_start)
     guard_tol, max_steps, stop = settings.guard_tol, settings.max_steps, settings.stop
@@ -518,8 +582,9 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         for i in range(n):
             diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
         return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_start)
-    J, lu_real, lu_complex, piv_real, piv_complex, Q = (
-        keep.J, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex, keep.Q)
+    J, V, lu_real, lu_complex, piv_real, piv_complex, Q = (
+        keep.J, keep.V, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex,
+        keep.Q)
     kept = keep.state
     newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
     if kept[0] == 1.0 and kept[1] == t0 and h_start > 0.0:     # going on from a pause
@@ -538,7 +603,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
         h_abs = min(h_abs, t1 - t0, max_step)
         h_abs_old, err_old = -1.0, -1.0
-        call_entry(jac, t, y, p, J)
+        _jacobian(system, t, y, p, J, V)
         stats[ST_JAC] += 1
         current_jac = True
         have_lu = False
@@ -606,7 +671,9 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
             while not converged:
                 if not have_lu:
                     stats[ST_LU] += 2
-                    lu_kind = _newton_matrices(J, M, h, lu_real, lu_complex, piv_real,
+                    lu_kind = _newton_matrices(J, V, system,
+                                               system.aug_mass if aug else M, h,
+                                               lu_real, lu_complex, piv_real,
                                                piv_complex, plan)
                     if lu_kind == NO_LU:
                         singular = True
@@ -619,7 +686,7 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
                     stats, diag, faccon)
                 if converged or not finite or current_jac:
                     break
-                call_entry(jac, t, y, p, J)    # slow convergence: a fresh Jacobian
+                _jacobian(system, t, y, p, J, V)    # slow convergence: a fresh Jacobian
                 stats[ST_JAC] += 1
                 current_jac = True
                 have_lu = False
@@ -677,12 +744,17 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         h_next = min(h_abs * factor, max_step)
         if recompute_jac or h_next != h_abs:
             have_lu = False
+        if system.project != 0:         # back onto the constraints (Newton steps)
+            for _ in range(PROJECTIONS):
+                call_entry(system.project, t_new, y_new, p, work)
+                for k in range(n):
+                    y_new[k] += work[k]
         f_new = evaluate(rhs, t_new, y_new, p, n)
         stats[ST_RHS] += 1
         if not _finite(y_new):
             return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_abs)
         if recompute_jac:
-            call_entry(jac, t_new, y_new, p, J)
+            _jacobian(system, t_new, y_new, p, J, V)
             stats[ST_JAC] += 1
             current_jac = True
         else:
@@ -746,7 +818,8 @@ def compile_loop():
     returns at once (t1 = t0), calling none of the entry points."""
     n = 1
     system = System(Model(0, 0, 0, 0, np.zeros(1)), np.empty((0, 0)), np.empty(0),
-                    sparse_lu.DENSE, rank.none())
+                    sparse_lu.DENSE, rank.none(), 0, np.empty((0, 0)), 0,
+                    np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))
     radau5(system, settings(1e-6, 1e-6, np.inf, 0.0, 1e-3, 0, np.zeros(0, dtype=np.uint8)),
            0.0, 0.0, np.zeros(n), np.empty(0), np.zeros(N_STATS, dtype=np.int64), np.zeros(n),
            carry(n))

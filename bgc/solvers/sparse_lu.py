@@ -35,13 +35,18 @@ MIN_SIZE = 24
 MAX_WORK = 0.1
 
 _EMPTY = np.empty(0, dtype=np.int64)
-DENSE = (_EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY)
+DENSE = (_EMPTY,) * 8
 
 
 def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
-    """The elimination plan ``(perm, lptr, lidx, uptr, uidx)`` for Newton matrices with
-    the structure of the Jacobian entries (rows, cols), the mass matrix's nonzeros and
-    the diagonal; ``DENSE`` (empty arrays) where sparse elimination would not pay."""
+    """The elimination plan ``(perm, lptr, lidx, uptr, uidx, dpos, lpos, upos)`` for
+    Newton matrices with the structure of the Jacobian entries (rows, cols), the mass
+    matrix's nonzeros and the diagonal; ``DENSE`` (empty arrays) where sparse
+    elimination would not pay. ``dpos``, ``lpos``, ``upos``: where each entry the
+    elimination reads (pivot k, its L and U lists) is among the Jacobian's entries, in
+    the order (rows, cols) lists them (-1: not one, a fill-in or a mass term), so that
+    the Newton matrices are formed from the Jacobian's values alone
+    (``newton_matrix_values``)."""
     if n < MIN_SIZE:
         return DENSE
     pattern = np.zeros((n, n), dtype=bool)
@@ -65,14 +70,47 @@ def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
     if best is None or elimination.work(best[1]) > MAX_WORK * elimination.dense_work(n):
         return DENSE
     perm, f = best
-    return (perm.astype(np.int64), *elimination.lists(f))
+    lptr, lidx, uptr, uidx = elimination.lists(f)
+    at = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(rows, cols))}
+    dpos = np.array([at.get((int(perm[k]), int(perm[k])), -1) for k in range(n)],
+                    dtype=np.int64)
+    lpos = np.empty(len(lidx), dtype=np.int64)
+    upos = np.empty(len(uidx), dtype=np.int64)
+    for k in range(n):
+        for q in range(lptr[k], lptr[k + 1]):
+            lpos[q] = at.get((int(perm[lidx[q]]), int(perm[k])), -1)
+        for r in range(uptr[k], uptr[k + 1]):
+            upos[r] = at.get((int(perm[k]), int(perm[uidx[r]])), -1)
+    return (perm.astype(np.int64), lptr, lidx, uptr, uidx, dpos, lpos, upos)
+
+
+@njit(cache=True)
+def _entry(v, k):
+    return v[k] if k >= 0 else 0.0
+
+
+@njit(cache=True)
+def newton_matrix_values(V, M, c, plan, a):
+    """``newton_matrix`` from the Jacobian's values ``V`` (in the order of its pattern,
+    the plan's ``dpos``, ``lpos``, ``upos``) instead of a dense J."""
+    perm, lptr, lidx, uptr, uidx, dpos, lpos, upos = plan
+    n = a.shape[0]
+    for k in range(n):
+        pk = perm[k]
+        a[k, k] = (c if M.shape[0] == 0 else c * M[pk, pk]) - _entry(V, dpos[k])
+        for q in range(lptr[k], lptr[k + 1]):
+            a[lidx[q], k] = (0.0 if M.shape[0] == 0 else c * M[perm[lidx[q]], pk]) \
+                - _entry(V, lpos[q])
+        for r in range(uptr[k], uptr[k + 1]):
+            a[k, uidx[r]] = (0.0 if M.shape[0] == 0 else c * M[pk, perm[uidx[r]]]) \
+                - _entry(V, upos[r])
 
 
 @njit(cache=True)
 def newton_matrix(J, M, c, plan, a):
     """``c M - J`` (M empty: the identity) in the plan's order, into ``a``: only the
     entries elimination reads (the filled pattern); the others are left as they are."""
-    perm, lptr, lidx, uptr, uidx = plan
+    perm, lptr, lidx, uptr, uidx = plan[0], plan[1], plan[2], plan[3], plan[4]
     n = J.shape[0]
     for k in range(n):
         pk = perm[k]
@@ -96,7 +134,7 @@ def factor(a, plan):
     """LU-factor ``a`` (the ordered matrix, overwritten by its factors: unit L below the
     diagonal, U on and above) along ``plan``. False on a zero pivot or an entry grown
     past ``GROWTH_LIMIT`` times the largest of ``a``."""
-    _, lptr, lidx, uptr, uidx = plan
+    lptr, lidx, uptr, uidx = plan[1], plan[2], plan[3], plan[4]
     n = a.shape[0]
     big = 0.0
     for k in range(n):
@@ -127,7 +165,7 @@ def factor(a, plan):
 @njit(cache=True)
 def solve(lu, plan, b):
     """Solve A x = b with ``factor``'s factors of A's ordered matrix."""
-    perm, lptr, lidx, uptr, uidx = plan
+    perm, lptr, lidx, uptr, uidx = plan[0], plan[1], plan[2], plan[3], plan[4]
     n = b.shape[0]
     x = np.empty_like(b)
     for i in range(n):

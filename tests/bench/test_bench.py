@@ -133,3 +133,22 @@ def test_startup_part_times_the_command_and_its_phases(gen_dir, tmp_path):
     assert "## Start-up" in (tmp_path / "summary.md").read_text()
     assert (tmp_path / "startup.png").stat().st_size > 5000
     assert any("small model warm start" in t for t in rep["targets"])
+
+
+@pytest.mark.slow       # compiles A01 and A02 (N = 2) under every method
+def test_iftomm_part_at_small_scale(gen_dir, tmp_path):
+    """The IFToMM part: A01 and A02 N = 2 under every method, their work-precision charts
+    and the summary's table; augmented within A02's limit, lagrange and zcp stopping at
+    a singular configuration, parasitic off by its modelling error."""
+    _bench(gen_dir, tmp_path, "iftomm")
+    rows = _rows(tmp_path / "iftomm.csv")
+    a02 = [r for r in rows if r["problem"] == "A02_N2"]
+    aug = [float(r["error"]) for r in a02 if r["method"] == "augmented" and r["status"] == "ok"]
+    assert min(aug) < 1e-3 and aug[0] > aug[-1]
+    for m in ("lagrange", "zcp"):
+        assert all("singular configuration" in r["status"] for r in a02 if r["method"] == m)
+    assert all(float(r["error"]) > 1e-2 for r in a02 if r["method"] == "parasitic")
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## IFToMM benchmark problems" in summary and "| A02_N2 | augmented |" in summary
+    for name in ("iftomm_A01.png", "iftomm_A02_N2.png"):
+        assert (tmp_path / name).stat().st_size > 10000

@@ -168,7 +168,7 @@ def test_redundant_constraints_at_millimetre_scale_end_at_once_naming_them(gen, 
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and len(lines) == 1, proc.stderr
     assert "not finite at the initial state (t = 0)" in lines[0], lines[0]
-    assert "its 20 constraints have rank 17, 3 redundant among pivot_a.ty" in lines[0]
+    assert "its 20 constraints have rank 17, 3 redundant (" in lines[0]
     assert "nothing was run" in lines[0] and "--method parasitic" in lines[0]
     assert not out.exists()
 

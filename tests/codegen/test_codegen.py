@@ -21,9 +21,16 @@ from bgc.simulate import simulate
 ALL_MODELS = sorted(p.stem for p in MODELS.glob("*.yaml"))
 
 
+# models whose default method cannot integrate them over their own run: the IFToMM
+# flyball governor (A05) under parasitic, whose stiff joints on near-massless spins (the
+# shaft's and rods' 5e-6 kg m^2 about their axes) exhaust the step budget within 1 ms
+# (bench part iftomm): its Jacobian is checked under zcp
+METHOD = {"flyball_governor": "zcp"}
+
+
 @pytest.mark.parametrize("name", model_params())
 def test_jacobian_matches_finite_differences(compiled, name):
-    mod = compiled(name)
+    mod = compiled(name, METHOD.get(name, "parasitic"))
     rng = np.random.default_rng(7)
     p = mod.PARAMS
     n = len(mod.STATE_NAMES)

@@ -38,7 +38,9 @@ def test_slider_crank_closes_exactly_and_names_its_redundant_constraints(compile
     # planar loop in 3D: 3 bodies x 6 - 20 blocked directions = -2, mobility 1
     proj = r.projection
     assert (proj.n_constraints, proj.rank) == (20, 17)
-    assert {n.split(".")[0] for n in proj.redundant} == {"main", "crank_pin", "wrist_pin",
+    # a minimal redundant set: exactly constraints - rank names, among the loop's joints
+    assert len(proj.redundant) == 3
+    assert {n.split(".")[0] for n in proj.redundant} <= {"main", "crank_pin", "wrist_pin",
                                                          "guide"}
     assert not any(n.endswith(("tx", "tz")) for n in proj.redundant if "pin" in n)
     assert r.stats.drift_position < 1e-9 and r.stats.drift_velocity < 1e-7
@@ -85,7 +87,8 @@ def test_bricard_runs_with_its_redundant_constraint_reported(compiled):
                    solver="native")
     proj = lag.projection
     assert (proj.n_constraints, proj.rank) == (30, 29)
-    assert {n.split(".")[0] for n in proj.redundant} == {f"J{k}" for k in range(1, 7)}
+    assert len(proj.redundant) == 1 and proj.redundant[0].split(".")[0] in {
+        f"J{k}" for k in range(1, 7)}
     # period 4.98648 s (rigid reference): P3 at t = 10 is back near its start
     p3 = np.array([lag.column(f"P3_{a}")[-1] for a in "xyz"])
     assert np.abs(p3 - [0.999282, -1.0, -0.000717]).max() < 1e-5, p3

@@ -46,7 +46,7 @@ def _kinds(compiled, suffix):
 
 
 def test_each_registered_method_is_found_by_its_name():
-    assert methods.NAMES == ("parasitic", "lagrange", "zcp")
+    assert methods.NAMES == ("parasitic", "lagrange", "zcp", "augmented")
     assert methods.DEFAULT == "parasitic"
     for name in methods.NAMES:
         m = methods.get(name)
@@ -55,15 +55,16 @@ def test_each_registered_method_is_found_by_its_name():
     assert methods.get("parasitic").stabilisation is None
     with pytest.raises(BgcError, match="unknown constraint method 'nope'") as e:
         methods.get("nope")
-    assert "parasitic, lagrange, zcp" in e.value.hint
+    assert "parasitic, lagrange, zcp, augmented" in e.value.hint
 
 
 def test_what_l_becomes_under_each_method():
     """The pendulum's hinge blocks 5 directions: parasitic puts a spring (C, or an effort
     source where it starts deflected under its static load) and a damper (R) on each,
-    lagrange an effort source (its multiplier), zcp flow sources."""
+    lagrange an effort source (its multiplier), zcp flow sources, augmented an effort
+    source as lagrange's (its block regularized, no rank parameter)."""
     model = MODELS / "pendulum.yaml"
-    par, lag, zcp = (build(model, m) for m in methods.NAMES)
+    par, lag, zcp, aug = (build(model, m) for m in methods.NAMES)
     assert len(_kinds(par, "__L")) == 5 and set(_kinds(par, "__L")) <= {"C", "MSe"}
     assert _kinds(par, "__Lc") == ["R"] * 5
     assert not par.system.constraints
@@ -72,6 +73,10 @@ def test_what_l_becomes_under_each_method():
     assert {n for _, n, _ in lag.system.params} >= {"lagrange__alpha", "lagrange__rank"}
     assert len(zcp.system.imposed) == 5                  # the tree joint: flow sources
     assert len(zcp.system.states) < len(lag.system.states)  # dependent momenta dropped
+    assert _kinds(aug, "__L") == ["MSe"] * 5 and len(aug.system.constraints) == 5
+    assert {n for _, n, _ in aug.system.params} >= {"augmented__alpha", "augmented__eps"}
+    assert "lagrange__rank" not in {n for _, n, _ in aug.system.params}
+    assert aug.system.projection and methods.get("augmented").passes_singular
 
 
 def test_a_fourth_method_is_one_class(penalty):

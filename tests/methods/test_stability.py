@@ -72,7 +72,8 @@ def test_redundant_constraints_without_redundancy_handling_are_refused(compiled)
     from t = 0, which is what a run would get); bgc refuses before the run, naming the
     constraints. With the handling it runs."""
     mod = compiled("bricard", "lagrange")
-    with pytest.raises(SimulationError, match=r"1 redundant constraint\(s\) among J1") as err:
+    with pytest.raises(SimulationError, match=r"1 redundant constraint\(s\) \(J\d\.\w+\)") \
+            as err:
         simulate(mod, t_end=0.5, solver="native", redundancy=False)
     assert "rank 29 of 30" in str(err.value) and "nothing was run" in str(err.value)
     assert err.value.result is None

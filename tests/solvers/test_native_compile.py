@@ -37,7 +37,9 @@ def test_loops_return_at_once_with_nothing_to_integrate():
     flag = np.zeros(0, dtype=np.uint8)
     from bgc.solvers import rank, sparse_lu
     model = native.Model(0, 0, 0, 0, np.zeros(1))
-    system = radau5.System(model, np.empty((0, 0)), np.empty(0), sparse_lu.DENSE, rank.none())
+    system = radau5.System(model, np.empty((0, 0)), np.empty(0), sparse_lu.DENSE, rank.none(),
+                           0, np.empty((0, 0)), 0, np.empty(0, dtype=np.int64),
+                           np.empty(0, dtype=np.int64))
     r = radau5.radau5(system, radau5.settings(1e-6, 1e-6, np.inf, 0.25, 1e-3, 0, flag),
                       1.0, 1.0, x0, np.array([1.0]), counts, np.zeros(2), radau5.carry(2))
     out, k, t, x, status, _, h = r

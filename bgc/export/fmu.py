@@ -163,11 +163,17 @@ def export(model, fmu, method: str = "parasitic", fmi: int = 2, params=(),
     """Write ``fmu`` for ``model`` (a model file) under ``method``; ``params``: (name,
     value) pairs that become the FMU's parameter defaults. Everything the command line
     can get wrong is refused before any work."""
+    from bgc import methods
     from bgc.export import toolchain
     if fmi not in FMI_VERSIONS:
         raise BgcError(f"FMI {fmi} export is not available (this bgc writes FMI "
                        f"{', '.join(map(str, FMI_VERSIONS))})", key="--fmi",
                        hint="use --fmi 2")
+    if getattr(methods.get(method), "passes_singular", False):
+        raise BgcError(f"--method {method} projects the state back onto the constraints "
+                       "after every step, which the FMU's integrator (and an importer's) "
+                       "does not do", key="--method",
+                       hint="export under lagrange or zcp (ideal joints, exact) or parasitic")
     if Path(fmu).suffix != ".fmu":
         raise BgcError(f"an FMU's file name ends in .fmu, got {str(fmu)!r}", key="--fmu")
     check_writable(fmu, "--fmu")

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "7af98ab66382f6bba6b0ab5e8424ef5d"
+MODEL_HASH = "850f131bbb5da65025e3f7fd4effdaae"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d", sys.modules[__name__])
-__name__ = "_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d"
+    sys.modules.setdefault("_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae", sys.modules[__name__])
+__name__ = "_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "F0", "f_drive", )
@@ -58,6 +58,11 @@ POSE_STATES = np.array([], dtype=np.int64)
 # a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
 # diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
 ALGEBRAIC = np.array([], dtype=np.int64)
+# the method passes singular configurations (no rank monitor stops its runs), and the
+# native integrators project the state onto the constraints after every step
+# (``project``)
+PASSES_SINGULAR = False
+PROJECTS = False
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False
@@ -94,8 +99,8 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076"
-KERNEL_FUNCTIONS = 17
+_KERNEL_PREFIX = "_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22"
+KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.sin.f64(double)
 
@@ -105,49 +110,53 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+
+@_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -206,7 +215,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -237,7 +246,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -295,58 +304,82 @@ ends:
 }
 
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define internal void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_tape_src, i64 0, i64 0))
-  %v5 = getelementptr inbounds double, double* %J, i64 0
-  %v6 = bitcast double* %v5 to i8*
-  call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_scatter(double* %J, double* %v2, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 14
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_tape(double %t, double* %x, double* %p, double* %w)
+  %v2 = getelementptr inbounds double, double* %J, i64 0
+  %v3 = bitcast double* %v2 to i8*
+  call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 14
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 208)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 208)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.sin.f64(double)
@@ -357,25 +390,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard_entry(double %t, double* %x, double* %p, double* %out)
+
+declare void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jacv_entry(double %t, double* %x, double* %p, double* %out)
+
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 3
   %v2 = load double, double* %v1, align 8
@@ -424,7 +461,7 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 3
   %v2 = load double, double* %v1, align 8
@@ -485,7 +522,7 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 3
   %v2 = load double, double* %v1, align 8
@@ -517,19 +554,24 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_msd_forced_7af98ab66382f6bba6b0ab5e8424ef5d_4412f2c43076_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_850f131bbb5da65025e3f7fd4effdaae_555871a50d22_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 N_WORK, N_EVAL = 26, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 5, 0
-# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros
+# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
+# JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the
+# regularized constraint block's unknowns u open (method augmented), sparse where the
+# model's own, its Schur complement (``jac``), is dense; the native integrator factors
+# its Newton matrices on it (``jac_augmented``)
+JAC_SIZE = 2
 JAC_I = np.array([0, 0, 1], dtype=np.int64)
 JAC_J = np.array([0, 1, 0], dtype=np.int64)
 
@@ -709,6 +751,17 @@ def guards(t, x, p):
     g = np.empty(_NG)
     _GUARD(t, _vec(x, _N), _vec(p, _NP), np.empty(N_EVAL), g)
     return g
+
+
+def jacobian_values_entry_point():
+    """The address of the Jacobian as a C function writing its entries' values in the
+    order of JAC_I, JAC_J (the native integrator's sparse LU reads these)."""
+    return _ENGINE.get_function_address(f"{_KERNEL_PREFIX}_jacv_entry")
+
+
+def projection_entry_point():
+    """The address of the projection as a C function (0: the module has none)."""
+    return 0
 
 
 def native_entry_points():

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "94a6aee5dadc65b68310ed6f59f8e1a6"
+MODEL_HASH = "6759d8560299d1eaa8c84b850abd6404"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.03, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6", sys.modules[__name__])
-__name__ = "_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6"
+    sys.modules.setdefault("_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404", sys.modules[__name__])
+__name__ = "_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
@@ -58,6 +58,11 @@ POSE_STATES = np.array([], dtype=np.int64)
 # a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
 # diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
 ALGEBRAIC = np.array([], dtype=np.int64)
+# the method passes singular configurations (no rank monitor stops its runs), and the
+# native integrators project the state onto the constraints after every step
+# (``project``)
+PASSES_SINGULAR = False
+PROJECTS = False
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False
@@ -95,8 +100,8 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771"
-KERNEL_FUNCTIONS = 18
+_KERNEL_PREFIX = "_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109"
+KERNEL_FUNCTIONS = 21
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
 
@@ -104,69 +109,73 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_row = internal constant [1 x i64] [i64 3]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_col = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_row = internal constant [1 x i64] [i64 3]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_zero = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_k = internal constant [1 x i64] [i64 0]
 
-define internal void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w) nounwind {
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_i = internal constant [1 x i64] [i64 0]
+
+@_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_j = internal constant [1 x i64] [i64 0]
+
+define internal void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w) nounwind {
 entry:
-  %v5 = call double @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_y0, i64 0, i64 0), i64 3, i1 false)
+  %v5 = call double @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_y0, i64 0, i64 0), i64 3, i1 false)
   %p5 = getelementptr inbounds double, double* %w, i64 5
   store double %v5, double* %p5, align 8
-  %v6 = call double @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_table_y0, i64 0, i64 0), i64 3, i1 true)
+  %v6 = call double @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_table_y0, i64 0, i64 0), i64 3, i1 true)
   %p6 = getelementptr inbounds double, double* %w, i64 6
   store double %v6, double* %p6, align 8
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tables(double %t, double* %w)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tables(double %t, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -225,7 +234,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -256,7 +265,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -314,58 +323,82 @@ ends:
 }
 
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define internal void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 11
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_tape_src, i64 0, i64 0))
-  %v5 = getelementptr inbounds double, double* %J, i64 0
-  %v6 = bitcast double* %v5 to i8*
-  call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 8, i1 false)
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 11
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_tape(double %t, double* %x, double* %p, double* %w)
+  %v2 = getelementptr inbounds double, double* %J, i64 0
+  %v3 = bitcast double* %v2 to i8*
+  call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 11
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 120)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 120)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -374,25 +407,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard_entry(double %t, double* %x, double* %p, double* %out)
+
+declare void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jacv_entry(double %t, double* %x, double* %p, double* %out)
+
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -421,7 +458,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -459,7 +496,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -479,19 +516,24 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rc_table_94a6aee5dadc65b68310ed6f59f8e1a6_a4d41a8c3771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_6759d8560299d1eaa8c84b850abd6404_465c15194109_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 N_WORK, N_EVAL = 15, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 1, 2, 0
-# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros
+# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
+# JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the
+# regularized constraint block's unknowns u open (method augmented), sparse where the
+# model's own, its Schur complement (``jac``), is dense; the native integrator factors
+# its Newton matrices on it (``jac_augmented``)
+JAC_SIZE = 1
 JAC_I = np.array([0], dtype=np.int64)
 JAC_J = np.array([0], dtype=np.int64)
 
@@ -671,6 +713,17 @@ def guards(t, x, p):
     g = np.empty(_NG)
     _GUARD(t, _vec(x, _N), _vec(p, _NP), np.empty(N_EVAL), g)
     return g
+
+
+def jacobian_values_entry_point():
+    """The address of the Jacobian as a C function writing its entries' values in the
+    order of JAC_I, JAC_J (the native integrator's sparse LU reads these)."""
+    return _ENGINE.get_function_address(f"{_KERNEL_PREFIX}_jacv_entry")
+
+
+def projection_entry_point():
+    """The address of the projection as a C function (0: the module has none)."""
+    return 0
 
 
 def native_entry_points():

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "369eda90de98b88a5953fec1327d8a77"
+MODEL_HASH = "ff064c9f2799be777a8db275f591c0e8"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.01, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77", sys.modules[__name__])
-__name__ = "_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77"
+    sys.modules.setdefault("_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8", sys.modules[__name__])
+__name__ = "_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )
@@ -58,6 +58,11 @@ POSE_STATES = np.array([], dtype=np.int64)
 # a DAE M dx/dt = rhs(t, x, p) (zcp, loops kept closed): the states whose row of the
 # diagonal M is zero, algebraic states of index 2 (empty: an ODE, M = I)
 ALGEBRAIC = np.array([], dtype=np.int64)
+# the method passes singular configurations (no rank monitor stops its runs), and the
+# native integrators project the state onto the constraints after every step
+# (``project``)
+PASSES_SINGULAR = False
+PROJECTS = False
 # method parasitic: the initial state is a static equilibrium; the run first sets the
 # parameters <joint>__<direction>_load to the parasitic springs' static loads
 STATIC_LOADS = False
@@ -93,8 +98,8 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51"
-KERNEL_FUNCTIONS = 17
+_KERNEL_PREFIX = "_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521"
+KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
 
@@ -102,49 +107,53 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_row = internal constant [1 x i64] [i64 4]
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_col = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_row = internal constant [1 x i64] [i64 4]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_zero = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_k = internal constant [1 x i64] [i64 0]
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_i = internal constant [1 x i64] [i64 0]
+
+@_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_j = internal constant [1 x i64] [i64 0]
+
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -203,7 +212,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -234,7 +243,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -292,58 +301,82 @@ ends:
 }
 
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define internal void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 40, i1 false)
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_tape_src, i64 0, i64 0))
-  %v5 = getelementptr inbounds double, double* %J, i64 0
-  %v6 = bitcast double* %v5 to i8*
-  call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 8, i1 false)
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_scatter(double* %J, double* %v2, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_col, i64 0, i64 0))
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 14
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_tape(double %t, double* %x, double* %p, double* %w)
+  %v2 = getelementptr inbounds double, double* %J, i64 0
+  %v3 = bitcast double* %v2 to i8*
+  call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+entry:
+  %v1 = getelementptr inbounds double, double* %w, i64 14
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_col, i64 0, i64 0))
+  ret void
+}
+
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 152)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -352,25 +385,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard_entry(double %t, double* %x, double* %p, double* %out)
+
+declare void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jacv_entry(double %t, double* %x, double* %p, double* %out)
+
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -411,7 +448,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -469,7 +506,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -518,19 +555,24 @@ entry:
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rr_loop_369eda90de98b88a5953fec1327d8a77_fed48d3d6f51_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_ff064c9f2799be777a8db275f591c0e8_27bcf28c1521_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 N_WORK, N_EVAL = 19, 8   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 1, 5, 0
-# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros
+# the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
+# JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the
+# regularized constraint block's unknowns u open (method augmented), sparse where the
+# model's own, its Schur complement (``jac``), is dense; the native integrator factors
+# its Newton matrices on it (``jac_augmented``)
+JAC_SIZE = 1
 JAC_I = np.array([0], dtype=np.int64)
 JAC_J = np.array([0], dtype=np.int64)
 
@@ -710,6 +752,17 @@ def guards(t, x, p):
     g = np.empty(_NG)
     _GUARD(t, _vec(x, _N), _vec(p, _NP), np.empty(N_EVAL), g)
     return g
+
+
+def jacobian_values_entry_point():
+    """The address of the Jacobian as a C function writing its entries' values in the
+    order of JAC_I, JAC_J (the native integrator's sparse LU reads these)."""
+    return _ENGINE.get_function_address(f"{_KERNEL_PREFIX}_jacv_entry")
+
+
+def projection_entry_point():
+    """The address of the projection as a C function (0: the module has none)."""
+    return 0
 
 
 def native_entry_points():

@@ -68,20 +68,24 @@ def _step_function():
             mass = np.empty((0, 0))
             index2 = np.empty(0)
         if sparse:
+            # dpos, lpos, upos (where the Jacobian's values go) are read only where the
+            # loop takes the values (System.jacv), never here: the FMU passes a dense J
+            none = np.empty(0, dtype=np.int64)
             plan = (carray(perm_ptr, (n,)), carray(lptr_ptr, (n + 1,)),
                     carray(lidx_ptr, (n_l,)), carray(uptr_ptr, (n + 1,)),
-                    carray(uidx_ptr, (n_u,)))
+                    carray(uidx_ptr, (n_u,)), none, none, none)
         else:
             none = np.empty(0, dtype=np.int64)
-            plan = (none, none, none, none, none)
+            plan = (none, none, none, none, none, none, none, none)
         ints, floats = np.empty(0, dtype=np.int64), np.empty(0)
         monitor = rank.Monitor(0, 0, 0, ints, ints, floats, floats, 0, 0.0,
                                np.empty((2, 0), dtype=np.int64), np.zeros(1, dtype=np.int64))
+        none_i = np.empty(0, dtype=np.int64)
         system = radau5.System(Model(rhs, jac, guards, n_guards, p), mass, index2, plan,
-                               monitor)
+                               monitor, 0, np.empty((0, 0)), 0, none_i, none_i)
         settings = radau5.Settings(rtol, atol, max_step, h_start, 1e-3, max_steps,
                                    np.empty(0, dtype=np.uint8))
-        keep = radau5.Carry(carray(j_ptr, (n, n)), carray(lu_ptr, (n, n)),
+        keep = radau5.Carry(carray(j_ptr, (n, n)), np.empty(1), carray(lu_ptr, (n, n)),
                             carray(lu_cplx_ptr, (n, n)), carray(piv_ptr, (n,)),
                             carray(piv_cplx_ptr, (n,)), carray(q_ptr, (n, 3)),
                             carray(y_old_ptr, (n,)), carray(kept_ptr, (11,)))

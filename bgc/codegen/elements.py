@@ -241,7 +241,7 @@ def hoist(bld: Builder, name, M: sp.Matrix) -> sp.Matrix:
         e = M[i, j]
         if e.is_Number or e.is_Symbol:
             return e
-        v = sp.Symbol(f"M_{name}__{i}{j}", real=True)
+        v = symbols.modulus(name, i, j)
         bld.define(v, e, name)
         bld.display[v] = f"{name.replace('__', '.')}.M{i}{j}"
         return v

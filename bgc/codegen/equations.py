@@ -412,7 +412,7 @@ class Builder:
         out.update(blocks.refs(self.m, want))
         for st in self.states:
             if want(st.element):
-                out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
+                out[symbols.ref(st.element, st.name.rsplit(".", 1)[1])] = st.sym
         for name, v in self.dependent.items():
             if want(name):
                 out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v

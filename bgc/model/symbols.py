@@ -2,6 +2,14 @@
 
 Every symbol's name is also its identifier in the generated code, so the emitter can
 print expressions as they are. Display names (``spring.q``, ``L1.f``) are kept beside.
+
+The names of an instance's parts carry its prefix with dots (``leg_2.beater``, a
+component's part; ``bgc.model.components``), which no identifier may hold: ``ident``
+writes each dot as ``__0``, here, for every symbol. Nothing else makes ``__0`` followed
+by a letter or ``_``: a name bgc accepts has no ``__`` and never starts with a digit, and
+the names bgc generates from them join parts with ``__`` and a name (``hinge__rx``,
+``box__P``) or end in numbers (``ROT_box__01``). So ``name`` reads a reference's target
+back exactly, and no two names share an identifier.
 """
 
 from __future__ import annotations
@@ -16,11 +24,25 @@ t = sp.Symbol("t", real=True)
 LOCAL = {name: sp.Symbol(f"LOCAL_{name}", real=True) for name in ("e", "f", "q", "p")}
 
 
+DOT = "__0"       # an instance's dot in an identifier (module doc)
+
+
+def ident(name: str) -> str:
+    """A (flat, dotted) name as an identifier: each ``.`` as ``__0``."""
+    return name.replace(".", DOT)
+
+
+def name(identifier: str) -> str:
+    """The name ``ident`` made ``identifier`` from."""
+    return identifier.replace(DOT, ".")
+
+
 @functools.lru_cache(maxsize=1 << 16)
 def _sym(name: str) -> sp.Symbol:
-    """The real symbol ``name`` (memoized: the same object sympy would return from its
-    cache, without re-checking the assumptions on every one of the many calls)."""
-    return sp.Symbol(name, real=True)
+    """The real symbol of ``name`` (its ``ident``; memoized: the same object sympy would
+    return from its cache, without re-checking the assumptions on every one of the many
+    calls)."""
+    return sp.Symbol(ident(name), real=True)
 
 
 def param(name: str) -> sp.Symbol:
@@ -83,6 +105,11 @@ def algebraic(element: str, kind: str) -> sp.Symbol:
     return _sym(f"V_{element}__{kind}")
 
 
+def modulus(element: str, i: int, j: int) -> sp.Symbol:
+    """Entry (i, j) of a modulated transformer's matrix, given its own assignment."""
+    return _sym(f"M_{element}__{i}{j}")
+
+
 def output(name: str) -> sp.Symbol:
     return _sym(f"Y_{name}")
 
@@ -113,5 +140,6 @@ def is_ref(s: sp.Symbol) -> bool:
 
 
 def split_ref(s: sp.Symbol) -> tuple[str, str]:
+    """(target, attr) of a reference symbol, the target in model names (dotted)."""
     target, attr = s.name[4:].rsplit("__", 1)
-    return target, attr
+    return name(target), attr

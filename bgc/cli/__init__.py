@@ -1,7 +1,8 @@
-"""The ``bgc`` command line: check, compile, simulate, frf, tune, sweep, run, bench, draw.
+"""The ``bgc`` command line: check, compile, simulate, frf, tune, sweep, run, bench, draw,
+library.
 
 One module per command (``check``, ``compile``, ``simulate``, ``frf``, ``tune``,
-``sweep``, ``run``, ``bench``, ``draw``), each registering itself on the group ``app.main``; ``app``
+``sweep``, ``run``, ``bench``, ``draw``, ``library``), each registering itself on the group ``app.main``; ``app``
 holds the group and the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130),
 ``options`` what several commands share. The long stages report their progress on stderr
 (``bgc.progress``: a live display on a terminal, else one ``bgc: ...`` line per stage;
@@ -12,7 +13,18 @@ generator are imported where a command needs them, so that ``bgc simulate`` on a
 module loads none of them (tests/cli/test_warm_start.py).
 """
 
-from bgc.cli import bench, check, compile, draw, frf, run, simulate, sweep, tune  # noqa: F401
+from bgc.cli import (  # noqa: F401
+    bench,
+    check,
+    compile,
+    draw,
+    frf,
+    library,
+    run,
+    simulate,
+    sweep,
+    tune,
+)
 from bgc.cli.app import main
 
 __all__ = ["main"]

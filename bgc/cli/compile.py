@@ -9,7 +9,14 @@ import time
 import click
 
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import json_option, loops_option, method_option, progress_option
+from bgc.cli.options import (
+    json_option,
+    loops_option,
+    method_option,
+    params_option,
+    progress_option,
+    split_constants,
+)
 from bgc.codegen.module_file import stored_hash
 from bgc.pipeline import compile_model
 
@@ -18,15 +25,23 @@ from bgc.pipeline import compile_model
 @click.argument("model", type=click.Path())
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="directory for <model>.py")
+@params_option("set a compile-time constant of the model (its constants:, e.g. -p N=40)")
 @method_option
 @loops_option
 @json_option
 @user_errors
 @progress_option
-def compile_cmd(model, out_dir, method, keep_loops, as_json):
+def compile_cmd(model, out_dir, params, method, keep_loops, as_json):
     """Generate the numba simulation module for MODEL."""
+    from bgc.errors import BgcError
+    constants, rest = split_constants(model, params)
+    if rest:
+        raise BgcError(f"-p {rest[0][0]}: not a constant of the model; a parameter is set "
+                       "at run time (bgc simulate -p), not compiled in", key="--param",
+                       hint="bgc compile takes -p for the model's constants: only")
     t0 = time.perf_counter()
-    c, path = compile_model(model, out_dir, method, open_loops=not keep_loops)
+    c, path = compile_model(model, out_dir, method, open_loops=not keep_loops,
+                            constants=constants)
     total = time.perf_counter() - t0
     text = path.read_text()
     info = {"module": str(path), "states": len(c.system.states),

@@ -18,6 +18,7 @@ from bgc.cli.options import (
     out_dir_option,
     params_option,
     parse_params,
+    split_constants,
     progress_option,
 )
 from bgc.errors import BgcError
@@ -54,11 +55,12 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
     if not 0 < f_min < f_max:
         raise BgcError(f"need 0 < --f-min < --f-max, got {f_min} and {f_max}", key="--f-min")
     check_writable(out, "--out")
-    module, m, _ = ensure_module(model, out_dir, method)
+    constants, params = split_constants(model, params)
+    module, m, _ = ensure_module(model, out_dir, method, constants=constants)
     if output not in module.OUTPUT_NAMES:
         raise BgcError(f"unknown output '{output}'", key="--output",
                        hint="outputs: " + ", ".join(module.OUTPUT_NAMES))
-    check_overrides(model, params)
+    check_overrides(model, params, constants)
     p, choice = _parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
         lin = bfrf.linearize(module, m, direction, p)

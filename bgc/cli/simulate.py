@@ -33,6 +33,7 @@ from bgc.cli.options import (
     out_dir_option,
     params_option,
     parse_params,
+    split_constants,
     progress_option,
 )
 from bgc.errors import BgcError
@@ -81,6 +82,7 @@ class SimulateOptions:
     method: str
     keep_loops: bool
     as_json: bool
+    constants: dict = field(default_factory=dict)  # -p of the model's constants (compile)
 
 
 @dataclass
@@ -170,7 +172,9 @@ def simulate(**options):
 def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
     """The run's options: ``options`` (click's values by name) and, without MODEL, the
     main job's (``MAIN_JOB``) where the command line (``ctx``) gives none."""
-    o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)})
+    o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)
+                           if f.name in options})
+    o.constants, o.params = split_constants(o.model, o.params)
     if o.model is not None:
         return o
     given = {k for k in options if ctx.get_parameter_source(k) is not ParameterSource.DEFAULT}
@@ -209,7 +213,7 @@ def _prepare(o: SimulateOptions) -> _Run:
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
                                             open_loops=not o.keep_loops, on_load=loop_beside,
-                                            need_model=need_model)
+                                            need_model=need_model, constants=o.constants)
     st = Settings(**module.SETTINGS)        # the model's, as the module was written
     return _Run(module, m, compiled, stages, st)
 
@@ -218,7 +222,7 @@ def _choose_parameters(o: SimulateOptions, run: _Run) -> None:
     """The parameter array: the module's defaults, the excitation's, --parasitic auto's,
     then the explicit ``-p`` values, which always win; the step plan checked."""
     module = run.module
-    check_overrides(o.model, o.params)
+    check_overrides(o.model, o.params, o.constants)
     run.p = parse_params(module, o.params)
     run.excitation = set_excitation(module, run.model, run.p, o)
     if run.excitation:

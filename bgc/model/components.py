@@ -68,7 +68,7 @@ class InstanceLoc(Loc):
 @dataclass
 class Port:
     """An instance's port: its ``kind`` (PORT_KINDS; an external port's is ``external
-    body`` or ``external signal``), the flat name it stands for (``target``) or, for a
+    body``, ``external element`` or ``external signal``), the flat name it stands for (``target``) or, for a
     signal, its expression; ``power`` of an element port (in, out or None)."""
     name: str
     kind: str
@@ -467,9 +467,11 @@ class _Assembler:
                      f"{', '.join(kinds) or 'none'}", loc, key)
             kind, target = kinds[0], p[kinds[0]]
             if kind == "external":
-                if target not in ("body", "signal"):
-                    fail(f"an external port is a body or a signal, got {target!r}", loc, key,
-                         "external: body (a body the instance's joints attach to) or "
+                if target not in ("body", "element", "signal"):
+                    fail(f"an external port is a body, an element or a signal, got "
+                         f"{target!r}", loc, key,
+                         "external: body (a body the instance's joints attach to), "
+                         "external: element (an element its bonds end on) or "
                          "external: signal (an input it reads)")
                 out[pname] = Port(pname, f"external {target}", loc=loc)
                 continue
@@ -692,8 +694,9 @@ class _Assembler:
                                  f"({p.kind}) is not connected", loc=inst.loc,
                                  key=f"{key}.connect",
                                  hint=f"connect: {{{pname}: "
-                                      + ("a body}" if p.kind == "external body"
-                                         else "an expression}"))
+                                      + {"external body": "a body}",
+                                         "external element": "an element}"}.get(
+                                          p.kind, "an expression}"))
             x, loc, k = m[pname], m.val_locs[pname], f"{key}.connect.{pname}"
             if isinstance(x, str):
                 x = self._interpolate(x, outer, loc, k)
@@ -703,6 +706,13 @@ class _Assembler:
                          "a body of the model, another instance's body port, or "
                          "fixed_frame")
                 scope.rename[pname] = self._conn(x, outer, "body", loc, k)
+            elif p.kind == "external element":
+                if not isinstance(x, str):
+                    fail(f"expected the name of an element, got {kind_of(x)}",
+                         outer.loc(loc), k, "an element of the model (a junction most "
+                         "often), another instance's element port, or a port of the "
+                         "mechanism (joint.tx)")
+                scope.rename[pname] = self._conn(x, outer, "end", loc, k)
             else:
                 if isinstance(x, bool) or not isinstance(x, (int, float, str)):
                     fail(f"expected an expression, got {kind_of(x)}", outer.loc(loc), k)
@@ -711,8 +721,8 @@ class _Assembler:
                 scope.rename.pop(pname, None)
 
     def _interpolate(self, text: str, scope: Scope, loc, key) -> str:
-        """``{expr}`` in a connect value: the whole number the expression of indices and
-        constants gives (``w_{i - 1}.crank``)."""
+        """``{expr}`` in a name: the whole number the expression of indices and constants
+        gives (``w_{i - 1}.crank`` in a connect value, ``c_{N}.v`` in a bond)."""
         def one(m):
             return str(self._integer(m.group(1), loc, key, scope))
         return re.sub(r"\{([^{}]*)\}", one, text)
@@ -921,6 +931,8 @@ class _Assembler:
         of its ports of the right kind."""
         if not isinstance(name, str) or name == FIXED_FRAME:
             return name
+        if "{" in name:
+            name = self._interpolate(name, scope, loc, key)
         parts = name.split(".")
         head = parts[0]
         if head in scope.insts and (want != "joint" or len(parts) == 1):
@@ -982,6 +994,8 @@ class _Assembler:
         reads no name once rewritten is its value (a number) where ``numeric``."""
         if not isinstance(text, str) or len(text) > bexpr.MAX_CHARS:
             return text
+        if "{" in text:         # no expression holds braces: names made of constants
+            text = self._interpolate(text, scope, loc, key)
         try:
             tree = ast.parse(text.strip(), mode="eval")
         except (SyntaxError, RecursionError, MemoryError, ValueError):

@@ -5,11 +5,13 @@ print expressions as they are. Display names (``spring.q``, ``L1.f``) are kept b
 
 The names of an instance's parts carry its prefix with dots (``leg_2.beater``, a
 component's part; ``bgc.model.components``), which no identifier may hold: ``ident``
-writes each dot as ``__0``, here, for every symbol. Nothing else makes ``__0`` followed
-by a letter or ``_``: a name bgc accepts has no ``__`` and never starts with a digit, and
-the names bgc generates from them join parts with ``__`` and a name (``hinge__rx``,
-``box__P``) or end in numbers (``ROT_box__01``). So ``name`` reads a reference's target
-back exactly, and no two names share an identifier.
+writes each dot as ``__0``, here, for every symbol. A name bgc accepts has no ``__`` and
+never starts with a digit, so a dot's ``__0`` is always followed by a name's first
+character (a letter or one ``_``), and ``ident`` is one-to-one on dotted names; the names
+bgc generates from them join parts with ``__`` and a name (``hinge__rx``, ``box__P``) or
+end a part in ``__0`` followed by ``__`` (a point's 0-junction, ``box__P__0__x``) or in
+numbers (``ROT_box__01``). So ``name`` reads a reference's target (which is a model's
+name, never a generated one) back exactly, and no two names share an identifier.
 """
 
 from __future__ import annotations

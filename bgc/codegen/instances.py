@@ -68,14 +68,15 @@ def owners(instances) -> callable:
 
 
 def schedule(steps: list, instances, where, assigned: dict | None = None,
-             min_copies: int | None = None) -> list:
+             min_copies: int | None = None, memo: dict | None = None) -> list:
     """``steps`` (``kernels._steps``) with loops: the same steps, or, where some structure
     repeats in ``min_copies`` instances or more, level by level with ``("loop", Loop)``
     steps in place of the instances' own. ``where(symbol)``: (base, index) of a symbol's
     value ("x" state, "p" parameter, "w" workspace slot); ``assigned``: expression -> the
     symbol it is assigned to (a Jacobian step's partials are of an assignment's
-    expression, and belong where it does). A program with no such repetition comes back
-    as it is."""
+    expression, and belong where it does); ``memo``: the symbols each expression reads,
+    shared by a module's programs. A program with no such repetition comes back as it
+    is."""
     if not instances:
         return steps
     min_copies = MIN_COPIES if min_copies is None else min_copies
@@ -91,9 +92,9 @@ def schedule(steps: list, instances, where, assigned: dict | None = None,
         e = _expr(step)
         if step[0] == "grad" and e in assigned:
             return by_symbol(assigned[e])
-        found = {o for o in map(by_symbol, e.free_symbols) if o is not None}
+        found = {o for o in map(by_symbol, _symbols(e, owner.memo)) if o is not None}
         return found.pop() if len(found) == 1 else None
-    owner.step = own
+    owner.step, owner.memo = own, memo if memo is not None else {}
     out, segment = [], []
     for step in steps:
         if step[0] in _STRAIGHT:
@@ -112,7 +113,7 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
         return steps
     level, defined = [], {}
     for step in steps:
-        reads = _expr(step).free_symbols
+        reads = _symbols(_expr(step), owner.memo)
         lv = 1 + max((defined[s] for s in reads if s in defined), default=-1)
         level.append(lv)
         if step[0] == "set":
@@ -126,6 +127,22 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
         looped = looped or bool(loops)
         out += straight + [("loop", lp) for lp in loops]
     return out if looped else steps
+
+
+def _symbols(e, memo: dict) -> frozenset:
+    """The symbols ``e`` reads (sympy's ``free_symbols``, memoized on the expressions,
+    which the programs of a module share)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    if e.is_Symbol:
+        out = frozenset((e,))
+    elif not e.args:
+        out = frozenset()
+    else:
+        out = frozenset().union(*(_symbols(a, memo) for a in e.args))
+    memo[id(e)] = (e, out)
+    return out
 
 
 def _expr(step):

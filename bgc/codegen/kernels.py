@@ -1346,6 +1346,7 @@ class _Module:
         self.loops = 0
         self.assigned = {it[1]: it[0] for it in system.assignments
                          if not isinstance(it, LinearBlock)} if self.instances else {}
+        self.memo: dict = {}                # instances.schedule's, shared by the programs
 
     @staticmethod
     def _region(fn: _Function, offset: int, base: str = "%w") -> str:
@@ -1462,7 +1463,8 @@ class _Module:
 
         flush()
         for step in instances.schedule(list(_steps(items, outputs, self.layout)),
-                                       self.instances, self.where, self.assigned):
+                                       self.instances, self.where, self.assigned,
+                                       memo=self.memo):
             kind = step[0]
             if kind == "loop":              # instances of one part: a loop (instances.py)
                 flush()

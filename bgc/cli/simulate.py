@@ -174,7 +174,8 @@ def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
     main job's (``MAIN_JOB``) where the command line (``ctx``) gives none."""
     o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)
                            if f.name in options})
-    o.constants, o.params = split_constants(o.model, o.params)
+    constants, params = split_constants(o.model, o.params)
+    o = replace(o, constants=constants, params=params)
     if o.model is not None:
         return o
     given = {k for k in options if ctx.get_parameter_source(k) is not ParameterSource.DEFAULT}

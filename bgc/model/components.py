@@ -306,6 +306,8 @@ class _Assembler:
                             f"bonds[{i}].name")
                     if not model:
                         scope.rename[b["name"]] = scope.prefix + b["name"]
+                elif not model and f"b{i + 1}" not in seen:    # unnamed: NAME.b<k>
+                    scope.rename[f"b{i + 1}"] = f"{scope.prefix}b{i + 1}"
         if not model:
             for pname, p in self._entries(body, "ports").items():
                 if isinstance(p, YMap) and "external" in p:

@@ -112,7 +112,9 @@ def _storage_vector(bld: Builder, name, el, qname, b, s, E, F):
     dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
     law = el.fields.get(el.law)
     M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-    value = matmul(M, x) if el.law == "k" else matmul(M.inv(), x)
+    inverse = (sp.diag(*[1 / M[k, k] for k in range(d)]) if M.is_diagonal()
+               else M.inv())          # a mass, principal moments: no general inverse
+    value = matmul(M, x) if el.law == "k" else matmul(inverse, x)
     if el.kind == "C":
         bld.define(E, value, name, b)
         bld.define(dx, s * F, name, b)

@@ -24,7 +24,7 @@ import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
 from bgc import methods
-from bgc.codegen import blocks, elements
+from bgc.codegen import blocks, elements, shapes
 from bgc.codegen.elements import Dt, State, matmul
 from bgc.codegen.forward_mode import directional, propagate, trivial
 from bgc.errors import EquationError
@@ -242,8 +242,9 @@ class Builder:
                 else:
                     for k, v in enumerate(var):
                         self.display[v] = f"{bond.name}.{tag}{AXES[k]}"
+        memo = shapes.RuleMemo(self)         # elements of one shape: derived once
         for name, el in self.g.elements.items():
-            elements.RULES[el.kind](self, name, el)
+            memo.apply(name, el, elements.RULES[el.kind])
         self.kinematics()
         blocks.build(self)
 

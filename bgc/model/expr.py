@@ -96,7 +96,9 @@ def check_finite(e: sp.Expr, values: dict) -> tuple[sp.Expr, str] | None:
     parameters' values) are put in and is not a finite real number (1/0, log(0),
     sqrt(-1), acos(2), a constant beyond the float range), with the reason; None if
     there is none. Parts that depend on time or the state are not judged."""
-    values = {k: sp.Float(v) for k, v in values.items()}
+    # only the values of the symbols ``e`` reads: a model with many parameters (an
+    # assembly's instances each have their own) parses many expressions
+    values = {k: sp.Float(values[k]) for k in e.free_symbols if k in values}
     known = set(values)
 
     def constant(x):

@@ -19,8 +19,8 @@ ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
 # models whose numba compilation and runs take minutes: their tests are marked slow (the
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
-# CI scale)
-SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive"}
+# CI scale; the A02 N-four-bar's 20 s through its singular positions)
+SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive", "n_four_bar"}
 
 
 def model_params(names=None):

@@ -108,6 +108,7 @@ class Scope:
     consts: dict = field(default_factory=dict)  # constant -> exact value
     insts: dict = field(default_factory=dict)   # local instance name -> Instance
     points: dict = field(default_factory=dict)  # point name -> local body (bare 'at:')
+    declared: set = field(default_factory=set)  # the names declared here
 
     @property
     def placed(self) -> bool:
@@ -317,6 +318,7 @@ class _Assembler:
                 pts = b.get("points") if isinstance(b, YMap) else None
                 for pt in pts if isinstance(pts, YMap) else ():
                     scope.points.setdefault(pt, []).append(bname)
+        scope.declared = set(seen)
         for name, v in self._entries(body, "instances").items():
             for flat, _ in self._expand_names(name, v, self._entries(body, "instances"),
                                               scope):
@@ -391,7 +393,8 @@ class _Assembler:
             if not isinstance(idx, str) or not IDENT.match(idx) or "__" in idx or \
                     idx in bexpr.RESERVED:
                 fail(f"{idx!r} is not a valid index name", scope.loc(rng.key_locs[idx]), k)
-            if idx in scope.consts or idx in scope.rename or idx in scope.subst:
+            if idx in scope.consts or idx in scope.rename or idx in scope.subst or \
+                    idx in scope.declared:
                 fail(f"index '{idx}' is already a name here", scope.loc(rng.key_locs[idx]),
                      k, "give the index a name of its own")
             if not isinstance(r, YList) or len(r) != 2:

@@ -63,7 +63,7 @@ def point(n: int, loops: bool, root: Path, cache: Path) -> dict:
     if r.returncode != 0:
         raise SystemExit(f"N = {n}: {r.stderr[-2000:]}")
     rep = json.loads(r.stdout)
-    module = next((work / "gen").glob("*.py"))
+    module = next((work / "gen").glob("n_four_bar*.py"))
     text = module.read_text()
     ir = "".join(re.findall(r'^_KERNEL_IR(?:_STRAIGHT)? = """\\\n(.*?)"""', text, re.S | re.M))
     code = sum(len(line) + 1 for line in ir.splitlines() if not line.startswith("@"))

@@ -149,16 +149,19 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
             exprs.append(item[1])
     exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
     exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
-    calls = set()
+    calls, reading = set(), set()
     for e in exprs:
-        calls |= {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
+        found = {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
+        if found:
+            calls |= found
+            reading.add(e)
     mapping = {f: sp.Symbol(f"{_HOISTED[f.func]}_{f.args[0].name}", real=True)
                for f in sorted(calls, key=sp.default_sort_key)}
     if not mapping:
         return system, mapping
 
-    def sub(e):
-        return None if e is None else e.xreplace(mapping)
+    def sub(e):         # only what reads a call: xreplace walks a whole expression
+        return None if e is None else e.xreplace(mapping) if e in reading else e
     head = [(v, f) for f, v in mapping.items()]
     body = [it.xreplace(mapping) if isinstance(it, LinearBlock) else (it[0], sub(it[1]))
             for it in system.assignments]

@@ -52,17 +52,37 @@ class Loop:
 
 
 def owners(instances) -> callable:
-    """symbol -> the instance it belongs to (the longest instance name whose identifier,
-    ``symbols.ident``, its name holds as ``_<ident>__0``), or None."""
-    marks = sorted(((f"_{symbols.ident(n)}{symbols.DOT}", n) for n in instances),
-                   key=lambda m: -len(m[0]))
+    """symbol -> the instance it belongs to, or None: the first instance name (as
+    ``symbols.ident`` writes it) in its name, followed by ``__0``, as deep as instances
+    nest (``X_leg_1__0motor__0coil__p``: leg_1.motor); a bond between two instances'
+    elements belongs to its first end's."""
+    idents = {symbols.ident(n): n for n in instances}
+    dot = symbols.DOT
     cache: dict = {}
 
     def owner(s) -> str | None:
         hit = cache.get(s, False)
-        if hit is False:
-            name = "_" + s.name
-            hit = cache[s] = next((n for mark, n in marks if mark in name), None)
+        if hit is not False:
+            return hit
+        name, hit = s.name, None
+        k = name.find(dot)
+        while k >= 0 and hit is None:
+            j = name.find("_")
+            while 0 <= j < k:             # the longest name ending at k after an '_'
+                if name[j + 1:k] in idents:
+                    hit = name[j + 1:k]
+                    break
+                j = name.find("_", j + 1)
+            if hit is None:
+                k = name.find(dot, k + len(dot))
+        while hit is not None:           # nested instances: as deep as they go
+            rest = name[k + len(dot):]
+            seg = rest.split("__", 1)[0]
+            deeper = f"{hit}{dot}{seg}"
+            if deeper not in idents:
+                break
+            hit, k = deeper, k + len(dot) + len(seg)
+        hit = cache[s] = None if hit is None else idents[hit]
         return hit
     return owner
 
@@ -161,7 +181,7 @@ def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]
             per.setdefault(o, []).append(step)
     groups: dict = {}
     for o, block in per.items():
-        key, canon = _canonical(block, o, where)
+        key, canon = _canonical(block, o, where, owner.memo)
         groups.setdefault(key, []).append((o, block, canon))
     loops = []
     for key, members in groups.items():
@@ -174,13 +194,18 @@ def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]
     return straight, loops
 
 
+_MARKS: dict = {}
+
+
 def _local(s, o: str) -> str:
     """A symbol's name relative to its instance ``o`` (its own) or '?' (another's)."""
-    mark = symbols.ident(o) + symbols.DOT
+    mark = _MARKS.get(o)
+    if mark is None:
+        mark = _MARKS[o] = symbols.ident(o) + symbols.DOT
     return s.name.replace(mark, "@", 1) if mark in s.name else "?"
 
 
-def _canonical(block: list, o: str, where):
+def _canonical(block: list, o: str, where, memo: dict):
     """The structure of one instance's steps at one level: a hashable key (the steps in
     a canonical order, their expressions with numbered placeholders and the numbers left
     out) and what the template and the table need (the ordered steps, the placeholders'
@@ -199,15 +224,37 @@ def _canonical(block: list, o: str, where):
     for step in ordered:
         if step[0] == "set":
             lhs = _place(step[1], ph)
-            key.append(("set", lhs, _walk(step[2], ph, nums)))
+            key.append(("set", lhs) + _shape(step[2], ph, nums, memo))
         elif step[0] == "out":
-            key.append(("out", _walk(step[2], ph, nums)))
+            key.append(("out",) + _shape(step[2], ph, nums, memo))
         else:
-            shape = _walk(step[1], ph, nums)
-            key.append(("grad", shape, tuple(_place(w, ph) for _, w in step[2])))
+            key.append(("grad",) + _shape(step[1], ph, nums, memo)
+                       + (tuple(_place(w, ph) for _, w in step[2]),))
     syms = list(ph)
-    bases = tuple(where(s)[0] for s in syms)
+    bases = tuple(_where(s, where, memo)[0] for s in syms)
     return (tuple(key), bases), (ordered, syms, nums)
+
+
+def _where(s, where, memo: dict) -> tuple[str, int]:
+    """``where(s)``, memoized."""
+    hit = memo.get(s)
+    if hit is None:
+        hit = memo[s] = where(s)
+    return hit
+
+
+def _shape(e, ph: dict, nums: list, memo: dict) -> tuple:
+    """``e``'s shape (``_walk``, its symbols numbered within it; memoized on the
+    expression, which a module's programs share) and its symbols as placeholders of the
+    block (``ph``); its numbers appended to ``nums``."""
+    hit = memo.get(("shape", id(e)))
+    if hit is None or hit[0] is not e:
+        local: dict = {}
+        found: list = []
+        hit = memo[("shape", id(e))] = (e, _walk(e, local, found), list(local), found)
+    _, shape, syms, found = hit
+    nums.extend(found)
+    return shape, tuple(_place(s, ph) for s in syms)
 
 
 def _place(s, ph: dict) -> int:

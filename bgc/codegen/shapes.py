@@ -44,26 +44,32 @@ def _shape(e, ph: dict):
     return (type(e).__name__,) + tuple(_shape(a, ph) for a in e.args)
 
 
-def _columns(v) -> list:
-    return list(v) if isinstance(v, sp.MatrixBase) else [v]
-
-
 class RuleMemo:
     """The equations of ``Builder``'s elements, by shape (module doc)."""
 
     def __init__(self, bld):
         self.bld = bld
         self.cache: dict = {}
+        self.bond_symbols: dict = {}
+
+    def symbols_of(self, b: int) -> list:
+        """A bond's effort and flow symbols (components of a multibond's), once."""
+        hit = self.bond_symbols.get(b)
+        if hit is None:
+            bond = self.bld.g.bonds[b]
+            ks = [None] if bond.dim == 1 else range(bond.dim)
+            hit = self.bond_symbols[b] = ([symbols.effort(bond.name, k) for k in ks]
+                                          + [symbols.flow(bond.name, k) for k in ks])
+        return hit
 
     def signature(self, name: str, el) -> tuple[tuple, dict]:
         """(the element's shape, its symbols by number)."""
-        bld, g, cg = self.bld, self.bld.g, self.bld.cg
+        g, cg = self.bld.g, self.bld.cg
         ph: dict = {}
         ports = []
         for b in g.ports[name]:
-            syms = _columns(bld.E(b)) + _columns(bld.F(b))
-            ports.append((g.bonds[b].dim, g.points_into(b, name),
-                          cg.receives_effort(b, name), tuple(_place(s, ph) for s in syms)))
+            ports.append((g.bonds[b].dim, g.points_into(b, name), cg.receives_effort(b, name),
+                          tuple(_place(s, ph) for s in self.symbols_of(b))))
         fields = tuple((k, _shape(el.fields[k], ph)) for k in sorted(el.fields))
         return (el.kind, el.law, el.orthogonal, tuple(ports), fields), ph
 

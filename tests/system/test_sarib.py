@@ -53,7 +53,7 @@ def test_nominal_configuration_is_a_static_equilibrium(sarib):
     p = _params(mod, model, "constant", "pumping", amplitude=0.0)
     r = simulate(mod, t_end=2.0, rtol=1e-8, atol=1e-10, params=p, points=201,
                  solver="native")
-    pose = [i for i, n in enumerate(mod.STATE_NAMES) if "." in n and n.split(".")[1] in
+    pose = [i for i, n in enumerate(mod.STATE_NAMES) if "." in n and n.rsplit(".", 1)[1] in
             ("x", "y", "z", "ax", "ay", "az")]
     assert len(pose) == 84
     dev = np.abs(r.x[:, pose] - mod.X0[pose]).max()

@@ -149,9 +149,9 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
             exprs.append(item[1])
     exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
     exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
-    calls, reading = set(), set()
+    calls, reading, memo = set(), set(), {}
     for e in exprs:
-        found = {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
+        found = _calls(e, roots, memo)
         if found:
             calls |= found
             reading.add(e)
@@ -169,6 +169,25 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
                    outputs=[(n, sub(e)) for n, e in system.outputs],
                    guards=[(w, sub(e)) for w, e in system.guards],
                    constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints]), mapping
+
+
+_NONE: frozenset = frozenset()
+
+
+def _calls(e, roots: set, memo: dict) -> frozenset:
+    """The calls of ``_HOISTED`` functions of ``roots`` in ``e`` (sympy's ``atoms``,
+    memoized on the subexpressions that the assignments share)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    if not e.args:
+        out = _NONE
+    elif e.func in _HOISTED and e.args[0] in roots:
+        out = frozenset((e,))
+    else:
+        out = _NONE.union(*(_calls(a, roots, memo) for a in e.args))
+    memo[id(e)] = (e, out)
+    return out
 
 
 def render(system: EquationSystem) -> str:

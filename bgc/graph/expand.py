@@ -176,7 +176,10 @@ class _Expander:
         worked out once per shape: joints that differ only in their bodies and in the
         fixed frame's point (the windows of a chain, the instances of an array of
         components) share one computation, put on their own bodies' symbols by renaming
-        (issue 40: compile cost follows the parts, not their copies)."""
+        (issue 40: compile cost follows the parts, not their copies). The first joint of
+        a shape gets its directions as computed; a joint between two bodies gets the
+        first's renamed in their form (``symbols.renamed``); one on the fixed frame, whose
+        point enters them, the shape's worked out on placeholders, substituted."""
         sides = []
         for n in (j.body1, j.body2):
             if n is None:
@@ -187,25 +190,31 @@ class _Expander:
         key = (j.kind, j.frame, j.pitch, tuple(sides))
         shape = self.shapes.get(key)
         if shape is None:
-            names = [None if n is None else f"$body{k}" for k, n in
-                     enumerate((j.body1, j.body2), 1)]
-            at = sp.Matrix(sp.symbols("$at0:3", real=True))
-            geo = self.geometry(j, names, at)
-            shape = self.shapes[key] = (jmodels.directions(j.kind, geo, j.frame, j.pitch),
-                                        names, at)
+            dirs = jmodels.directions(j.kind, self.geometry(j), j.frame, j.pitch)
+            self.shapes[key] = (dirs, (j.body1, j.body2), None)
+            return dirs
         dirs, names, at = shape
-        rename = dict(zip(at, exact.vector(j.at)))
+        if None in names and at is None:        # on the fixed frame: on placeholders
+            names = [None if n is None else f"$body{k}" for k, n in enumerate(names, 1)]
+            at = sp.Matrix(sp.symbols("$at0:3", real=True))
+            dirs = jmodels.directions(j.kind, self.geometry(j, names, at), j.frame, j.pitch)
+            self.shapes[key] = (dirs, names, at)
+        rename = {} if at is None else dict(zip(at, exact.vector(j.at)))
         for ph, n in zip(names, (j.body1, j.body2)):
             if n is not None:
                 rename.update((symbols.rotation(ph, i, k), symbols.rotation(n, i, k))
                               for i in range(3) for k in range(3))
                 rename.update((symbols.state(ph, a), symbols.state(n, a)) for a in AXES)
+        memo: dict = {}
 
-        def put(v):         # a row: a column of expressions
-            return sp.Matrix(v.rows, v.cols, [x.xreplace(rename) for x in v])
+        def put(e):         # symbols for symbols: the form stays; a point: substituted
+            return symbols.renamed(e, rename, memo) if at is None else e.xreplace(rename)
+
+        def row(v):         # a row: a column of expressions
+            return sp.Matrix(v.rows, v.cols, [put(x) for x in v])
         return [jmodels.Direction(d.label, d.blocked, d.rotational,
-                                  {k: put(v) for k, v in d.rows.items()},
-                                  None if d.g is None else d.g.xreplace(rename))
+                                  {k: row(v) for k, v in d.rows.items()},
+                                  None if d.g is None else put(d.g))
                 for d in dirs]
 
     def joint(self, j: Joint) -> list[jmodels.Direction]:

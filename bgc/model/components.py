@@ -197,6 +197,7 @@ class _Assembler:
         self.bonds: list[tuple] = []            # (value, loc)
         self.excitation = None
         self.stack: list[Definition] = []
+        self.geometry: dict = {}        # a geometry text -> its exact value
 
     # -- the model -------------------------------------------------------------------
     def model(self, doc, given: dict) -> YMap:
@@ -1118,14 +1119,17 @@ class _Assembler:
                 fail(f"expected a number, got {kind_of(x)}", scope.loc(xl), k)
             if isinstance(x, str):
                 text = self._rewrite(x, scope, xl, k, numeric=False)
-                try:
-                    e = bexpr.parse(text, loc=scope.loc(xl), key=k, names={})
-                except ModelError as exc:
-                    raise ModelError(exc.message, loc=exc.loc, key=k,
-                                     hint="positions, axes and angles are compile-time: "
-                                          "numbers, constants and indices (not "
-                                          "parameters)") from None
-                out.append(_exact(sp.sympify(e)))
+                hit = self.geometry.get(text)       # the instances of an array: one text
+                if hit is None:
+                    try:
+                        e = bexpr.parse(text, loc=scope.loc(xl), key=k, names={})
+                    except ModelError as exc:
+                        raise ModelError(exc.message, loc=exc.loc, key=k,
+                                         hint="positions, axes and angles are compile-time: "
+                                              "numbers, constants and indices (not "
+                                              "parameters)") from None
+                    hit = self.geometry[text] = _exact(sp.sympify(e))
+                out.append(hit)
             else:
                 out.append(exact.rational(x))
         return sp.Matrix(out)

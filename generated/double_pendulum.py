@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "465dcab2864db11f881afb8b62110918"
+MODEL_HASH = "59afe1a0d0474fe66be722ceada04acb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_double_pendulum_465dcab2864db11f881afb8b62110918", sys.modules[__name__])
-__name__ = "_bgc_double_pendulum_465dcab2864db11f881afb8b62110918"
+    sys.modules.setdefault("_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb", sys.modules[__name__])
+__name__ = "_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb"
 
 STATE_NAMES = ("rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", )
 PARAM_NAMES = ("shoulder__stiffness", "shoulder__damping", "shoulder__rot_stiffness", "shoulder__rot_damping", "shoulder__tx_load", "shoulder__ty_load", "shoulder__tz_load", "shoulder__ry_load", "shoulder__rz_load", "elbow__stiffness", "elbow__damping", "elbow__rot_stiffness", "elbow__rot_damping", "elbow__tx_load", "elbow__ty_load", "elbow__tz_load", )
@@ -93,7 +93,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809"
+_KERNEL_PREFIX = "_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809"
 KERNEL_FUNCTIONS = 17
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -108,49 +108,49 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape_ptr = internal constant [162 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 17, i64 20, i64 22, i64 23, i64 29, i64 30, i64 31, i64 33, i64 34, i64 35, i64 36, i64 41, i64 47, i64 49, i64 50, i64 51, i64 53, i64 54, i64 55, i64 56, i64 58, i64 64, i64 65, i64 67, i64 69, i64 70, i64 72, i64 75, i64 77, i64 78, i64 79, i64 85, i64 87, i64 88, i64 90, i64 92, i64 94, i64 95, i64 100, i64 103, i64 109, i64 111, i64 117, i64 119, i64 124, i64 130, i64 131, i64 133, i64 135, i64 136, i64 138, i64 141, i64 147, i64 149, i64 150, i64 152, i64 154, i64 159, i64 162, i64 167, i64 170, i64 176, i64 181, i64 187, i64 189, i64 194, i64 200, i64 201, i64 203, i64 205, i64 206, i64 208, i64 211, i64 217, i64 219, i64 220, i64 222, i64 224, i64 226, i64 227, i64 233, i64 239, i64 243, i64 244, i64 246, i64 248, i64 250, i64 251, i64 257, i64 261, i64 262, i64 264, i64 266, i64 268, i64 270, i64 276, i64 282, i64 288, i64 290, i64 296, i64 302, i64 304, i64 308, i64 310, i64 316, i64 322, i64 323, i64 329, i64 330, i64 334, i64 340, i64 341, i64 342, i64 345, i64 346, i64 347, i64 348, i64 349, i64 350, i64 351, i64 352, i64 354, i64 360, i64 366, i64 368, i64 370, i64 372, i64 378, i64 379, i64 381, i64 382, i64 383, i64 384, i64 385, i64 386, i64 387, i64 388, i64 389, i64 394, i64 395, i64 399, i64 400, i64 407, i64 408, i64 413, i64 414, i64 418, i64 419, i64 426]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape_ptr = internal constant [162 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 17, i64 20, i64 22, i64 23, i64 29, i64 30, i64 31, i64 33, i64 34, i64 35, i64 36, i64 41, i64 47, i64 49, i64 50, i64 51, i64 53, i64 54, i64 55, i64 56, i64 58, i64 64, i64 65, i64 67, i64 69, i64 70, i64 72, i64 75, i64 77, i64 78, i64 79, i64 85, i64 87, i64 88, i64 90, i64 92, i64 94, i64 95, i64 100, i64 103, i64 109, i64 111, i64 117, i64 119, i64 124, i64 130, i64 131, i64 133, i64 135, i64 136, i64 138, i64 141, i64 147, i64 149, i64 150, i64 152, i64 154, i64 159, i64 162, i64 167, i64 170, i64 176, i64 181, i64 187, i64 189, i64 194, i64 200, i64 201, i64 203, i64 205, i64 206, i64 208, i64 211, i64 217, i64 219, i64 220, i64 222, i64 224, i64 226, i64 227, i64 233, i64 239, i64 243, i64 244, i64 246, i64 248, i64 250, i64 251, i64 257, i64 261, i64 262, i64 264, i64 266, i64 268, i64 270, i64 276, i64 282, i64 288, i64 290, i64 296, i64 302, i64 304, i64 308, i64 310, i64 316, i64 322, i64 323, i64 329, i64 330, i64 334, i64 340, i64 341, i64 342, i64 345, i64 346, i64 347, i64 348, i64 349, i64 350, i64 351, i64 352, i64 354, i64 360, i64 366, i64 368, i64 370, i64 372, i64 378, i64 379, i64 381, i64 382, i64 383, i64 384, i64 385, i64 386, i64 387, i64 388, i64 389, i64 394, i64 395, i64 399, i64 400, i64 407, i64 408, i64 413, i64 414, i64 418, i64 419, i64 426]
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape_src = internal constant [426 x i64] [i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 10, i64 5, i64 4, i64 12, i64 13, i64 14, i64 15, i64 -19, i64 -22, i64 -2, i64 -9, i64 17, i64 18, i64 -1, i64 20, i64 20, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 23, i64 12, i64 13, i64 24, i64 -13, i64 -4, i64 -10, i64 26, i64 27, i64 -3, i64 29, i64 29, i64 10, i64 11, i64 28, i64 30, i64 31, i64 32, i64 14, i64 15, i64 -16, i64 33, i64 34, i64 25, i64 35, i64 36, i64 16, i64 37, i64 12, i64 13, i64 -19, i64 17, i64 18, i64 20, i64 20, i64 40, i64 41, i64 42, i64 23, i64 12, i64 13, i64 43, i64 -13, i64 44, i64 39, i64 45, i64 38, i64 46, i64 7, i64 2, i64 1, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 48, i64 49, i64 50, i64 51, i64 -20, i64 -23, i64 7, i64 8, i64 19, i64 21, i64 22, i64 53, i64 48, i64 49, i64 54, i64 -14, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 56, i64 50, i64 51, i64 -17, i64 57, i64 58, i64 55, i64 59, i64 60, i64 52, i64 61, i64 48, i64 49, i64 -20, i64 40, i64 41, i64 42, i64 53, i64 48, i64 49, i64 64, i64 -14, i64 65, i64 63, i64 66, i64 62, i64 67, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 69, i64 70, i64 71, i64 72, i64 -21, i64 -24, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 74, i64 69, i64 70, i64 75, i64 -15, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 77, i64 71, i64 72, i64 -18, i64 78, i64 79, i64 76, i64 80, i64 81, i64 73, i64 82, i64 69, i64 70, i64 -21, i64 40, i64 41, i64 42, i64 74, i64 69, i64 70, i64 85, i64 -15, i64 86, i64 84, i64 87, i64 83, i64 88, i64 17, i64 18, i64 74, i64 20, i64 17, i64 18, i64 23, i64 12, i64 13, i64 20, i64 17, i64 18, i64 53, i64 48, i64 49, i64 92, i64 93, i64 23, i64 53, i64 94, i64 91, i64 95, i64 96, i64 53, i64 96, i64 23, i64 23, i64 20, i64 17, i64 18, i64 74, i64 69, i64 70, i64 93, i64 100, i64 53, i64 74, i64 101, i64 99, i64 102, i64 103, i64 74, i64 98, i64 104, i64 103, i64 53, i64 105, i64 97, i64 106, i64 23, i64 53, i64 74, i64 38, i64 62, i64 83, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 13, i64 49, i64 70, i64 108, i64 109, i64 46, i64 67, i64 88, i64 12, i64 48, i64 69, i64 46, i64 67, i64 88, i64 13, i64 49, i64 70, i64 111, i64 112, i64 90, i64 107, i64 110, i64 113, i64 20, i64 18, i64 105, i64 97, i64 106, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 23, i64 53, i64 74, i64 117, i64 46, i64 67, i64 88, i64 23, i64 53, i64 74, i64 119, i64 115, i64 116, i64 118, i64 120, i64 105, i64 97, i64 106, i64 13, i64 49, i64 70, i64 117, i64 119, i64 122, i64 123, i64 124, i64 47, i64 68, i64 89, i64 114, i64 121, i64 125, i64 83, i64 26, i64 27, i64 38, i64 62, i64 83, i64 14, i64 50, i64 71, i64 38, i64 62, i64 83, i64 15, i64 51, i64 72, i64 134, i64 135, i64 133, i64 136, i64 29, i64 27, i64 38, i64 62, i64 83, i64 32, i64 56, i64 77, i64 139, i64 138, i64 140, i64 139, i64 38, i64 62, i64 132, i64 137, i64 141, i64 142, i64 -13, i64 7, i64 8, i64 20, i64 17, i64 2, i64 -14, i64 8, i64 20, i64 17, i64 2, i64 -15, i64 7, i64 8, i64 20, i64 17, i64 18, i64 1, i64 2, i64 34, i64 10, i64 11, i64 29, i64 26, i64 5, i64 58, i64 11, i64 29, i64 26, i64 5, i64 79, i64 10, i64 11, i64 29, i64 26, i64 27, i64 4, i64 5]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape_src = internal constant [426 x i64] [i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 10, i64 5, i64 4, i64 12, i64 13, i64 14, i64 15, i64 -19, i64 -22, i64 -2, i64 -9, i64 17, i64 18, i64 -1, i64 20, i64 20, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 23, i64 12, i64 13, i64 24, i64 -13, i64 -4, i64 -10, i64 26, i64 27, i64 -3, i64 29, i64 29, i64 10, i64 11, i64 28, i64 30, i64 31, i64 32, i64 14, i64 15, i64 -16, i64 33, i64 34, i64 25, i64 35, i64 36, i64 16, i64 37, i64 12, i64 13, i64 -19, i64 17, i64 18, i64 20, i64 20, i64 40, i64 41, i64 42, i64 23, i64 12, i64 13, i64 43, i64 -13, i64 44, i64 39, i64 45, i64 38, i64 46, i64 7, i64 2, i64 1, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 48, i64 49, i64 50, i64 51, i64 -20, i64 -23, i64 7, i64 8, i64 19, i64 21, i64 22, i64 53, i64 48, i64 49, i64 54, i64 -14, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 56, i64 50, i64 51, i64 -17, i64 57, i64 58, i64 55, i64 59, i64 60, i64 52, i64 61, i64 48, i64 49, i64 -20, i64 40, i64 41, i64 42, i64 53, i64 48, i64 49, i64 64, i64 -14, i64 65, i64 63, i64 66, i64 62, i64 67, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 69, i64 70, i64 71, i64 72, i64 -21, i64 -24, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 74, i64 69, i64 70, i64 75, i64 -15, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 77, i64 71, i64 72, i64 -18, i64 78, i64 79, i64 76, i64 80, i64 81, i64 73, i64 82, i64 69, i64 70, i64 -21, i64 40, i64 41, i64 42, i64 74, i64 69, i64 70, i64 85, i64 -15, i64 86, i64 84, i64 87, i64 83, i64 88, i64 17, i64 18, i64 74, i64 20, i64 17, i64 18, i64 23, i64 12, i64 13, i64 20, i64 17, i64 18, i64 53, i64 48, i64 49, i64 92, i64 93, i64 23, i64 53, i64 94, i64 91, i64 95, i64 96, i64 53, i64 96, i64 23, i64 23, i64 20, i64 17, i64 18, i64 74, i64 69, i64 70, i64 93, i64 100, i64 53, i64 74, i64 101, i64 99, i64 102, i64 103, i64 74, i64 98, i64 104, i64 103, i64 53, i64 105, i64 97, i64 106, i64 23, i64 53, i64 74, i64 38, i64 62, i64 83, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 13, i64 49, i64 70, i64 108, i64 109, i64 46, i64 67, i64 88, i64 12, i64 48, i64 69, i64 46, i64 67, i64 88, i64 13, i64 49, i64 70, i64 111, i64 112, i64 90, i64 107, i64 110, i64 113, i64 20, i64 18, i64 105, i64 97, i64 106, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 23, i64 53, i64 74, i64 117, i64 46, i64 67, i64 88, i64 23, i64 53, i64 74, i64 119, i64 115, i64 116, i64 118, i64 120, i64 105, i64 97, i64 106, i64 13, i64 49, i64 70, i64 117, i64 119, i64 122, i64 123, i64 124, i64 47, i64 68, i64 89, i64 114, i64 121, i64 125, i64 83, i64 26, i64 27, i64 38, i64 62, i64 83, i64 14, i64 50, i64 71, i64 38, i64 62, i64 83, i64 15, i64 51, i64 72, i64 134, i64 135, i64 133, i64 136, i64 29, i64 27, i64 38, i64 62, i64 83, i64 32, i64 56, i64 77, i64 139, i64 138, i64 140, i64 139, i64 38, i64 62, i64 132, i64 137, i64 141, i64 142, i64 -13, i64 7, i64 8, i64 20, i64 17, i64 2, i64 -14, i64 8, i64 20, i64 17, i64 2, i64 -15, i64 7, i64 8, i64 20, i64 17, i64 18, i64 1, i64 2, i64 34, i64 10, i64 11, i64 29, i64 26, i64 5, i64 58, i64 11, i64 29, i64 26, i64 5, i64 79, i64 10, i64 11, i64 29, i64 26, i64 27, i64 4, i64 5]
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_i = internal constant [266 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 12, i64 13, i64 13, i64 13, i64 13, i64 14, i64 15, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 22, i64 23, i64 23, i64 23, i64 23, i64 23]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_i = internal constant [266 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 12, i64 13, i64 13, i64 13, i64 13, i64 14, i64 15, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 22, i64 23, i64 23, i64 23, i64 23, i64 23]
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_j = internal constant [266 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 15, i64 17, i64 1, i64 3, i64 4, i64 17, i64 2, i64 3, i64 4, i64 5, i64 15, i64 17, i64 6, i64 9, i64 10, i64 21, i64 23, i64 7, i64 9, i64 10, i64 23, i64 8, i64 9, i64 10, i64 11, i64 21, i64 23]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_j = internal constant [266 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 15, i64 17, i64 1, i64 3, i64 4, i64 17, i64 2, i64 3, i64 4, i64 5, i64 15, i64 17, i64 6, i64 9, i64 10, i64 21, i64 23, i64 7, i64 9, i64 10, i64 23, i64 8, i64 9, i64 10, i64 11, i64 21, i64 23]
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_row = internal constant [266 x i64] [i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 149, i64 150, i64 150, i64 150, i64 150, i64 151, i64 152, i64 152, i64 152, i64 153, i64 154, i64 154, i64 154, i64 154, i64 154, i64 155, i64 156, i64 156, i64 156, i64 156, i64 157, i64 158, i64 158, i64 158, i64 159, i64 160, i64 160, i64 160, i64 160, i64 160]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_row = internal constant [266 x i64] [i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 149, i64 150, i64 150, i64 150, i64 150, i64 151, i64 152, i64 152, i64 152, i64 153, i64 154, i64 154, i64 154, i64 154, i64 154, i64 155, i64 156, i64 156, i64 156, i64 156, i64 157, i64 158, i64 158, i64 158, i64 159, i64 160, i64 160, i64 160, i64 160, i64 160]
 
-@_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_col = internal constant [266 x i64] [i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 6, i64 4, i64 13, i64 0, i64 1, i64 4, i64 14, i64 0, i64 1, i64 8, i64 6, i64 4, i64 15, i64 2, i64 3, i64 7, i64 5, i64 16, i64 2, i64 3, i64 5, i64 17, i64 2, i64 3, i64 9, i64 7, i64 5]
+@_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_col = internal constant [266 x i64] [i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 6, i64 4, i64 13, i64 0, i64 1, i64 4, i64 14, i64 0, i64 1, i64 8, i64 6, i64 4, i64 15, i64 2, i64 3, i64 7, i64 5, i64 16, i64 2, i64 3, i64 5, i64 17, i64 2, i64 3, i64 9, i64 7, i64 5]
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -209,7 +209,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -240,7 +240,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -298,58 +298,58 @@ ends:
 }
 
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 161
   %v2 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 587
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 30912, i1 false)
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_tape_src, i64 0, i64 0))
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %J, i64 0
   %v6 = bitcast double* %v5 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v6, i8 0, i64 4608, i1 false)
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_scatter(double* %J, double* %v2, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_scatter(double* %J, double* %v2, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35608)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -364,25 +364,25 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -1318,7 +1318,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3670,7 +3670,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3967,7 +3967,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 15
   %v2 = load double, double* %v1, align 8
@@ -3986,7 +3986,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_465dcab2864db11f881afb8b62110918_a0a8d4d63809_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_59afe1a0d0474fe66be722ceada04acb_a0a8d4d63809_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

@@ -19,7 +19,7 @@ from bgc.codegen.module_file import (
     module_path,
 )
 from bgc.fileio import check_writable
-from bgc.model import document
+from bgc.model import document, library
 from bgc.model.model import Model, Settings
 
 if TYPE_CHECKING:
@@ -73,16 +73,17 @@ class Compiled:
 
 
 def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool = True,
-          **derive_options) -> Compiled:
+          constants: dict | None = None, **derive_options) -> Compiled:
     """Run load (unless given a Model) -> expand -> (zcp) -> causality -> equations, each a
     progress stage (timed in ``Compiled.timings``). ``open_loops``: method zcp opens
-    kinematic loops with break variables (else refuses them). ``derive_options`` go to
+    kinematic loops with break variables (else refuses them). ``constants``: the model's
+    compile-time constants given (``-p N=40``). ``derive_options`` go to
     ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     from bgc.codegen import equations
     from bgc.graph import causality, expand
     with progress.record() as timings:
         if not isinstance(model, Model):
-            model = _load(model)
+            model = _load(model, constants)
         with progress.stage("causality") as st:
             graph = methods.get(method).restructure(expand.expand(model, method), open_loops)
             cg = causality.assign(graph)
@@ -95,42 +96,50 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
     return Compiled(model, cg, system, timings)
 
 
-def _load(path: str | Path) -> Model:
-    """The load stage: the model file read and checked."""
+def _load(path: str | Path, constants: dict | None = None) -> Model:
+    """The load stage: the model file read and checked (``constants``: compile-time
+    constants given for the file's, ``-p N=40``)."""
     with progress.stage("load") as st:
-        model = _model(document.read(path), str(path), st)
+        model = _model(document.read(path), str(path), st, constants)
     return model
 
 
-def _model(doc, file: str, st: progress.Stage) -> Model:
+def _model(doc, file: str, st: progress.Stage, constants: dict | None = None) -> Model:
     """The Model of a model file's document, counted in the load stage ``st``."""
     from bgc.model import load
-    model = load.from_document(doc, file)
+    model = load.from_document(doc, file, constants=constants)
     parts = [("element", model.elements), ("bond", model.bonds), ("body", model.bodies),
              ("joint", model.joints)]
+    if model.instances:
+        parts.append(("instance", model.instances))
     st.done(f"{model.name}: " + ", ".join(
         progress.count(len(v), k, "bodies" if k == "body" else None) for k, v in parts if v))
     return model
 
 
-def _fresh(doc, file: str, out_dir: str | Path, kind: str) -> Path | None:
+def _fresh(doc, file: str, out_dir: str | Path, kind: str,
+           constants: dict | None = None) -> Path | None:
     """The path of the generated module of a model file's YAML document if that module
-    is fresh, else None. Fresh: its MODEL_HASH is this document's digest under this method
-    and this compiler (``module_file.is_stale``), so it was written from this very document
-    after it loaded without error; the document is not loaded again. None also when the
-    digest does not capture the whole document (``document.plain_json``) or the model's
-    name is refused: the full load then decides, and reports any error."""
+    is fresh, else None. Fresh: its MODEL_HASH is this document's digest (with the
+    component files it uses and the ``constants`` given: ``library.digest``) under this
+    method and this compiler (``module_file.is_stale``), so it was written from this very
+    document after it loaded without error; the document is not loaded again. None also
+    when the digest does not capture the whole document (``document.plain_json``) or the
+    model's name is refused: the full load then decides, and reports any error."""
     if not isinstance(doc, dict) or not document.plain_json(doc):
         return None
     name = doc.get("name", Path(file).stem)       # as load names it
     if module_name_syntax_problem(name) is not None:    # (the rest was checked when written)
         return None
+    digest = library.digest(doc, file, constants)
+    if digest is None:
+        return None
     path = module_path(name, out_dir, kind)
-    return None if is_stale(path, document.digest(doc), kind) else path
+    return None if is_stale(path, digest, kind) else path
 
 
 def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
-                  method: str = "parasitic", check=None,
+                  method: str = "parasitic", check=None, constants: dict | None = None,
                   **derive_options) -> tuple[Compiled, Path]:
     """Build and write ``out_dir/<name>.py``, then compile its machine code, so that a
     later ``import`` or ``bgc simulate`` compiles nothing; nothing is written if a stage
@@ -140,7 +149,7 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
     from bgc.codegen import emit
     check_writable(out_dir, "output directory", directory=True)   # before the work
     with progress.record() as timings:
-        c = build(model, method, **derive_options)
+        c = build(model, method, constants=constants, **derive_options)
         if check is not None:
             check(Declared.of_system(c.system))
         with progress.stage("emit") as st:
@@ -166,7 +175,7 @@ def machine_code(path: Path):
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                   method: str = "parasitic", open_loops: bool = True, on_load=None,
-                  need_model: bool = True, check=None):
+                  need_model: bool = True, check=None, constants: dict | None = None):
     """The generated module for a model, recompiled only if missing or stale (method zcp
     with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``); returns the
     module, the Model and the Compiled (None if nothing was compiled). ``check`` is
@@ -175,16 +184,18 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
     ``on_load`` is called with the model's Settings once they passed (e.g. to start
     other work beside the build). ``need_model=False``: a fresh module is found from the
     YAML alone (``_fresh``) and the Model comes back as None; the module's SETTINGS and
-    MODEL_NAME are the model's."""
+    MODEL_NAME are the model's. ``constants``: the model's compile-time constants given
+    (``-p N=40``), part of its digest: another value is another module."""
     kind = methods.variant(method, open_loops)
     with progress.record() as timings:
         with progress.stage("load") as st:
             doc = document.read(model_path)
-            fresh = None if need_model else _fresh(doc, str(model_path), out_dir, kind)
+            fresh = None if need_model else _fresh(doc, str(model_path), out_dir, kind,
+                                                   constants)
             if fresh is not None:
                 st.done(f"{fresh.stem}: its generated module is up to date")
             else:
-                model = _model(doc, str(model_path), st)
+                model = _model(doc, str(model_path), st, constants)
         if fresh is not None:
             module = import_module(fresh)
             if check is not None:

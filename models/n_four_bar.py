@@ -1,7 +1,6 @@
-"""IFToMM benchmark A02, the N-four-bar mechanism: write its model for any N, and its exact
-reference.
-
-    python models/n_four_bar.py N [-o FILE]      # default: models/n_four_bar.yaml for N = 2
+"""IFToMM benchmark A02, the N-four-bar mechanism: the exact reference of B0 for any N
+(the model itself is models/n_four_bar.yaml, N windows of the library's four_bar_window;
+another N: ``-p N=40``).
 
 The mechanism (IFToMM library of computational benchmark problems, problem A02; M.
 Gonzalez, D. Dopico, U. Lugris, J. Cuadrado, Multibody System Dynamics 16, 2006): 2N + 1
@@ -29,84 +28,11 @@ elliptic function (``theta_exact``); ``reference`` integrates it as a check.
 
 from __future__ import annotations
 
-import argparse
 import math
-from pathlib import Path
 
 import numpy as np
 
 G = 9.81
-T_END = 20.0
-ROD_AXIAL = 1.0e-4        # a slender rod's moment about its own axis (kg m^2): small, > 0
-
-
-def _vec(v) -> str:
-    return "[" + ", ".join(_num(x) for x in v) + "]"
-
-
-def _num(x: float) -> str:
-    return repr(float(x)) if x != int(x) else f"{int(x)}"
-
-
-def model(n: int, t_end: float = T_END) -> str:
-    """The YAML text of A02 with ``n`` couplers (``n + 1`` cranks)."""
-    if n < 1:
-        raise ValueError("A02 needs at least one coupler (N >= 1)")
-    lines = [f"name: n_four_bar{'' if n == 2 else f'_{n}'}",
-             "description: >",
-             f"  IFToMM benchmark A02, the N-four-bar mechanism, N = {n} (written by",
-             f"  models/n_four_bar.py {n}): {n + 1} cranks of 1 m and 1 kg pinned to the "
-             f"ground at x = 0..{n},",
-             f"  {n} couplers of 1 m and 1 kg joining their tops, {3 * n + 1} revolute joints "
-             "about z, gravity 9.81",
-             "  along -y; the cranks start vertical with the top of the first (B0) moving at "
-             "1 m/s along +x.",
-             "  Every time the cranks pass horizontal the mobility jumps from 1 to N + 1 (a "
-             "singular",
-             f"  configuration); in 3D the {15 * n + 5} scalar constraints have rank "
-             f"{12 * n + 5} ({3 * n} redundant).",
-             "  Exact solution: ((N+1)/3 + N) theta'' = ((N+1)/2 + N) g sin theta, theta(0) "
-             "= 0,",
-             "  theta'(0) = 1 rad/s, B0 = (sin theta, cos theta) (models/n_four_bar.py, "
-             "reference).",
-             f"gravity: [0, {-G}, 0]",
-             "bodies:"]
-    # body frames: x along R0 z (the axis every link turns about: its Cardan angle ax
-    # turns freely, b stays 0), z along the rod
-    inertia = _vec([1.0 / 12.0, 1.0 / 12.0, ROD_AXIAL])
-    for i in range(n + 1):
-        lines += [f"  crank{i}:",
-                  "    mass: 1.0",
-                  f"    com: {_vec([i, 0.5, 0])}",
-                  "    frame: {x: [0, 0, 1], y: [1, 0, 0], z: [0, 1, 0]}",
-                  f"    inertia: {inertia}",
-                  f"    points: {{A: {_vec([i, 0, 0])}, B: {_vec([i, 1, 0])}}}",
-                  "    velocity: [0.5, 0, 0]",
-                  "    omega: [0, 0, -1.0]"]
-    for j in range(n):
-        lines += [f"  coupler{j}:",
-                  "    mass: 1.0",
-                  f"    com: {_vec([j + 0.5, 1, 0])}",
-                  "    frame: {x: [0, 0, 1], y: [0, 1, 0], z: [-1, 0, 0]}",
-                  f"    inertia: {inertia}",
-                  "    velocity: [1.0, 0, 0]"]
-    lines.append("joints:")
-    for i in range(n + 1):
-        lines.append(f"  pivot{i}: {{type: revolute, between: [fixed_frame, crank{i}], "
-                     f"at: crank{i}.A, axis: [0, 0, 1]}}")
-    for j in range(n):
-        lines.append(f"  pin{j}a: {{type: revolute, between: [crank{j}, coupler{j}], "
-                     f"at: crank{j}.B, axis: [0, 0, 1]}}")
-        lines.append(f"  pin{j}b: {{type: revolute, between: [coupler{j}, crank{j + 1}], "
-                     f"at: crank{j + 1}.B, axis: [0, 0, 1]}}")
-    lines += ["outputs:",
-              "  B0_x: {expr: crank0.B.x, unit: m}",
-              "  B0_y: {expr: crank0.B.y, unit: m}",
-              f"  B{n}_x: {{expr: crank{n}.B.x, unit: m}}",
-              f"  B{n}_y: {{expr: crank{n}.B.y, unit: m}}",
-              f"simulation: {{t_end: {_num(t_end)}, rtol: 1.0e-6, atol: 1.0e-8, "
-              "points: 2001}"]
-    return "\n".join(lines) + "\n"
 
 
 def coefficients(n: int) -> tuple[float, float]:
@@ -150,21 +76,3 @@ def reference(n: int, t, theta_dot0: float = 1.0, rtol: float = 1e-13):
         raise AssertionError("A02's reduced equation and its closed form disagree by "
                              f"{np.abs(theta - closed).max():.3g} rad")
     return np.sin(theta), np.cos(theta)
-
-
-def main(argv=None):
-    ap = argparse.ArgumentParser(description="Write IFToMM A02 (the N-four-bar) for any N.")
-    ap.add_argument("n", type=int, nargs="?", default=2, help="couplers (cranks: N + 1)")
-    ap.add_argument("-o", "--out", help="file to write (default: models/n_four_bar.yaml "
-                                        "for N = 2, n_four_bar_<N>.yaml beside it else)")
-    ap.add_argument("--t-end", type=float, default=T_END)
-    args = ap.parse_args(argv)
-    here = Path(__file__).resolve().parent
-    out = Path(args.out) if args.out else here / (
-        "n_four_bar.yaml" if args.n == 2 else f"n_four_bar_{args.n}.yaml")
-    out.write_text(model(args.n, args.t_end))
-    print(out)
-
-
-if __name__ == "__main__":
-    main()

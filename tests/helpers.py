@@ -21,8 +21,8 @@ MODELS = ROOT / "models"
 TUTORIAL_MODEL = ROOT / "docs" / "tutorial" / "absorber.yaml"
 # models whose numba compilation and runs take minutes: their tests are marked slow (the
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
-# CI scale)
-SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive"}
+# CI scale; the A02 N-four-bar's 20 s through its singular positions)
+SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive", "n_four_bar"}
 
 
 def model_params(names=None):

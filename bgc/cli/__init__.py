@@ -1,8 +1,9 @@
 """The ``bgc`` command line: check, compile, simulate, report, frf, modes, tune, sweep, run,
-bench, draw, export.
+bench, draw, export, library.
 
 One module per command (``check``, ``compile``, ``simulate``, ``report``, ``frf``,
-``modes``, ``tune``, ``sweep``, ``run``, ``bench``, ``draw``, ``export``), each registering itself on the group ``app.main``; ``app``
+``modes``, ``tune``, ``sweep``, ``run``, ``bench``, ``draw``, ``export``, ``library``), each
+registering itself on the group ``app.main``; ``app``
 holds the group and the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130),
 ``options`` what several commands share. The long stages report their progress on stderr
 (``bgc.progress``: a live display on a terminal, else one ``bgc: ...`` line per stage;
@@ -20,6 +21,7 @@ from bgc.cli import (  # noqa: F401
     draw,
     export,
     frf,
+    library,
     modes,
     report,
     run,

@@ -16,7 +16,9 @@ from bgc.cli.options import (
     json_option,
     loops_option,
     method_option,
+    params_option,
     progress_option,
+    split_constants,
 )
 from bgc.cli.stages import STAGES
 from bgc.errors import BgcError
@@ -31,12 +33,13 @@ from bgc.pipeline import build
                    "system), emit (the generated module's source, not written)")
 @click.option("-o", "--out-dir", default="generated", show_default=True,
               help="--stage emit: where bgc compile would write the module")
+@params_option("set a compile-time constant of the model (its constants:, e.g. -p N=40)")
 @method_option
 @loops_option
 @json_option
 @user_errors
 @progress_option
-def check(model, stage, out_dir, method, keep_loops, as_json):
+def check(model, stage, out_dir, params, method, keep_loops, as_json):
     """Assign causality and derive equations; report storage causality, algebraic loops,
     derivative causality and conflicts; with --method zcp, the zero-order causal paths.
     Given a scene file: the state count before and after each reduction pass."""
@@ -53,7 +56,11 @@ def check(model, stage, out_dir, method, keep_loops, as_json):
     if stage is not None:
         _show_stage(stage, model, method, not keep_loops, out_dir, as_json)
         return
-    c = build(model, method, open_loops=not keep_loops)
+    constants, rest = split_constants(model, params)
+    if rest:
+        raise BgcError(f"-p {rest[0][0]}: not a constant of the model", key="--param",
+                       hint="bgc check takes -p for the model's constants: only")
+    c = build(model, method, open_loops=not keep_loops, constants=constants)
     report, method_lines = _report(c, model, method)
     if as_json:
         click.echo(json.dumps(report, indent=2))
@@ -121,6 +128,10 @@ def _report(c, model: str, method: str) -> tuple[dict, list[str]]:
         found = mobility.analyse(c.causal.graph, s)
         report.update(rank=found["rank"], mobility=found["mobility"],
                       redundant=found["redundant"])
+    report["instances"] = [{"name": i.name, "component": i.component,
+                            "file": i.loc.file, "line": i.loc.line,
+                            "definition": f"{i.definition.file}:{i.definition.line}"}
+                           for i in c.model.instances.values()]
     report.update(own)
     return report, own_lines
 
@@ -142,6 +153,12 @@ def _print_report(c, report: dict, method_lines: list[str], model: str, method: 
                    f"count {report['dof']})" + (
                        f"; {len(red)} redundant: {', '.join(red)}" if red else
                        "; no redundant constraint"))
+    by_component: dict = {}
+    for i in c.model.instances.values():
+        by_component.setdefault((i.component, f"{i.definition.file}:{i.definition.line}"),
+                                []).append(i.name)
+    for (comp, where), names in by_component.items():
+        click.echo(f"instances of {comp} ({where}): {', '.join(names)}")
     click.echo("causality: no conflicts")
     for name, cz in rep["storage"].items():
         kind = c.causal.graph.elements[name].kind

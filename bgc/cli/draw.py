@@ -24,9 +24,9 @@ from bgc.cli.options import (
 @retired_option("-o", "--out FILE for the drawing (-o names the directory of generated "
                       "modules, which bgc draw does not write)")
 @click.option("--only", metavar="NAME[,NAME...]",
-              help="draw some groups: a body (with its joints), a joint, 'network' (the "
-                   "model's own elements) or a pattern such as 'beater_*'; the SARIB's leg "
-                   "1: --only beater_1,bar_1")
+              help="draw some groups: a body (with its joints), a joint, an instance of a "
+                   "component (all its parts), 'network' (the model's own elements) or a "
+                   "pattern such as 'leg_*'; the SARIB's leg 1: --only leg_1")
 @method_option
 @loops_option
 @user_errors

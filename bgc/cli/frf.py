@@ -24,6 +24,7 @@ from bgc.cli.options import (
     out_dir_option,
     parasitic_option,
     params_option,
+    split_constants,
     progress_option,
     run_parameters,
 )
@@ -60,14 +61,15 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
     check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
     check_out_dir(out_dir)
     check_writable(out, "--out")
+    constants, params = split_constants(model, params)
 
     def check(decl):            # against the model, before any compile
         check_output(decl, output)
         check_direction(decl, direction, "--input")
         check_params(decl, params)
-        check_overrides(model, params, decl.model)
+        check_overrides(model, params, decl.model, constants=constants)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
-                                 check=check)
+                                 check=check, constants=constants)
     p, choice = run_parameters(module, m, method, params, parasitic_mode)
     with progress.stage("frequency response") as stage:
         lin = bfrf.linearize(module, m, direction, p)

@@ -137,16 +137,34 @@ def check_params(decl, items, key: str = "--param") -> None:
                               f"{', '.join(added[:3])}" if added else ""))
 
 
-def check_overrides(model, items, loaded=None) -> None:
+def split_constants(model, items) -> tuple[dict, tuple]:
+    """``-p`` values split into the model's compile-time constants (its ``constants:``:
+    another value builds another module) and its parameters (the rest). Reads the model's
+    YAML only; a file it cannot read is left to the command's own load to report."""
+    from bgc.model import document
+    if model is None or not items:
+        return {}, tuple(items)
+    try:
+        doc = document.read(model)
+    except BgcError:
+        return {}, tuple(items)
+    consts = doc.get("constants") if isinstance(doc, dict) else None
+    names = set(consts) if isinstance(consts, dict) else set()
+    return ({n: v for n, v in items if n in names},
+            tuple((n, v) for n, v in items if n not in names))
+
+
+def check_overrides(model, items, loaded=None, *, constants: dict | None = None) -> None:
     """Refuse ``-p`` values that the model's own checks refuse (a capacitance, inertance
     or mass not > 0, a constant that becomes infinite or complex): the model is read
-    again with them, and its error is told as the option's. ``loaded``: the Model if it
-    is read already (nothing to do without overrides either way)."""
+    again with them (and the compile-time ``constants`` given), and its error is told as
+    the option's. ``loaded``: the Model if it is read already (nothing to do without
+    overrides either way)."""
     if not items:
         return
     from bgc.model import load
     try:
-        load.load(model, overrides=dict(items))
+        load.load(model, overrides=dict(items), constants=constants)
     except BgcError as exc:
         given = ", ".join(f"{n}={v:g}" for n, v in items)
         where = f" ({exc.key} at {exc.loc})" if exc.loc else ""

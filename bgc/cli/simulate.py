@@ -39,6 +39,7 @@ from bgc.cli.options import (
     out_dir_option,
     params_option,
     parse_params,
+    split_constants,
     progress_option,
 )
 from bgc.errors import BgcError
@@ -89,6 +90,7 @@ class SimulateOptions:
     method: str
     keep_loops: bool
     as_json: bool
+    constants: dict = field(default_factory=dict)  # -p of the model's constants (compile)
 
 
 @dataclass
@@ -196,7 +198,10 @@ def run_for(o: SimulateOptions) -> _Run:
 def resolve(options: dict, ctx: click.Context) -> SimulateOptions:
     """The run's options: ``options`` (click's values by name) and, without MODEL, the
     main job's (``MAIN_JOB``) where the command line (``ctx``) gives none."""
-    o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)})
+    o = SimulateOptions(**{f.name: options[f.name] for f in fields(SimulateOptions)
+                           if f.name in options})
+    constants, params = split_constants(o.model, o.params)
+    o = replace(o, constants=constants, params=params)
     if o.model is not None:
         return o
     given = {k for k in options if ctx.get_parameter_source(k) is not ParameterSource.DEFAULT}
@@ -252,7 +257,7 @@ def _check_declared(o: SimulateOptions, decl) -> None:
     after it is read and before any compile: ``-p`` names and values, the excitation,
     the model's solver and what it needs, the output times."""
     check_params(decl, o.params)
-    check_overrides(decl.file, o.params, decl.model)
+    check_overrides(decl.file, o.params, decl.model, constants=o.constants)
     if o.exc_kind is not None and decl.model is not None:
         exc = decl.model.excitation
         if exc is None:
@@ -301,7 +306,8 @@ def _prepare(o: SimulateOptions, check) -> _Run:
     with progress.record() as stages:       # what this run paid before integrating
         module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
                                             open_loops=not o.keep_loops, on_load=loop_beside,
-                                            need_model=need_model, check=check)
+                                            need_model=need_model, check=check,
+                                            constants=o.constants)
     st = Settings(**module.SETTINGS)        # the model's, as the module was written
     return _Run(module, m, compiled, stages, st)
 

@@ -125,7 +125,9 @@ def _storage_vector(bld: Builder, name, el, qname, b, s, E, F):
     dx = sp.Matrix([symbols.dstate(name, f"{qname}{AXES[k]}") for k in range(d)])
     law = el.fields.get(el.law)
     M = law if isinstance(law, sp.MatrixBase) else law * sp.eye(d)
-    value = matmul(M, x) if el.law == "k" else matmul(_inverse(M, name, el, el.law), x)
+    inverse = (sp.diag(*[1 / M[k, k] for k in range(d)]) if M.is_diagonal()
+               else _inverse(M, name, el, el.law))   # a mass, principal moments: by entry
+    value = matmul(M, x) if el.law == "k" else matmul(inverse, x)
     if el.kind == "C":
         bld.define(E, value, name, b)
         bld.define(dx, s * F, name, b)
@@ -254,7 +256,7 @@ def hoist(bld: Builder, name, M: sp.Matrix) -> sp.Matrix:
         e = M[i, j]
         if e.is_Number or e.is_Symbol:
             return e
-        v = sp.Symbol(f"M_{name}__{i}{j}", real=True)
+        v = symbols.modulus(name, i, j)
         bld.define(v, e, name)
         bld.display[v] = f"{name.replace('__', '.')}.M{i}{j}"
         return v

@@ -150,16 +150,19 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
     exprs += [e for _, e in system.outputs] + [e for _, e in system.guards]
     exprs += [e for _, g, r in system.constraints for e in (g, r) if e is not None]
     exprs += [e for _, e in system.projection]
-    calls = set()
+    calls, reading, memo = set(), set(), {}
     for e in exprs:
-        calls |= {f for f in e.atoms(*_HOISTED) if f.args[0] in roots}
+        found = _calls(e, roots, memo)
+        if found:
+            calls |= found
+            reading.add(e)
     mapping = {f: sp.Symbol(f"{_HOISTED[f.func]}_{f.args[0].name}", real=True)
                for f in sorted(calls, key=sp.default_sort_key)}
     if not mapping:
         return system, mapping
 
-    def sub(e):
-        return None if e is None else e.xreplace(mapping)
+    def sub(e):         # only what reads a call: xreplace walks a whole expression
+        return None if e is None else e.xreplace(mapping) if e in reading else e
     head = [(v, f) for f, v in mapping.items()]
     body = [it.xreplace(mapping) if isinstance(it, LinearBlock) else (it[0], sub(it[1]))
             for it in system.assignments]
@@ -168,6 +171,25 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
                    guards=[(w, sub(e)) for w, e in system.guards],
                    constraints=[(n, sub(g), sub(r)) for n, g, r in system.constraints],
                    projection=[(i, sub(e)) for i, e in system.projection]), mapping
+
+
+_NONE: frozenset = frozenset()
+
+
+def _calls(e, roots: set, memo: dict) -> frozenset:
+    """The calls of ``_HOISTED`` functions of ``roots`` in ``e`` (sympy's ``atoms``,
+    memoized on the subexpressions that the assignments share)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    if not e.args:
+        out = _NONE
+    elif e.func in _HOISTED and e.args[0] in roots:
+        out = frozenset((e,))
+    else:
+        out = _NONE.union(*(_calls(a, roots, memo) for a in e.args))
+    memo[id(e)] = (e, out)
+    return out
 
 
 def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:

@@ -24,7 +24,7 @@ import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
 from bgc import methods
-from bgc.codegen import blocks, elements
+from bgc.codegen import blocks, elements, shapes
 from bgc.codegen.elements import Dt, State, matmul
 from bgc.codegen.forward_mode import directional, propagate, trivial
 from bgc.errors import EquationError
@@ -275,8 +275,9 @@ class Builder:
                 else:
                     for k, v in enumerate(var):
                         self.display[v] = f"{bond.name}.{tag}{AXES[k]}"
+        memo = shapes.RuleMemo(self)         # elements of one shape: derived once
         for name, el in self.g.elements.items():
-            elements.RULES[el.kind](self, name, el)
+            memo.apply(name, el, elements.RULES[el.kind])
         self.kinematics()
         blocks.build(self)
 
@@ -445,7 +446,7 @@ class Builder:
         out.update(blocks.refs(self.m, want))
         for st in self.states:
             if want(st.element):
-                out[symbols.ref(st.element, st.name.split(".")[1])] = st.sym
+                out[symbols.ref(st.element, st.name.rsplit(".", 1)[1])] = st.sym
         for name, v in self.dependent.items():
             if want(name):
                 out[symbols.ref(name, "q" if self.g.elements[name].kind == "C" else "p")] = v

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from bgc.codegen import elimination
+from bgc.codegen import elimination, instances
 from bgc.codegen.equations import LinearBlock
 from bgc.codegen.start import block_matrices
 from bgc.errors import BgcError
@@ -1453,6 +1453,11 @@ class _Module:
         self.functions: list[str] = []
         self.straight: list[str] = []       # the programs' chunks (their own module)
         self.globals: list[str] = []
+        self.instances = system.model.instances if system.model else {}
+        self.loops = 0
+        self.assigned = {it[1]: it[0] for it in system.assignments
+                         if not isinstance(it, LinearBlock)} if self.instances else {}
+        self.memo: dict = {}                # instances.schedule's, shared by the programs
 
     @staticmethod
     def _region(fn: _Function, offset: int, base: str = "%w") -> str:
@@ -1644,8 +1649,14 @@ class _Module:
             count = 0
 
         flush()
-        for step in _steps(items, outputs, self.layout):
+        for step in instances.schedule(list(_steps(items, outputs, self.layout)),
+                                       self.instances, self.where, self.assigned,
+                                       memo=self.memo):
             kind = step[0]
+            if kind == "loop":              # instances of one part: a loop (instances.py)
+                flush()
+                chunks.append(self.loop(name, step[1]))
+                continue
             if kind == "solve":
                 blk = self.layout.blocks[step[1]]
                 self.solve(fn, blk, blk.b, blk.columns, True)
@@ -1673,6 +1684,32 @@ class _Module:
         self.functions.append("\n".join(
             [f"define void @{self.prefix}_{name}({ARGS}) nounwind {{", "entry:", *chunks,
              "  ret void", "}"]))
+
+    def where(self, s) -> tuple[str, int]:
+        """Where a symbol's value is: ("x", state), ("p", parameter) or ("w", slot)."""
+        if s in self.states:
+            return "x", self.states[s]
+        if s in self.params:
+            return "p", self.params[s]
+        return "w", self.layout.slot[s]
+
+    def loop(self, name: str, lp) -> str:
+        """A loop over instances (``instances.Loop``): its template in the straight
+        module, its driver and tables here; returns the program's call of it."""
+        k, P = self.loops, self.prefix
+        self.loops += 1
+        template = f"{P}_{name}_tmpl{k}"
+        self.straight.append(instances.template_ir(lp, template, self.layout, self.decls))
+        width = max(len(lp.bases), 1)
+        rows = self.array(f"{name}_rows{k}", "i64",
+                          [x for r in lp.rows for x in (r or [0])])
+        nc = len(lp.constants)
+        consts = self.array(f"{name}_consts{k}", DBL, [x for r in lp.consts for x in r])
+        self.functions.append(instances.driver_ir(f"{P}_{name}_loop{k}", template,
+                                                  len(lp.rows), width, rows, (consts, nc),
+                                                  ARGS))
+        return (f"  call void @{P}_{name}_loop{k}(double %t, double* %x, double* %p, "
+                f"double* %w, double* %out)")
 
     def tables(self, tables):
         """``@<prefix>_tables(t, w)``: each table's value and slope at t into w."""

@@ -1,7 +1,9 @@
-"""The models and scenes bgc ships: the repository's ``models/`` and ``scenes/``, which an
-installed bgc carries as the packages ``bgc.data.models`` and ``bgc.data.scenes``
-(pyproject.toml maps them with ``package-dir``; one copy of each file). They let the main
-job (``bgc simulate`` without MODEL) run from any directory after a plain ``pip install``.
+"""The models, scenes and components bgc ships: the repository's ``models/``, ``scenes/``
+and ``library/``, which an installed bgc carries as the packages ``bgc.data.models``,
+``bgc.data.scenes`` and ``bgc.data.library`` (pyproject.toml maps them with
+``package-dir``; one copy of each file). They let the main job (``bgc simulate`` without
+MODEL) run from any directory after a plain ``pip install``, and a model use the
+library's components (``bgc.model.library``).
 
 A scene names its model by a path relative to the scene file (``../models/sarib.yaml``):
 in the repository, in an editable install and in an installed wheel alike, the two
@@ -13,11 +15,11 @@ from __future__ import annotations
 from importlib.util import find_spec
 from pathlib import Path
 
-FOLDERS = ("models", "scenes")
+FOLDERS = ("models", "scenes", "library")
 
 
 def folder(name: str) -> Path:
-    """The shipped folder ``name`` ("models" or "scenes") on disk: importlib finds it in
+    """The shipped folder ``name`` ("models", "scenes" or "library") on disk: importlib finds it in
     an installed wheel and in an editable install; a source checkout on PYTHONPATH, not
     installed, has it beside the ``bgc`` package."""
     if name not in FOLDERS:

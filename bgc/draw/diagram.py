@@ -11,13 +11,16 @@ Groups: ``expand`` names the elements of a body ``<body>__...`` and those of a j
 ``<joint>__...`` (``bgc/graph/expand.py``); an element belongs to the longest body or joint
 name its own starts with (followed by ``__``): a body's points belong to the body, a joint's
 directions, transformers and constraint elements to the joint. The model's own elements
-(an electric network, ports' elements) form the group ``network``.
+(an electric network, ports' elements) form the group ``network``, but for those of an
+instance of a component (``leg_1.motor.coil``), which form the instance's group.
 
 ``--only NAME[,NAME...]`` keeps some groups: a body brings the joints it takes part in, a
 joint comes alone, ``network`` is the model's own elements, and a NAME with ``*``, ``?`` or
 ``[`` is a shell pattern over the body and joint names (a body it matches brings its joints
-too). The SARIB's leg i is its beater and its bar: ``--only beater_1,bar_1`` draws
-``beater_1``, ``bar_1``, ``hinge_1``, ``bar_bottom_1`` and ``bar_top_1``. The elements of
+too), and an instance's name keeps all of its parts (its bodies, joints and own elements,
+those of the instances in it too). The SARIB's leg i is the instance ``leg_i``: ``--only
+leg_1`` draws ``leg_1.beater``, ``leg_1.bar``, ``leg_1.hinge``, ``leg_1.bar_bottom`` and
+``leg_1.bar_top``. The elements of
 other groups that a kept element is bonded to are drawn too, marked ``outside``, so that
 every bond of a kept element is drawn with its stroke.
 
@@ -153,15 +156,22 @@ def build_diagram(graph, effort_in: list, marks: dict[str, tuple[set, set]],
 
 
 def _ordered(graph) -> list[str]:
-    """The groups in file order: bodies, joints, the network."""
-    return [*graph.model.bodies, *graph.model.joints, NETWORK] if graph.model else [NETWORK]
+    """The groups in file order: bodies, joints, the instances (their own network
+    elements), the network."""
+    if not graph.model:
+        return [NETWORK]
+    return [*graph.model.bodies, *graph.model.joints, *graph.model.instances, NETWORK]
 
 
 def groups_of(graph) -> dict[str, str]:
     """element -> its group: the longest body or joint name that prefixes it (module
-    doc), else ``network``."""
-    names = sorted(_ordered(graph)[:-1], key=len, reverse=True)
-    return {el: next((g for g in names if el.startswith(g + "__")), NETWORK)
+    doc), else the longest instance name (``leg_1.motor`` for ``leg_1.motor.coil``),
+    else ``network``."""
+    model = graph.model
+    parts = sorted([*model.bodies, *model.joints] if model else [], key=len, reverse=True)
+    insts = sorted(model.instances if model else [], key=len, reverse=True)
+    return {el: next((g for g in parts if el.startswith(g + "__")), None)
+            or next((g for g in insts if el.startswith(g + ".")), NETWORK)
             for el in graph.elements}
 
 
@@ -178,10 +188,13 @@ def select(graph, only: str | None) -> set[str]:
     for name in (s.strip() for s in only.split(",")):
         hits = ([g for g in groups if fnmatch.fnmatchcase(g, name)]
                 if any(c in name for c in "*?[") else [name] if name in groups else [])
+        if model and name in model.instances:       # an instance: all of its parts
+            hits = [g for g in groups if g == name or g.startswith(name + ".")]
         if not hits:
-            raise BgcError(f"no body, joint or group named '{name}'", key="--only",
-                           hint="give bodies (with their joints), joints, 'network' or "
-                                "a pattern such as 'beater_*': " + ", ".join(groups))
+            raise BgcError(f"no body, joint, instance or group named '{name}'",
+                           key="--only", hint="give bodies (with their joints), joints, "
+                           "instances, 'network' or a pattern such as 'leg_*': "
+                           + ", ".join(groups))
         for g in hits:
             keep.add(g)
             keep.update(joints_of.get(g, ()))
@@ -221,5 +234,6 @@ def _caption(graph, group: str, kept: bool) -> str:
     if group == NETWORK:
         return "network" if model and (model.bodies or model.joints) else ""
     what = (f"body {group}" if group in model.bodies
-            else f"joint {group} ({model.joints[group].kind})")
+            else f"joint {group} ({model.joints[group].kind})" if group in model.joints
+            else f"instance {group} ({model.instances[group].component})")
     return what if kept else f"{what}: outside --only"

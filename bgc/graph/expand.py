@@ -49,7 +49,7 @@ def body_junction(body: str, part: str) -> str:
 
 def rotation_matrix(body: str) -> sp.Matrix:
     """The body's rotation matrix (body frame -> R0) as the symbols ``equations`` defines."""
-    return sp.Matrix(3, 3, lambda i, j: symbols.rotation(body, i, j))
+    return sp.Matrix([[symbols.rotation(body, i, j) for j in range(3)] for i in range(3)])
 
 
 def position(body: str) -> sp.Matrix:
@@ -93,6 +93,7 @@ class _Expander:
         self.bonds: list[Bond] = list(model.bonds)
         self.ported = {(p.joint, p.direction) for p in model.ports.values() if p.joint}
         self.port_junction: dict[str, str] = {}     # port name -> its 1-junction
+        self.shapes: dict = {}                      # a joint's shape -> its directions
 
     def add(self, name, kind, loc, initial=None, orthogonal=False, **fields) -> str:
         self.elements[name] = Element(name, kind, loc, fields=fields, initial=initial,
@@ -155,21 +156,69 @@ class _Expander:
         return P
 
     # --- joints ---------------------------------------------------------------------------
-    def geometry(self, j: Joint) -> jmodels.Geometry:
+    def geometry(self, j: Joint, names=None, at=None) -> jmodels.Geometry:
+        """The joint's geometry on its bodies' symbols, or on those of the bodies
+        ``names`` (placeholders) with the fixed frame's point ``at``."""
         rot, pos = {}, {}
-        for side, n in ((1, j.body1), (2, j.body2)):
+        names = names or (j.body1, j.body2)
+        for side, n, sym in ((1, j.body1, names[0]), (2, j.body2, names[1])):
             if n is None:
-                rot[side], pos[side] = None, exact.vector(j.at)
+                rot[side], pos[side] = None, exact.vector(j.at) if at is None else at
                 continue
             b = self.m.bodies[n]
             r = joint_offset(b, j.at)
-            rot[side] = (rotation_matrix(n), exact.matrix(b.frame))
-            pos[side] = position(n) + rotation_matrix(n) * r
+            rot[side] = (rotation_matrix(sym), exact.matrix(b.frame))
+            pos[side] = position(sym) + rotation_matrix(sym) * r
         return jmodels.Geometry(rot[1], rot[2], pos[1], pos[2])
 
+    def directions(self, j: Joint) -> list[jmodels.Direction]:
+        """The joint's directions (``mechanics.joints.directions`` on its geometry),
+        worked out once per shape: joints that differ only in their bodies and in the
+        fixed frame's point (the windows of a chain, the instances of an array of
+        components) share one computation, put on their own bodies' symbols by renaming
+        (issue 40: compile cost follows the parts, not their copies). The first joint of
+        a shape gets its directions as computed; a joint between two bodies gets the
+        first's renamed in their form (``symbols.renamed``); one on the fixed frame, whose
+        point enters them, the shape's worked out on placeholders, substituted."""
+        sides = []
+        for n in (j.body1, j.body2):
+            if n is None:
+                sides.append(None)
+            else:
+                b = self.m.bodies[n]
+                sides.append((b.frame, tuple(joint_offset(b, j.at))))
+        key = (j.kind, j.frame, j.pitch, tuple(sides))
+        shape = self.shapes.get(key)
+        if shape is None:
+            dirs = jmodels.directions(j.kind, self.geometry(j), j.frame, j.pitch)
+            self.shapes[key] = (dirs, (j.body1, j.body2), None)
+            return dirs
+        dirs, names, at = shape
+        if None in names and at is None:        # on the fixed frame: on placeholders
+            names = [None if n is None else f"$body{k}" for k, n in enumerate(names, 1)]
+            at = sp.Matrix(sp.symbols("$at0:3", real=True))
+            dirs = jmodels.directions(j.kind, self.geometry(j, names, at), j.frame, j.pitch)
+            self.shapes[key] = (dirs, names, at)
+        rename = {} if at is None else dict(zip(at, exact.vector(j.at)))
+        for ph, n in zip(names, (j.body1, j.body2)):
+            if n is not None:
+                rename.update((symbols.rotation(ph, i, k), symbols.rotation(n, i, k))
+                              for i in range(3) for k in range(3))
+                rename.update((symbols.state(ph, a), symbols.state(n, a)) for a in AXES)
+        memo: dict = {}
+
+        def put(e):         # symbols for symbols: the form stays; a point: substituted
+            return symbols.renamed(e, rename, memo) if at is None else e.xreplace(rename)
+
+        def row(v):         # a row: a column of expressions
+            return sp.Matrix(v.rows, v.cols, [put(x) for x in v])
+        return [jmodels.Direction(d.label, d.blocked, d.rotational,
+                                  {k: row(v) for k, v in d.rows.items()},
+                                  None if d.g is None else put(d.g))
+                for d in dirs]
+
     def joint(self, j: Joint) -> list[jmodels.Direction]:
-        geo = self.geometry(j)
-        dirs = jmodels.directions(j.kind, geo, j.frame, j.pitch)
+        dirs = self.directions(j)
         for d in dirs:
             fun = j.functional.get(d.label)
             ported = (j.name, d.label) in self.ported

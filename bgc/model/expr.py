@@ -130,7 +130,9 @@ def check_finite(e: sp.Expr, values: dict) -> tuple[sp.Expr, str] | None:
     parameters' values) are put in and is not a finite real number (1/0, log(0),
     sqrt(-1), acos(2), a constant beyond the float range), with the reason; None if
     there is none. Parts that depend on time or the state are not judged."""
-    values = {k: sp.Float(v) for k, v in values.items()}
+    # only the values of the symbols ``e`` reads: a model with many parameters (an
+    # assembly's instances each have their own) parses many expressions
+    values = {k: sp.Float(values[k]) for k in e.free_symbols if k in values}
     known = set(values)
 
     def constant(x):
@@ -304,16 +306,24 @@ class _Converter:
         self.fail(f"unknown name '{node.id}'", hint="valid names here: " + ", ".join(valid))
 
     def reference(self, node: ast.Attribute):
-        target = node.value       # name.attr, or body.point.attr
-        if (isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name)):
-            target_name = f"{target.value.id}.{target.attr}"
-        elif isinstance(target, ast.Name):
-            target_name = target.id
-        else:
-            target_name = None
-        if target_name is None or self.resolve_ref is None:
+        """``name.attr``, ``body.point.attr``, and the same in an instance
+        (``leg_2.beater.x``): a dotted name the expression may read as it is (an
+        instance's parameter, ``leg_2.k``) or a reference to resolve."""
+        parts, target = [node.attr], node.value
+        while isinstance(target, ast.Attribute):
+            parts.append(target.attr)
+            target = target.value
+        if not isinstance(target, ast.Name):
             self.fail("references 'name.attr' are not allowed here")
-        return self.resolve_ref(target_name, node.attr)
+        dotted = ".".join([target.id, *reversed(parts)])
+        if dotted in self.names:
+            return self.names[dotted]
+        if self.resolve_ref is None:
+            if dotted.rpartition(".")[0] in self.names or target.id in self.names:
+                self.fail(f"'{dotted}' is not a name here",
+                          hint="valid names here: " + ", ".join(sorted(self.names)))
+            self.fail("references 'name.attr' are not allowed here")
+        return self.resolve_ref(dotted.rpartition(".")[0], node.attr)
 
     def call(self, node: ast.Call):
         if not isinstance(node.func, ast.Name) or node.keywords:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from bgc.codegen.module_file import module_name_problem, suggest_module_name
 from bgc.errors import Loc, ModelError
-from bgc.model import symbols
+from bgc.model import components, library, symbols
 from bgc.model.document import (  # noqa: F401  (MAX_*, read_source: bgc's limits, here too)
     MAX_DEPTH,
     MAX_FILE_BYTES,
@@ -41,17 +41,23 @@ TOP_KEYS = ("name", "description", "parameters", "signals", "gravity", "bodies",
             "simulation")
 
 
-def loads(text: str, file: str = "<string>", overrides: dict | None = None) -> Model:
-    """Parse model text; ``file`` is used in error locations and for the default name.
-    ``overrides``: parameter values that replace the file's (``-p NAME=VALUE``) before
-    anything uses them, so that every check of the model (a positive capacitance, a
-    finite constant) holds for them too."""
-    return from_document(from_text(text, file), file, overrides)
+def loads(text: str, file: str = "<string>", overrides: dict | None = None,
+          constants: dict | None = None) -> Model:
+    """Parse model text; ``file`` is used in error locations and for the default name
+    (and the component files it uses are found relative to it). ``overrides``: parameter
+    values that replace the file's (``-p NAME=VALUE``) before anything uses them, so that
+    every check of the model (a positive capacitance, a finite constant) holds for them
+    too; ``constants``: compile-time constants that replace the file's."""
+    return from_document(from_text(text, file), file, overrides, constants)
 
 
-def from_document(doc, file: str, overrides: dict | None = None) -> Model:
-    """The Model of a document ``document.read`` gave (``loads``, past the YAML): the
+def from_document(doc, file: str, overrides: dict | None = None,
+                  constants: dict | None = None) -> Model:
+    """The Model of a document ``document.read`` gave (``loads``, past the YAML): its
+    components assembled into a flat document (``bgc.model.components``), then the
     section readers of ``bgc.model.sections`` in the order their names are needed."""
+    source = doc
+    doc, instances = components.flatten(doc, file, constants)
     name = _check_top(doc, file)
 
     def section(key, kind=YMap):
@@ -86,13 +92,14 @@ def from_document(doc, file: str, overrides: dict | None = None) -> Model:
     elements = network.element_fields(cx, headers, params, sigs, bnds)
     blks = blocks.blocks(cx, block_heads, params, sigs, elements, bnds)
     outputs = network.outputs(cx, section("outputs"), params, sigs, elements, bnds)
-    return Model(name=name, file=file, digest=digest(doc), parameters=params, signals=sigs,
+    return Model(name=name, file=file, digest=library.digest(source, file, constants) or
+                 digest(source), parameters=params, signals=sigs,
                  tables=tables, elements=elements, bonds=bnds, outputs=outputs,
                  settings=sets, bodies=bods, description=text(
                      doc.get("description"), doc.val_locs.get("description"), "description"),
                  gravity=gravity, gravity_expr=gravity_expr, joints=jts, excitation=exc,
                  static_loads=doc.get("parasitic", {}).get("loads") == "static",
-                 ports=cx.ports, blocks=blks)
+                 ports=cx.ports, blocks=blks, instances=instances)
 
 
 def _check_top(doc, file: str) -> str:
@@ -119,6 +126,7 @@ def _check_top(doc, file: str) -> str:
     return name
 
 
-def load(path: str | Path, overrides: dict | None = None) -> Model:
-    """Read and parse a model file (``overrides``: as in ``loads``)."""
-    return from_document(read(path), str(path), overrides)
+def load(path: str | Path, overrides: dict | None = None,
+         constants: dict | None = None) -> Model:
+    """Read and parse a model file (``overrides``, ``constants``: as in ``loads``)."""
+    return from_document(read(path), str(path), overrides, constants)

@@ -380,6 +380,9 @@ class Model:
     ports: dict[str, Port] = field(default_factory=dict)   # name as written -> Port
     # control blocks (``blocks:``), in the order the file gives them
     blocks: dict[str, Block] = field(default_factory=dict)
+    # the instances of components it was assembled from (``bgc.model.components``): flat
+    # name (``leg_1``, ``leg_1.motor``) -> Instance; their parts' names carry the prefix
+    instances: dict = field(default_factory=dict)
 
     def param_values(self) -> dict[sp.Symbol, float]:
         from bgc.model import symbols

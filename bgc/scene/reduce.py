@@ -167,7 +167,7 @@ def _idle_axis(m, body) -> int | None:
     joints = [j for j in m.joints.values() if body.name in (j.body1, j.body2)]
     if not joints or any(j.kind != "spherical" for j in joints):
         return None
-    if any(end.split(".")[0] == body.name for b in m.bonds for end in (b.src, b.dst)):
+    if any(_owner(end, m) == body.name for b in m.bonds for end in (b.src, b.dst)):
         return None
     R = np.array(body.frame, dtype=float)            # columns: body axes in R0
     arms = [R.T @ (np.array(j.at) - np.array(body.com)) for j in joints]
@@ -242,6 +242,16 @@ class _Link:
         return self.joint.functional.get(free)
 
 
+def _owner(end: str, model: Model) -> str:
+    """The body, joint or element a bond's end names: itself, or the joint of a port
+    ``joint.tx`` or the body of ``body.P.z`` (names of instances' parts hold dots)."""
+    name = end
+    while name not in model.elements and name not in model.joints \
+            and name not in model.bodies and "." in name:
+        name = name.rpartition(".")[0]
+    return name
+
+
 def _references(model: Model) -> dict[str, set[tuple[str, str]]]:
     """Body or joint name -> who reads it: ``("element", E)``, ``("bond", B)``,
     ``("joint", J)`` (its actuator), ``("output", O)``."""
@@ -249,14 +259,14 @@ def _references(model: Model) -> dict[str, set[tuple[str, str]]]:
 
     def scan(e, who):
         for s in getattr(e, "free_symbols", ()):
-            if symbols.is_ref(s):
-                read.setdefault(symbols.split_ref(s)[0].split(".")[0], set()).add(who)
+            if symbols.is_ref(s):       # body, body__point, joint, joint__direction, ...
+                read.setdefault(symbols.split_ref(s)[0].split("__")[0], set()).add(who)
     for el in model.elements.values():
         for e in list(el.fields.values()) + [el.initial]:
             scan(e, ("element", el.name))
     for b in model.bonds:
         for end in (b.src, b.dst):
-            read.setdefault(end.split(".")[0], set()).add(("bond", b.name))
+            read.setdefault(_owner(end, model), set()).add(("bond", b.name))
     for j in model.joints.values():
         for f in j.functional.values():
             scan(f.actuator, ("joint", j.name))

@@ -54,9 +54,11 @@ def test_jacobian_matches_finite_differences(compiled, name):
 
 
 # the semi-active SARIB's code paths are the SARIB's plus ports and blocks that smaller
-# models exercise; its 7 s build is left to `make test-all`
+# models exercise, the A02 N-four-bar's those of the chains and instance loops of
+# test_instances; their builds are left to `make test-all`
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
-                                  if n == "sarib_semiactive" else n for n in ALL_MODELS])
+                                  if n in ("sarib_semiactive", "n_four_bar") else n
+                                  for n in ALL_MODELS])
 def test_committed_generated_module_is_fresh(name, tmp_path):
     """generated/<model>.py in the repository is exactly what `bgc compile` writes now."""
     committed = ROOT / "generated" / f"{name}.py"

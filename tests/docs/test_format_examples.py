@@ -19,7 +19,7 @@ EXAMPLES = [block for block in re.findall(r"```yaml\n(.*?)```",
 
 def test_the_format_has_complete_examples():
     names = {re.match(r"name: (\w+)", b).group(1) for b in EXAMPLES}
-    assert {"dc_motor", "pi_servo", "screw_lift"} <= names
+    assert {"dc_motor", "pi_servo", "screw_lift", "screw_servo", "pendulum_row"} <= names
 
 
 @pytest.mark.parametrize("text", EXAMPLES, ids=lambda b: re.match(r"name: (\w+)", b).group(1))

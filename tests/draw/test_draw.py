@@ -100,13 +100,13 @@ def sarib():
 
 
 def test_sarib_leg_and_whole(sarib, tmp_path):
-    """A leg (--only beater_1,bar_1: the beater, the bar and their three joints, with the
-    fuselage's and MGB's elements they bond to, marked outside), and the whole SARIB."""
+    """A leg (--only leg_1, the instance: the beater, the bar and their three joints, with
+    the fuselage's and MGB's elements they bond to, marked outside), and the whole SARIB."""
     cg = sarib.causal
     g = cg.graph
     group = diagram.groups_of(g)
-    leg = {"beater_1", "bar_1", "hinge_1", "bar_bottom_1", "bar_top_1"}
-    d = diagram.build_diagram(g, cg.effort_in, {}, "beater_1,bar_1", "sarib")
+    leg = {"leg_1.beater", "leg_1.bar", "leg_1.hinge", "leg_1.bar_bottom", "leg_1.bar_top"}
+    d = diagram.build_diagram(g, cg.effort_in, {}, "leg_1", "sarib")
     kept = {n for n in g.elements if group[n] in leg}
     assert {n for n, node in d.nodes.items() if "outside" not in node.marks} == kept
     assert {group[n] for n, node in d.nodes.items() if "outside" in node.marks} == \

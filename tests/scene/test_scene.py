@@ -149,7 +149,7 @@ def test_reduced_sarib_pumping_scene_answers_like_the_full_model(tmp_path, compi
     scene = load_scene(ROOT / "scenes" / "pumping_sine.yaml")
     reduced, passes = ensure_scene_module(scene, tmp_path / "gen")
     assert passes[0]["states_after"] == passes[0]["states_before"] == 152     # parasitic
-    assert passes[2]["removed"] == [f"bar_{i}.J.pz" for i in (1, 2, 3, 4)]
+    assert passes[2]["removed"] == [f"leg_{i}.bar.J.pz" for i in (1, 2, 3, 4)]
     full, model = compiled("sarib"), load.load(MODELS / "sarib.yaml")
     p = np.array(full.PARAMS)
     for name, v in scene_values(scene, model).items():

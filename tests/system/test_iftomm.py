@@ -1,8 +1,9 @@
 """The IFToMM basic benchmark problems (the library of computational benchmark problems
 of González, Dopico, Lugrís & Cuadrado, Multibody System Dynamics 16, 2006) against
-their published or exact references: A01 simple pendulum, A02 N-four-bar (any N:
-``models/n_four_bar.py``), A03 Andrews' mechanism and A04 Bricard's mechanism (their own
-tests: ``tests/methods``), A05 flyball governor.
+their published or exact references: A01 simple pendulum, A02 N-four-bar (any N: the
+constant of ``models/n_four_bar.yaml``; its exact reference ``models/n_four_bar.py``),
+A03 Andrews' mechanism and A04 Bricard's mechanism (their own tests: ``tests/methods``),
+A05 flyball governor.
 
 A02 is the hard one: every time the cranks pass horizontal the mobility jumps from 1 to
 N + 1; bgc's method ``augmented`` passes those singular configurations and keeps B0 within
@@ -14,8 +15,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -63,13 +62,11 @@ def test_a02_reference_is_the_reduced_equation_in_closed_form():
     assert np.abs(other - A02.theta_exact(2, t)).max() < 1e-6
 
 
-def test_a02_generator_writes_any_n(tmp_path):
-    """The model for N = 3, as the script writes it: 7 bodies, 10 revolute joints, the
-    mechanism's rank and mobility at the start (1 whatever N: the cranks stay parallel)."""
-    path = tmp_path / "a02_3.yaml"
-    subprocess.run([sys.executable, str(MODELS / "n_four_bar.py"), "3", "-o", str(path)],
-                   check=True, capture_output=True)
-    c = build(path, "lagrange")
+def test_a02_any_n_by_its_constant():
+    """The model for N = 3 (``-p N=3``): 7 bodies, 10 revolute joints, the mechanism's
+    rank and mobility at the start (1 whatever N: the cranks stay parallel)."""
+    c = build(MODELS / "n_four_bar.yaml", "lagrange", constants={"N": 3})
+    assert len(c.model.bodies) == 7 and len(c.model.joints) == 10
     found = mobility.analyse(c.causal.graph, c.system)
     assert (found["coordinates"], found["constraints"]) == (42, 50)
     assert (found["rank"], found["mobility"]) == (41, 1)
@@ -139,9 +136,8 @@ def test_a02_lagrange_and_zcp_stop_at_the_first_crossings_and_say_why(compiled, 
 def test_a02_augmented_at_n(tmp_path, n):
     """N = 10 and 40 through 20 s at rtol 1e-5 and 1e-6, within the benchmark's limit."""
     from bgc.pipeline import ensure_module
-    path = tmp_path / f"n_four_bar_{n}.yaml"
-    path.write_text(A02.model(n))
-    mod = ensure_module(path, tmp_path / "gen", "augmented")[0]
+    mod = ensure_module(MODELS / "n_four_bar.yaml", tmp_path / "gen", "augmented",
+                        constants={"N": n})[0]
     for rtol in (1e-5, 1e-6):
         r = simulate(mod, t_end=20.0, rtol=rtol, atol=rtol * 1e-2, points=801)
         assert b0_error(r, n).max() < LIMIT, (rtol, b0_error(r, n).max())

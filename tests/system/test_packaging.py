@@ -1,6 +1,7 @@
 """What a plain `pip install` of bgc carries: every module, the SARIB and every other
-model, and the scenes (the repository's models/ and scenes/ as bgc.data.models and
-bgc.data.scenes, pyproject.toml's package-dir), found from any directory."""
+model, the scenes and the library of components (the repository's models/, scenes/ and
+library/ as bgc.data.models, bgc.data.scenes and bgc.data.library, pyproject.toml's
+package-dir), found from any directory."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from helpers import ROOT
 from bgc import data
 
 # what setuptools reads to build the wheel
-SOURCES = ("pyproject.toml", "README.md", "bgc", "models", "scenes")
+SOURCES = ("pyproject.toml", "README.md", "bgc", "models", "scenes", "library")
 
 
 def build_wheel(tmp_path: Path) -> Path:

@@ -20,15 +20,20 @@ MODEL = MODELS / "sarib_semiactive.yaml"
 
 def test_each_beater_carries_a_motor_screw_and_pi_loop_on_its_slide():
     m = load(MODEL)
-    assert set(m.ports) == {f"slide_{i}.tx" for i in (1, 2, 3, 4)}
-    assert {n: b.kind for n, b in m.blocks.items()} == {f"pos_{i}": "PI" for i in (1, 2, 3, 4)}
+    assert set(m.ports) == {f"leg_{i}.slide.tx" for i in (1, 2, 3, 4)}
+    assert {n: b.kind for n, b in m.blocks.items()} == {
+        f"leg_{i}.servo.ctrl": "PI" for i in (1, 2, 3, 4)}
+    assert {n: i.component for n, i in m.instances.items()} == {
+        **{f"leg_{i}": "sarib_leg_semiactive" for i in (1, 2, 3, 4)},
+        **{f"leg_{i}.{part}": comp for i in (1, 2, 3, 4) for part, comp in (
+            ("servo", "pi_servo"), ("motor", "dc_motor"), ("screw", "ball_screw"))}}
     for i in (1, 2, 3, 4):       # every mass starts at the setpoint
-        assert str(m.joints[f"slide_{i}"].initial["tx"]) == "P_x_set"
+        assert str(m.joints[f"leg_{i}.slide"].initial["tx"]) == "P_x_set"
     cg = assign(expand(m))
     # each rotor is geared rigidly to its mass: derivative causality, its momentum follows
     assert {n for n, c in cg.storage.items() if c == "derivative"} == {
-        f"Jm_{i}" for i in (1, 2, 3, 4)}
-    assert all(cg.storage[f"La_{i}"] == "integral" for i in (1, 2, 3, 4))
+        f"leg_{i}.motor.Jm" for i in (1, 2, 3, 4)}
+    assert all(cg.storage[f"leg_{i}.motor.La"] == "integral" for i in (1, 2, 3, 4))
 
 
 @pytest.mark.slow

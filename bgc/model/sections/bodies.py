@@ -71,19 +71,19 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
         if isinstance(v.get("inertia"), YList) and any(isinstance(x, str)
                                                        for x in v["inertia"]):
             inertia_expr = tuple(
-                _expression(cx, x, v["inertia"].item_locs[i], f"{key}.inertia[{i}]", pnames)
-                or exact.rational(number(x, v["inertia"].item_locs[i],
-                                         f"{key}.inertia[{i}]"))
+                _or_number(_expression(cx, x, v["inertia"].item_locs[i],
+                                       f"{key}.inertia[{i}]", pnames),
+                           x, v["inertia"].item_locs[i], f"{key}.inertia[{i}]")
                 for i, x in enumerate(v["inertia"]))
             if len(inertia_expr) != 3:
                 fail(f"expected 3 principal moments, got {len(inertia_expr)}",
                      *at("inertia"))
-        com = exact.vector(vector(v["com"], *at("com")))
+        com = exact_vector(cx, v["com"], *at("com"))
         if "inertia" not in v and mass > 0:
             fail("missing 'inertia'", v.loc, key,
                  "a body needs mass, com and inertia (mass: 0 for a body of "
                  "negligible mass)")
-        frame_ = frame(v["frame"], *at("frame")) if "frame" in v else sp.eye(3)
+        frame_ = frame(v["frame"], *at("frame"), cx) if "frame" in v else sp.eye(3)
         moments, frame_ = _inertia(v, key, mass, frame_, inertia_expr, cx.pvals)
         points = {}
         if "points" in v:
@@ -93,10 +93,11 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
                     fail(f"'{pn}' is not a valid point name", pts.key_locs[pn],
                          f"{key}.points", "letters, digits and single '_' ('__' is kept "
                          "for the names bgc generates)")
-                pos = exact.vector(vector(pv, pts.val_locs[pn], f"{key}.points.{pn}"))
+                pos = exact_vector(cx, pv, pts.val_locs[pn], f"{key}.points.{pn}")
                 points[pn] = exact.floats(frame_.T * (pos - com))
                 cx.point_r0[(name, pn)] = pos
-        dirs = _directions(v["directions"], *at("directions")) if "directions" in v else {}
+        dirs = (_directions(v["directions"], *at("directions"), cx) if "directions" in v
+                else {})
         vel, vel_expr = _parametric_vector(cx, v, "velocity", key, pnames)
         omg, omg_expr = _parametric_vector(cx, v, "omega", key, pnames)
         out[name] = Body(name, v.loc, mass, tuple(float(m) for m in moments),
@@ -107,7 +108,7 @@ def bodies(cx: Context, sec: YMap, params=()) -> dict[str, Body]:
     return out
 
 
-def _directions(v, loc, key) -> dict:
+def _directions(v, loc, key, cx: Context | None = None) -> dict:
     """``directions: {name: [x, y, z]}``: body-fixed unit vectors (R0 at the initial pose)
     that a port at one of the body's points may act along."""
     dirs = mapping(v, loc, key, "a mapping {name: [x, y, z]}")
@@ -117,7 +118,7 @@ def _directions(v, loc, key) -> dict:
                 or "__" in dn:
             fail(f"{dn!r} is not a valid direction name", dirs.key_locs[dn], key,
                  "an identifier without '__', other than x, y, z (which are R0's axes)")
-        out[dn] = unit_vector(dv, dirs.val_locs[dn], f"{key}.{dn}")     # exact
+        out[dn] = unit_vector(dv, dirs.val_locs[dn], f"{key}.{dn}", cx)     # exact
     return out
 
 
@@ -142,8 +143,9 @@ def _parametric_vector(cx: Context, v: YMap, k, key, pnames) -> tuple:
 
 
 def _expression(cx: Context, x, loc, key, pnames) -> sp.Expr | None:
-    """``x`` as an expression of parameters if it is one (a string that is not a plain
-    number), else None (a number: read by ``number``)."""
+    """``x`` as an expression if it is one (a string that is not a plain number: of
+    parameters, or a constant such as a component's placement writes, exact), else None
+    (a number: read by ``number``)."""
     if not isinstance(x, str):
         return None
     try:
@@ -152,7 +154,33 @@ def _expression(cx: Context, x, loc, key, pnames) -> sp.Expr | None:
     except ValueError:
         pass
     e = cx.parse(x, loc=loc, key=key, names=pnames)
-    return e if e.free_symbols else None
+    return e if e.free_symbols else _exact_constant(e)
+
+
+def _or_number(e, x, loc, key) -> sp.Expr:
+    """An expression ``_expression`` gave, else the exact number ``x``."""
+    return e if e is not None else exact.rational(number(x, loc, key))
+
+
+def _exact_constant(e: sp.Expr) -> sp.Expr:
+    """A constant expression with its decimals read as written (``exact``)."""
+    return sp.sympify(e).xreplace({f: exact.rational(f) for f in e.atoms(sp.Float)})
+
+
+def exact_vector(cx: Context | None, v, loc, key) -> sp.Matrix:
+    """A position or axis [x, y, z], exact: numbers read as the decimals written, or
+    constant expressions (``3*sqrt(2)/20``: a component's placement writes its R0
+    geometry so)."""
+    if not (isinstance(v, YList) and any(isinstance(x, str) for x in v)):
+        return exact.vector(vector(v, loc, key))
+    if len(v) != 3:
+        fail(f"expected 3 numbers [x, y, z], got {len(v)}", loc, key)
+    out = []
+    for i, x in enumerate(v):
+        xl, k = v.item_locs[i], f"{key}[{i}]"
+        e = _expression(cx, x, xl, k, {}) if cx is not None and isinstance(x, str) else None
+        out.append(exact.rational(number(x, xl, k)) if e is None else e)
+    return sp.Matrix(out)
 
 
 def _inertia(v: YMap, key, mass, frame_, inertia_expr=None, pvals=None) -> tuple:
@@ -197,7 +225,7 @@ def _inertia(v: YMap, key, mass, frame_, inertia_expr=None, pvals=None) -> tuple
     return moments, frame_
 
 
-def frame(v, loc, key) -> sp.Matrix:
+def frame(v, loc, key, cx: Context | None = None) -> sp.Matrix:
     """``{x: [..], y: [..], z: [..]}`` (R0) -> exact 3x3 matrix whose columns are the
     unit axes (``exact``: no floating-point noise reaches the equations); they must be
     orthogonal and right-handed."""
@@ -206,8 +234,8 @@ def frame(v, loc, key) -> sp.Matrix:
     check_keys(fr, ("x", "y", "z"), key)
     if set(fr) != {"x", "y", "z"}:
         fail("a frame needs its three axes x, y, z", fr.loc, key)
-    F = sp.Matrix.hstack(*[exact.unit(exact.vector(
-        vector(fr[a], fr.val_locs[a], f"{key}.{a}"))) for a in "xyz"])
+    F = sp.Matrix.hstack(*[exact.unit(exact_vector(cx, fr[a], fr.val_locs[a], f"{key}.{a}"))
+                           for a in "xyz"])
     Ff = np.array(exact.floats(F))
     if np.abs(Ff.T @ Ff - np.eye(3)).max() > 1e-6 or np.linalg.det(Ff) < 0:
         fail("the frame axes must be orthogonal and right-handed (x cross y = z)",
@@ -215,9 +243,9 @@ def frame(v, loc, key) -> sp.Matrix:
     return F
 
 
-def unit_vector(v, loc, key) -> sp.Matrix:
+def unit_vector(v, loc, key, cx: Context | None = None) -> sp.Matrix:
     """An axis, scaled to unit length exactly."""
-    u = exact.vector(vector(v, loc, key))
+    u = exact_vector(cx, v, loc, key)
     if exact.to_float(exact.norm(u)) < 1e-12:
         fail("an axis of zero length", loc, key, "give a direction such as [0, 0, 1]")
     return exact.unit(u)
@@ -227,7 +255,7 @@ def joint_point(cx: Context, v, loc, key) -> sp.Matrix:
     """``at``: [x, y, z] in R0, a point name of one body, or body.point (exact: the
     point as the body's ``points`` wrote it)."""
     if isinstance(v, YList):
-        return exact.vector(vector(v, loc, key))
+        return exact_vector(cx, v, loc, key)
     if not isinstance(v, str):
         fail(f"expected [x, y, z] or a point name, got {kind_of(v)}", loc, key)
     body, _, pt = v.rpartition(".")

@@ -40,13 +40,16 @@ class Context:
     def declare(self, name, what, loc, key):
         """Enter ``name`` (``what`` it names, e.g. "body 'b'") in the global namespace: a
         valid identifier, not reserved, not already declared."""
-        if not isinstance(name, str) or not IDENT.match(name) or keyword.iskeyword(name):
+        from bgc.model.components import QName
+        parts = name.split(".") if isinstance(name, QName) else [name]
+        if not all(isinstance(p, str) and IDENT.match(p) and not keyword.iskeyword(p)
+                   for p in parts):
             fail(f"{name!r} is not a valid name", loc, key,
                  "use letters, digits and '_', not starting with a digit")
         if "__" in name:
             fail(f"'{name}' contains '__', which bgc keeps for the names it generates",
                  loc, key, "use a single '_'")
-        if name in bexpr.RESERVED:
+        if parts[-1] in bexpr.RESERVED:
             fail(f"'{name}' is a reserved name", loc, key,
                  "reserved: " + ", ".join(sorted(bexpr.RESERVED)))
         if name in self.names:
@@ -68,9 +71,12 @@ class Context:
         point's coordinate, a joint's or a joint direction's, a bond's or an element's
         variable, a control block's output or input (``kinds``: the elements' kinds by
         name; ``bond_names``: the bonds')."""
-        if "." in target and target.split(".")[0] in self.joints:    # joint.direction.attr
+        owner = target.rpartition(".")[0]
+        known = (target in self.blocks or target in self.joints or target in self.bodies
+                 or target in bond_names or target in kinds)
+        if not known and owner in self.joints:          # joint.direction.attr
             return self._direction_ref(target, attr, key, loc)
-        if "." in target:                      # body.point.attr
+        if not known and owner:                         # body.point.attr
             return self._point_ref(target, attr, key, loc)
         if target in self.blocks:
             if attr not in Block.ATTRS:
@@ -122,7 +128,7 @@ class Context:
         """``joint.direction.q`` (displacement from the initial pose: m or rad) and
         ``.v`` (rate) of a joint's free direction: its sensors."""
         from bgc.mechanics.joints import JOINT_KINDS
-        joint, label = target.split(".", 1)
+        joint, label = target.rsplit(".", 1)
         free = JOINT_KINDS[self.joints[joint].kind].free
         if label not in free:
             fail(f"'{target}' is not a free direction of joint '{joint}'", loc, key,
@@ -133,7 +139,7 @@ class Context:
         return symbols.ref(f"{joint}__{label}", attr)
 
     def _point_ref(self, target, attr, key, loc):
-        body, pt = target.split(".", 1)
+        body, pt = target.rsplit(".", 1)
         if body not in self.bodies or pt not in self.bodies[body].points:
             fail(f"'{target}' names no point of a body nor a joint's direction", loc, key,
                  "write body.point.attr (a point from the body's 'points:') or "

@@ -126,7 +126,7 @@ def _joint(cx: Context, name, v: YMap, key, names, base: Parasitic) -> Joint:
     if bodies[0] == bodies[1]:
         fail(f"a joint joins two different bodies, got {pair[0]!r} twice", *at("between"))
     point, axes = _placement(cx, v, kind, key, at)
-    out_frame = exact.floats(frame(v["frame"], *at("frame"))) if "frame" in v else None
+    out_frame = exact.floats(frame(v["frame"], *at("frame"), cx)) if "frame" in v else None
     pitch = 0.0
     if kind == "screw":
         if "pitch" not in v:
@@ -146,9 +146,9 @@ def _placement(cx: Context, v: YMap, kind, key, at) -> tuple[sp.Matrix, sp.Matri
     (``axis2``, else the R0 axis most nearly perpendicular to x, made perpendicular),
     z = x cross y; exact."""
     point = joint_point(cx, v["at"], *at("at"))
-    x = unit_vector(v["axis"], *at("axis")) if "axis" in v else sp.Matrix([1, 0, 0])
+    x = unit_vector(v["axis"], *at("axis"), cx) if "axis" in v else sp.Matrix([1, 0, 0])
     if "axis2" in v:
-        y = unit_vector(v["axis2"], *at("axis2"))
+        y = unit_vector(v["axis2"], *at("axis2"), cx)
         if abs(exact.to_float(x.dot(y))) > 1e-6:
             fail("axis2 must be perpendicular to axis", *at("axis2"))
     elif kind in NEEDS_AXIS2:
@@ -229,11 +229,11 @@ def actuator(cx: Context, v, loc, key, names) -> sp.Expr:
     positions, angles and velocities (a spring or controller law; not accelerations,
     which would close an algebraic loop through the actuator)."""
     def ref(target, attr):
-        body = target.split(".")[0]
+        body = target if target in cx.bodies else target.rpartition(".")[0]
         if body not in cx.bodies:
             fail(f"'{target}.{attr}' names no body; a joint actuator may read "
                  "bodies only", loc, key, "write body.x, body.az, body.point.vx, ...")
-        valid = Body.POINT_ATTRS[:6] if "." in target else Body.ATTRS[:15]
+        valid = Body.POINT_ATTRS[:6] if target != body else Body.ATTRS[:15]
         if attr not in valid:
             fail(f"a joint actuator cannot read '{target}.{attr}'", loc, key,
                  "valid: " + ", ".join(f"{target}.{a}" for a in valid))

@@ -57,7 +57,7 @@ def bonds(cx: Context, sec: YList, elements) -> list[Bond]:
                      f"{cx.names[name][0]}", loc, key, "give this bond a name:")
             cx.names[name] = (f"bond '{name}'", loc)
         for end in (src, dst):
-            if isinstance(end, str) and "." in end:
+            if isinstance(end, str) and "." in end and end not in elements:
                 port(cx, end, loc, key)
                 if dim != 1:
                     fail(f"bond to port '{end}' has dim {dim}", loc, key,
@@ -85,7 +85,7 @@ def port(cx: Context, name: str, loc, key) -> Port:
     from bgc.mechanics.joints import JOINT_KINDS
     if name in cx.ports:
         return cx.ports[name]
-    parts = name.split(".")
+    parts = _port_parts(cx, name)
     if len(parts) == 2 and parts[0] in cx.joints:
         j = cx.joints[parts[0]]
         spec = JOINT_KINDS[j.kind]
@@ -119,6 +119,19 @@ def port(cx: Context, name: str, loc, key) -> Port:
              + (", ".join(cx.joints) or "none") + "; bodies: " + (", ".join(cx.bodies) or "none"))
     cx.ports[name] = p
     return p
+
+
+def _port_parts(cx: Context, name: str) -> list[str]:
+    """A port's name split after its joint or body, whose name may hold dots (an
+    instance's: ``leg_1.slide.tx``, ``leg_1.beater.B.z``): [joint, direction] or [body,
+    point, direction] where one is known, else split at every dot."""
+    head, _, last = name.rpartition(".")
+    if head in cx.joints:
+        return [head, last]
+    body, _, point = head.rpartition(".")
+    if body in cx.bodies:
+        return [body, point, last]
+    return name.split(".")
 
 
 def element_fields(cx: Context, headers, params, signals, bonds) -> dict[str, Element]:

@@ -1,0 +1,416 @@
+"""Instance loops: where many instances of one component compute the same thing, the
+kernels compute it once per instance in a loop over a table instead of writing it out
+once per instance (issue 40; DESIGN.md: "compile cost follows the number of component
+kinds, not the model's size").
+
+A program's straight-line steps (``kernels._steps``: assignments, outputs, a Jacobian's
+partials) are independent of each other within one *level* of the causal order (the
+longest chain of assignments they are computed from), so any order within a level is
+correct. ``schedule`` orders them level by level; at each level it groups the steps by the
+instance they belong to (``owner``: the longest instance name in a symbol's name), and
+the steps of one instance at one level by their structure: the expressions with every
+symbol a placeholder ``T0, T1, ...`` in the order it is met, every number kept where the
+group's instances agree on it and a placeholder ``C0, ...`` where they differ. A group of
+at least ``MIN_COPIES`` instances with the same structure becomes a ``Loop``: one
+template, written once in IR (``kernels._Module.loop``), and a table, a row per instance,
+of where each placeholder lives (a state, a parameter, a workspace slot, an output) and of
+the numbers that differ. The rest stays straight-line code, as before.
+
+The values are the same as the straight-line code's up to the order of floating-point
+operations within an expression where a number became a placeholder (round-off). A
+model with fewer copies of any part than ``MIN_COPIES`` keeps its programs exactly as
+they were (the SARIB's four legs: written out).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from bgc.model import symbols
+from bgc.model.signals import table, table_slope
+
+MIN_COPIES = 5           # the fewest instances of one structure that make a loop
+_STRAIGHT = ("set", "grad", "out")      # the step kinds a loop may take; others stay
+
+
+@dataclass
+class Loop:
+    """One loop of a program: its template ``steps`` (``("set", T, e)``, ``("out", j,
+    e)`` and ``("grad", e, [(j, T)])`` in placeholders; ``j``: a row's entry, an output
+    slot), where each placeholder lives (``bases``: "x", "p", "w" or "out"), and per
+    instance its ``rows`` (the index of each placeholder in its base) and ``consts`` (the
+    numbers that differ between instances)."""
+    steps: list
+    placeholders: list[sp.Symbol]
+    bases: list[str]
+    constants: list[sp.Symbol]
+    rows: list[list[int]] = field(default_factory=list)
+    consts: list[list[float]] = field(default_factory=list)
+    owners: list[str] = field(default_factory=list)
+
+
+def owners(instances) -> callable:
+    """symbol -> the instance it belongs to, or None: the first instance name (as
+    ``symbols.ident`` writes it) in its name, followed by ``__0``, as deep as instances
+    nest (``X_leg_1__0motor__0coil__p``: leg_1.motor); a bond between two instances'
+    elements belongs to its first end's."""
+    idents = {symbols.ident(n): n for n in instances}
+    dot = symbols.DOT
+    cache: dict = {}
+
+    def owner(s) -> str | None:
+        hit = cache.get(s, False)
+        if hit is not False:
+            return hit
+        name, hit = s.name, None
+        k = name.find(dot)
+        while k >= 0 and hit is None:
+            j = name.find("_")
+            while 0 <= j < k:             # the longest name ending at k after an '_'
+                if name[j + 1:k] in idents:
+                    hit = name[j + 1:k]
+                    break
+                j = name.find("_", j + 1)
+            if hit is None:
+                k = name.find(dot, k + len(dot))
+        while hit is not None:           # nested instances: as deep as they go
+            rest = name[k + len(dot):]
+            seg = rest.split("__", 1)[0]
+            deeper = f"{hit}{dot}{seg}"
+            if deeper not in idents:
+                break
+            hit, k = deeper, k + len(dot) + len(seg)
+        hit = cache[s] = None if hit is None else idents[hit]
+        return hit
+    return owner
+
+
+def schedule(steps: list, instances, where, assigned: dict | None = None,
+             min_copies: int | None = None, memo: dict | None = None) -> list:
+    """``steps`` (``kernels._steps``) with loops: the same steps, or, where some structure
+    repeats in ``min_copies`` instances or more, level by level with ``("loop", Loop)``
+    steps in place of the instances' own. ``where(symbol)``: (base, index) of a symbol's
+    value ("x" state, "p" parameter, "w" workspace slot); ``assigned``: expression -> the
+    symbol it is assigned to (a Jacobian step's partials are of an assignment's
+    expression, and belong where it does); ``memo``: the symbols each expression reads,
+    shared by a module's programs. A program with no such repetition comes back as it
+    is."""
+    if not instances:
+        return steps
+    min_copies = MIN_COPIES if min_copies is None else min_copies
+    by_symbol = owners(instances)
+    assigned = assigned or {}
+
+    def owner(s):
+        return by_symbol(s)
+
+    def own(step):
+        if step[0] == "set":
+            return by_symbol(step[1])
+        e = _expr(step)
+        if step[0] == "grad" and e in assigned:
+            return by_symbol(assigned[e])
+        found = {o for o in map(by_symbol, _symbols(e, owner.memo)) if o is not None}
+        return found.pop() if len(found) == 1 else None
+    owner.step, owner.memo = own, memo if memo is not None else {}
+    out, segment = [], []
+    for step in steps:
+        if step[0] in _STRAIGHT:
+            segment.append(step)
+            continue
+        out += _segment(segment, owner, where, min_copies)
+        segment = []
+        out.append(step)
+    out += _segment(segment, owner, where, min_copies)
+    return out
+
+
+def _segment(steps: list, owner, where, min_copies: int) -> list:
+    """One stretch between solves and stores: level by level, with loops."""
+    if len(steps) < 2 * min_copies:
+        return steps
+    level, defined = [], {}
+    for step in steps:
+        reads = _symbols(_expr(step), owner.memo)
+        lv = 1 + max((defined[s] for s in reads if s in defined), default=-1)
+        level.append(lv)
+        if step[0] == "set":
+            defined[step[1]] = lv
+    by_level: dict[int, list] = {}
+    for lv, step in zip(level, steps):
+        by_level.setdefault(lv, []).append(step)
+    out, looped = [], False
+    for lv in sorted(by_level):
+        straight, loops = _level(by_level[lv], owner, where, min_copies)
+        looped = looped or bool(loops)
+        out += straight + [("loop", lp) for lp in loops]
+    return out if looped else steps
+
+
+def _symbols(e, memo: dict) -> frozenset:
+    """The symbols ``e`` reads (sympy's ``free_symbols``, memoized on the expressions,
+    which the programs of a module share)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    if e.is_Symbol:
+        out = frozenset((e,))
+    elif not e.args:
+        out = frozenset()
+    else:
+        out = frozenset().union(*(_symbols(a, memo) for a in e.args))
+    memo[id(e)] = (e, out)
+    return out
+
+
+def _expr(step):
+    return step[2] if step[0] in ("set", "out") else step[1]
+
+
+def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]]:
+    """One level's steps: those left straight, and the loops."""
+    per: dict[str, list] = {}
+    straight = []
+    for step in steps:
+        o = owner.step(step) if step[0] in _STRAIGHT else None
+        if o is None:
+            straight.append(step)
+        else:
+            per.setdefault(o, []).append(step)
+    groups: dict = {}
+    for o, block in per.items():
+        key, canon = _canonical(block, o, where, owner.memo)
+        groups.setdefault(key, []).append((o, block, canon))
+    loops = []
+    for key, members in groups.items():
+        if len(members) < min_copies:
+            straight += [s for _, block, _ in members for s in block]
+            continue
+        loops.append(_loop(members, where))
+    order = {id(s): i for i, s in enumerate(steps)}
+    straight.sort(key=lambda s: order[id(s)])
+    return straight, loops
+
+
+_MARKS: dict = {}
+
+
+def _local(s, o: str) -> str:
+    """A symbol's name relative to its instance ``o`` (its own) or '?' (another's)."""
+    mark = _MARKS.get(o)
+    if mark is None:
+        mark = _MARKS[o] = symbols.ident(o) + symbols.DOT
+    return s.name.replace(mark, "@", 1) if mark in s.name else "?"
+
+
+def _canonical(block: list, o: str, where, memo: dict):
+    """The structure of one instance's steps at one level: a hashable key (the steps in
+    a canonical order, their expressions with numbered placeholders and the numbers left
+    out) and what the template and the table need (the ordered steps, the placeholders'
+    symbols and bases, the numbers in order)."""
+    def sort_key(step):
+        if step[0] == "set":
+            return ("set", _local(step[1], o))
+        if step[0] == "out":
+            return ("out", tuple(sorted(_local(w, o) for w in step[2].free_symbols)))
+        e = step[1]
+        return ("grad", tuple(sorted(_local(w, o) for _, w in step[2])), str(len(e.args)))
+    ordered = sorted(block, key=sort_key)
+    ph: dict = {}
+    nums: list = []
+    key = []
+    for step in ordered:
+        if step[0] == "set":
+            lhs = _place(step[1], ph)
+            key.append(("set", lhs) + _shape(step[2], ph, nums, memo))
+        elif step[0] == "out":
+            key.append(("out",) + _shape(step[2], ph, nums, memo))
+        else:
+            key.append(("grad",) + _shape(step[1], ph, nums, memo)
+                       + (tuple(_place(w, ph) for _, w in step[2]),))
+    syms = list(ph)
+    bases = tuple(_where(s, where, memo)[0] for s in syms)
+    return (tuple(key), bases), (ordered, syms, nums)
+
+
+def _where(s, where, memo: dict) -> tuple[str, int]:
+    """``where(s)``, memoized."""
+    hit = memo.get(s)
+    if hit is None:
+        hit = memo[s] = where(s)
+    return hit
+
+
+def _shape(e, ph: dict, nums: list, memo: dict) -> tuple:
+    """``e``'s shape (``_walk``, its symbols numbered within it; memoized on the
+    expression, which a module's programs share) and its symbols as placeholders of the
+    block (``ph``); its numbers appended to ``nums``."""
+    hit = memo.get(("shape", id(e)))
+    if hit is None or hit[0] is not e:
+        local: dict = {}
+        found: list = []
+        hit = memo[("shape", id(e))] = (e, _walk(e, local, found), list(local), found)
+    _, shape, syms, found = hit
+    nums.extend(found)
+    return shape, tuple(_place(s, ph) for s in syms)
+
+
+def _place(s, ph: dict) -> int:
+    i = ph.get(s)
+    if i is None:
+        i = ph[s] = len(ph)
+    return i
+
+
+def _walk(e, ph: dict, nums: list):
+    """``e``'s shape: symbols by placeholder number, numbers out (into ``nums``), but
+    those that are structure (integer exponents, a table's index)."""
+    if e.is_Symbol:
+        return _place(e, ph) if e is not symbols.t else "t"
+    if e.is_Number:
+        nums.append(e)
+        return "#"
+    if e.is_Pow and e.exp.is_Number:
+        return ("Pow", _walk(e.base, ph, nums), str(e.exp))
+    if isinstance(e, (table, table_slope)):
+        return (type(e).__name__, str(e.args[0]), _walk(e.args[1], ph, nums))
+    if not e.args:
+        return (type(e).__name__, str(e))        # pi, E, true, false, nan ...
+    return (type(e).__name__,) + tuple(_walk(a, ph, nums) for a in e.args)
+
+
+def _loop(members: list, where) -> Loop:
+    """The loop of instances whose steps have one structure: the template from the
+    first (numbers that all agree kept, the others placeholders), a row per instance: the
+    index of each symbol placeholder in its base, then the output slot of each partial
+    of its Jacobian steps, then (in ``consts``) its numbers that differ."""
+    first_steps, first_syms, first_nums = members[0][2]
+    differ = [k for k in range(len(first_nums))
+              if any(m[2][2][k] != first_nums[k] for m in members[1:])]
+    T = [sp.Symbol(f"T{j}", real=True) for j in range(len(first_syms))]
+    C = [sp.Symbol(f"C{k}", real=True) for k in range(len(differ))]
+    sym_map = dict(zip(first_syms, T))
+    num_map = {k: C[i] for i, k in enumerate(differ)}
+    counter = [0]
+
+    def rebuild(e):         # the same traversal as _walk: numbers met in one order
+        if e.is_Symbol:
+            return sym_map.get(e, e)
+        if e.is_Number:
+            k = counter[0]
+            counter[0] += 1
+            return num_map.get(k, e)
+        if e.is_Pow and e.exp.is_Number:
+            return sp.Pow(rebuild(e.base), e.exp, evaluate=False)
+        if isinstance(e, (table, table_slope)):
+            return type(e)(e.args[0], rebuild(e.args[1]))
+        if not e.args:
+            return e
+        args = [rebuild(a) for a in e.args]
+        if e.is_Add or e.is_Mul:
+            return type(e)(*args, evaluate=False)
+        return e.func(*args)
+
+    steps, n_out = [], 0
+    for step in first_steps:
+        if step[0] == "set":
+            steps.append(("set", sym_map[step[1]], rebuild(step[2])))
+        elif step[0] == "out":
+            steps.append(("out", len(T) + n_out, rebuild(step[2])))
+            n_out += 1
+        else:
+            e = rebuild(step[1])
+            steps.append(("grad", e, [(len(T) + n_out + k, sym_map[w])
+                                      for k, (_, w) in enumerate(step[2])]))
+            n_out += len(step[2])
+    bases = [where(s)[0] for s in first_syms] + ["out"] * n_out
+    lp = Loop(steps, T, bases, C)
+    for o, _, (ordered, syms, nums) in members:
+        row = [where(s)[1] for s in syms]
+        row += [slot for step in ordered if step[0] != "set"
+                for slot in ([step[1]] if step[0] == "out" else [m for m, _ in step[2]])]
+        lp.rows.append(row)
+        lp.consts.append([float(nums[k]) for k in differ])
+        lp.owners.append(o)
+    return lp
+
+
+TEMPLATE_ARGS = ("double %t, double* noalias %x, double* noalias %p, double* noalias %w, "
+                 "double* noalias %out, i64* noalias %row, double* noalias %crow")
+
+
+def template_ir(lp: Loop, name: str, layout, decls: set) -> str:
+    """``@name(t, x, p, w, out, row, crow)``: the loop's template for one instance, each
+    placeholder read and written at ``base[row[j]]``, each differing number ``crow[k]``;
+    lowered as the straight-line chunks are (``kernels._Function``)."""
+    from bgc.codegen.kernels import _Function
+    slot = {s: j for j, s in enumerate(lp.placeholders)}
+    const = {c: k for k, c in enumerate(lp.constants)}
+    base = {"x": "%x", "p": "%p", "w": "%w", "out": "%out"}
+
+    class Template(_Function):
+        def index(self, j: int) -> str:
+            at = self.op(f"getelementptr inbounds i64, i64* %row, i64 {j}")
+            return self.op(f"load i64, i64* {at}, align 8")
+
+        def symbol(self, s) -> str:
+            if s in self.env:
+                return self.env[s]
+            if s is symbols.t:
+                v = "%t"
+            elif s in slot:
+                v = self.load(base[lp.bases[slot[s]]], self.index(slot[s]))
+            elif s in const:
+                v = self.load("%crow", const[s])
+            else:
+                return super().symbol(s)
+            self.env[s] = v
+            return v
+
+        def assign(self, v, e):
+            value = self.val(e)
+            self.env[v] = value
+            self.store("%w", self.index(slot[v]), value)
+
+    fn = Template(name, layout, {}, {}, decls)
+    for step in lp.steps:
+        if step[0] == "set":
+            fn.assign(step[1], step[2])
+        elif step[0] == "out":
+            fn.store("%out", fn.index(step[1]), fn.val(step[2]))
+        else:
+            d = fn.grad(step[1], [w for _, w in step[2]])
+            for j, w in step[2]:
+                fn.store("%out", fn.index(j), d[w])
+    return "\n".join([f"define void @{name}({TEMPLATE_ARGS}) noinline nounwind {{",
+                      "entry:", *fn.body, "  ret void", "}"])
+
+
+def driver_ir(name: str, template: str, n: int, width: int, rows: str, consts: str,
+              args: str) -> str:
+    """``@name(t, x, p, w, out)``: the template called for each of the ``n`` instances,
+    with its row of the table ``rows`` (``width`` entries a row) and of ``consts`` (a
+    pointer and its row's length); ``rows`` and ``consts[0]`` typed pointers
+    (``kernels._Module.array``)."""
+    return "\n".join([
+        f"define internal void @{name}({args}) nounwind {{",
+        "entry:",
+        "  br label %head",
+        "head:",
+        "  %i = phi i64 [ 0, %entry ], [ %i1, %body ]",
+        f"  %more = icmp slt i64 %i, {n}",
+        "  br i1 %more, label %body, label %exit",
+        "body:",
+        f"  %ro = mul i64 %i, {width}",
+        f"  %row = getelementptr inbounds i64, {rows}, i64 %ro",
+        f"  %co = mul i64 %i, {consts[1]}",
+        f"  %crow = getelementptr inbounds double, {consts[0]}, i64 %co",
+        f"  call void @{template}(double %t, double* %x, double* %p, double* %w, "
+        "double* %out, i64* %row, double* %crow)",
+        "  %i1 = add i64 %i, 1",
+        "  br label %head",
+        "exit:",
+        "  ret void",
+        "}"])

@@ -16,13 +16,13 @@ from helpers import TUTORIAL_MODEL
 from bgc.cli import main
 
 # the tutorial's absorber (docs/tutorial/absorber.yaml): a cabin on its suspension along
-# z and a tuned mass on its spring above it
+# z (the library's spring_damper) and a tuned mass on its spring above it (tuned_mass)
 TUTORIAL = yaml.safe_load(TUTORIAL_MODEL.read_text())
 M1 = TUTORIAL["bodies"]["cabin"]["mass"]
-K1, C1 = (TUTORIAL["joints"]["suspension"]["spring"][k] for k in ("k", "c"))
+K1, C1 = (TUTORIAL["instances"]["mount"]["parameters"][k] for k in ("k", "c"))
 M2 = TUTORIAL["parameters"]["m_t"]["value"]
 K2 = TUTORIAL["parameters"]["k_t"]["value"]
-C2 = TUTORIAL["joints"]["flap"]["spring"]["c"]
+C2 = TUTORIAL["instances"]["absorber"]["parameters"]["c"]
 
 M, D, I_G, C_H = 2.0, 0.5, 0.2, 0.05     # rod mass, hinge to G, inertia about G, damper
 PENDULUM = f"""
@@ -81,9 +81,9 @@ def test_absorber_modes_are_the_hand_written_systems(compiled, gen_dir, method):
         assert m["frequency_hz"] == pytest.approx(f, rel=tol)
         assert m["damping_ratio"] == pytest.approx(z, rel=10 * tol)
     # the lower mode is the absorber's (the tuned mass moves most), the upper the main's
-    assert [m["bodies"][0]["name"] for m in functional] == ["cabin", "tuned"]
+    assert [m["bodies"][0]["name"] for m in functional] == ["cabin", "absorber.mass"]
     assert functional[1]["bodies"][0]["share"] > 0.5
-    assert set(functional[0]["shape"]) == {"cabin", "tuned"}
+    assert set(functional[0]["shape"]) == {"cabin", "absorber.mass"}
     if method == "parasitic":
         others = [m for m in rep["modes"] if m["kind"] != "functional"]
         assert others and all(m["kind"] == "parasitic" for m in others)
@@ -144,7 +144,7 @@ def test_pendulum_mode_is_sqrt_mgd_over_io(tmp_path, method):
 def test_a_state_not_at_rest_is_refused_in_one_line(compiled, gen_dir):
     """A preload the suspension's start does not hold: no equilibrium to linearize."""
     compiled(TUTORIAL_MODEL)
-    r = CliRunner().invoke(main, ["modes", str(TUTORIAL_MODEL), "-p", "suspension__tx_preload=50",
+    r = CliRunner().invoke(main, ["modes", str(TUTORIAL_MODEL), "-p", "mount.preload=50",
                                   "-q", "-o", str(gen_dir)])
     assert r.exit_code == 2
     assert "not a static equilibrium" in r.output and "Traceback" not in r.output

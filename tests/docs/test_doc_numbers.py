@@ -109,7 +109,8 @@ CLAIMS = {
 # main-job.md, measured timings (not tested: the page says where they were measured).
 INPUTS = {
     README: {"5", "25", "1e-4", "2.0"},
-    TUTORIAL: {"0", "3", "5", "25", "40", "11", "4", "17.5", "15", "20", "30", "2", "200"},
+    TUTORIAL: {"0", "3", "5", "25", "40", "11", "4", "17.5", "15", "20", "30", "2", "200",
+               "0.3", "90"},
     MAIN_JOB: {"200", "5", "25", "28", "1e-4", "17.8", "18.2", "1e-9", "3e7", "1e-6", "1",
                "8", "0.005", "1e-3", "1e-5"},
 }
@@ -172,8 +173,8 @@ def two_mass_modes() -> list[tuple[float, float]]:
     import yaml
     model = yaml.safe_load((ROOT / ABSORBER).read_text())
     m1, m2 = model["bodies"]["cabin"]["mass"], model["parameters"]["m_t"]["value"]
-    k1, c1 = (model["joints"]["suspension"]["spring"][k] for k in ("k", "c"))
-    k2, c2 = model["parameters"]["k_t"]["value"], model["joints"]["flap"]["spring"]["c"]
+    k1, c1 = (model["instances"]["mount"]["parameters"][k] for k in ("k", "c"))
+    k2, c2 = model["parameters"]["k_t"]["value"], model["instances"]["absorber"]["parameters"]["c"]
     M = np.diag([m1, m2])
     K = np.array([[k1 + k2, -k2], [-k2, k2]])
     C = np.array([[c1 + c2, -c2], [-c2, c2]])
@@ -268,8 +269,14 @@ def test_the_inputs_the_documents_state():
     assert (f"from {c['f_start']:g} to {c['f_end']:g} Hz in {c['t3'] - c['t2']:g} s"
             in tutorial)
     import yaml
-    damper = yaml.safe_load((ROOT / ABSORBER).read_text())["joints"]["suspension"]["spring"]
+    damper = yaml.safe_load((ROOT / ABSORBER).read_text())["instances"]["mount"]["parameters"]
     assert f"damped by its {damper['c']:g} N s/m" in tutorial
+    model = yaml.safe_load((ROOT / ABSORBER).read_text())
+    assert f"its frame {model['instances']['absorber']['origin'][2]:g} m above it" in tutorial
+    legs = yaml.safe_load((ROOT / "models" / "sarib.yaml").read_text())["instances"]
+    assert "instanced at 90 degree steps" in tutorial and any(
+        "90 * (i - 1)" in str(v) or "90*(i-1)" in str(v).replace(" ", "")
+        for v in legs.values()), legs
     from bgc.export.fmu import FMI_VERSIONS
     assert FMI_VERSIONS == (2,) and "an FMU (FMI 2.0, " in readme
 

@@ -92,15 +92,16 @@ def test_a02_check_reports_rank_mobility_and_a_minimal_redundant_set():
 
 
 def test_a02_augmented_passes_every_singular_configuration(compiled):
-    """N = 2 through all 20 s (20 horizontal crossings) at rtol 1e-5: B0 within the
-    benchmark's 1e-3 m of the exact solution (measured 8e-4 at 1e-5, 4e-5 at 1e-6), the
+    """N = 2 through all 20 s (20 horizontal crossings) at rtol 1e-6: B0 within the
+    benchmark's 1e-3 m of the exact solution (measured 3.7e-5; at rtol 1e-5 it is
+    1.2e-4 .. 1.05e-3 depending on where the steps land, so not asserted there), the
     joints closed to round-off, and the projection of the start names the same minimal
     redundant set as ``bgc check``."""
     mod = compiled("n_four_bar", "augmented")
     assert mod.PASSES_SINGULAR and mod.PROJECTS and mod.JAC_SIZE > len(mod.STATE_NAMES)
-    r = simulate(mod, t_end=20.0, rtol=1e-5, atol=1e-7, points=801)
+    r = simulate(mod, t_end=20.0, rtol=1e-6, atol=1e-8, points=801)
     err = b0_error(r, 2)
-    assert err.max() < LIMIT, err.max()
+    assert err.max() < 1e-4, err.max()
     assert r.stats.drift_position < 1e-5
     c = build(MODELS / "n_four_bar.yaml", "augmented")
     assert r.projection.redundant == mobility.analyse(c.causal.graph, c.system)["redundant"]

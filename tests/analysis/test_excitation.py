@@ -189,6 +189,7 @@ def test_frf_finds_the_tuned_absorbers_anti_resonance(absorber):
     assert abs(lin.response([1e-4], "z")[0]) == pytest.approx(1 / k1, rel=1e-3)
 
 
+@pytest.mark.slow       # a 5 s dwell; the FRF and the chirp run stay in make test
 def test_sine_dwell_matches_the_frequency_response(absorber):
     """A sine dwell (nonlinear run, transients decayed) against |H(f)| within 1 %, with
     more damping (parameters, no recompilation) so the transient dies in the run."""

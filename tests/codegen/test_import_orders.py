@@ -78,6 +78,7 @@ def cached(tmp: Path) -> set:
     return {p.name.split("-")[0] for p in (tmp / "gen" / "__pycache__").glob("*.nbi")}
 
 
+@pytest.mark.slow       # three cold processes; the module imported standalone stays in make test (test_codegen)
 def test_bare_import_first_then_simulate_and_package_import(tmp_path):
     compile_(tmp_path)
     bare_import(tmp_path)

@@ -197,6 +197,7 @@ def _soft(mod) -> np.ndarray:
     return p
 
 
+@pytest.mark.slow       # five runs; parasitic auto itself stays in make test
 def test_parasitic_auto_error_falls_with_the_separation(compiled, gen_dir):
     ref = simulate(compiled("double_pendulum", "zcp"), t_end=2.0, rtol=1e-9, atol=1e-11,
                    solver="radau")

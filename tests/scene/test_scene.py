@@ -255,7 +255,8 @@ def test_relay_chain_becomes_the_prismatic_universal_it_is():
     assert (j.kind, j.body1, j.body2, removed) == ("universal", None, "rod", ["s1", "r1", "r2"])
 
 
-@pytest.mark.parametrize("joints", [FORWARD, MIXED], ids=["forward", "mixed"])
+@pytest.mark.parametrize("joints", [pytest.param(FORWARD, marks=pytest.mark.slow), MIXED],
+                         ids=["forward", "mixed"])     # mixed: both orientations of a relay
 def test_merged_relay_chain_moves_as_the_chain(tmp_path, joints):
     """Under ideal joints (lagrange) the merged joint is the chain: preloads, springs,
     dampers and both excitation directions (a force on the slide, a moment on the second

@@ -166,6 +166,7 @@ def test_ideal_joints_agree_with_parasitic_within_its_modelling_error(sarib, com
         assert err <= 1.5 * model_err + 1e-4 * scale, (out, err, model_err)
 
 
+@pytest.mark.slow       # the one-leg rig: its own module; the SARIB itself stays in make test
 def test_one_leg_variant_has_the_rigs_pumping_response(sarib, compiled):
     """models/sarib_one_leg.yaml (issue 7): the rig reduced by its symmetry under pumping.
     Its linear model has the rig's symmetric modes and the rig's anti-resonances within

@@ -100,6 +100,15 @@ def linearize(module, model, direction: str | None = None, p=None,
                               f"d{worst}/dt = {res:.3g}", hint="give the preloads that hold "
                               "it (or parasitic: {loads: static}), or start from a state at rest")
     A = module.jac(0.0, x, p0)
+    bad = ~np.isfinite(A).all(axis=1)
+    if bad.any():       # a constraint block without an inverse (redundant, or singular)
+        names = [module.STATE_NAMES[i] for i in np.flatnonzero(bad)]
+        raise SimulationError(
+            f"the Jacobian at the equilibrium is not finite in the rows of "
+            f"{', '.join(names[:4])}{' ...' if len(names) > 4 else ''}: no linearization "
+            "there", hint="the constraints' block is rank-deficient here (redundant "
+                          "constraints or a singular configuration): --method augmented "
+                          "linearizes through both")
     if direction is not None:
         B = (f1 - f0) / value
         D = (module.outputs(0.0, x, p1) - module.outputs(0.0, x, p0)) / value

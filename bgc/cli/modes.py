@@ -23,6 +23,7 @@ from bgc.cli.options import (
     out_dir_option,
     parasitic_option,
     params_option,
+    split_constants,
     progress_option,
     run_parameters,
 )
@@ -57,10 +58,12 @@ def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, keep_loo
     check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
     check_out_dir(out_dir)
 
+    constants, params = split_constants(model, params)
+
     def check(decl):            # against the model, before any compile
         check_params(decl, params)
-        check_overrides(model, params, decl.model)
-    module, m, _ = ensure_module(model, out_dir, method, check=check)
+        check_overrides(model, params, decl.model, constants=constants)
+    module, m, _ = ensure_module(model, out_dir, method, check=check, constants=constants)
     p, choice = run_parameters(module, m, method, params, parasitic_mode)
     with progress.stage("modes") as stage:
         lin = frf.linearize(module, m, None, p)

@@ -31,6 +31,7 @@ from bgc.cli.options import (
     parasitic_option,
     parse_params,
     progress_option,
+    split_constants,
 )
 from bgc.errors import BgcError
 from bgc.fileio import check_writable
@@ -157,6 +158,13 @@ def _job(o, axes, fixed, frfs, windows):
     def loop_beside(settings):          # the native loop compiles beside the model's build
         if windows:
             precompile_loop(settings.solver)
+    constants, fixed = split_constants(o.model, fixed)     # -p N=40: another mechanism
+    swept = split_constants(o.model, [(a.name, a.start) for a in axes])[0]
+    if swept:
+        raise BgcError(f"-p {next(iter(swept))}: a compile-time constant of the model cannot "
+                       "be swept (each value is another mechanism, another module)",
+                       key="--param", hint="fix it (-p NAME=VALUE) and sweep parameters")
+
     def check(decl):            # against the model, before any compile
         check_params(decl, [(a.name, a.start) for a in axes] + list(fixed))
         for m, key in [(m, "--frf") for m in frfs] + [(m, "--metric") for m in windows]:
@@ -175,10 +183,10 @@ def _job(o, axes, fixed, frfs, windows):
             decl.model.excitation.select(o.exc_kind, o.exc_dir, o.amplitude, o.frequency)
         for ends in ([a.start for a in axes], [a.stop for a in axes]):
             check_overrides(o.model, fixed + tuple(zip([a.name for a in axes], ends)),
-                            decl.model)
+                            decl.model, constants=constants)
     module, model, _ = ensure_module(o.model, o.out_dir, o.method,
                                      open_loops=not o.keep_loops, on_load=loop_beside,
-                                     check=check)
+                                     check=check, constants=constants)
     names = list(module.PARAM_NAMES)
     p = parse_params(module, fixed)
     if set_excitation(module, model, p, o):

@@ -27,6 +27,7 @@ from bgc.cli.options import (
     progress_option,
     retired_option,
     run_parameters,
+    split_constants,
 )
 from bgc.errors import BgcError
 from bgc.pipeline import ensure_module
@@ -101,6 +102,12 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
     check_method_options(method, keep_loops, parasitic_mode, linearizes=True)
     check_out_dir(out_dir)
 
+    constants, params = split_constants(model, params)
+    if name in constants:
+        raise BgcError(f"'{name}' is a compile-time constant of the model: another value is "
+                       "another mechanism, which cannot be tuned", key="--tune",
+                       hint="tune a parameter; set the constant with -p")
+
     def check(decl):            # against the model, before any compile
         check_output(decl, output)
         check_direction(decl, direction, "--input")
@@ -110,15 +117,15 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
                                n for n in decl.params if "__" not in n) + " (and the "
                                 "joints' values bgc adds, <joint>__<value>)")
         check_params(decl, params)
-        check_overrides(model, params, decl.model)
+        check_overrides(model, params, decl.model, constants=constants)
         if bracket is not None:
-            _check_ends(model, params, name, bracket)
+            _check_ends(model, params, name, bracket, constants)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
-                                 check=check)
+                                 check=check, constants=constants)
     p, _ = run_parameters(module, m, method, params, parasitic_mode)
     if bracket is None:
         bracket = btune.default_bracket(p[module.PARAM_NAMES.index(name)], name)
-        _check_ends(model, params, name, bracket)
+        _check_ends(model, params, name, bracket, constants)
     with progress.stage("tuning") as stage:
         r = btune.tune(module, m, direction, output, name, target, p, bracket, band)
         stage.done(f"{progress.count(r.linearizations, 'linearization')}")
@@ -143,11 +150,11 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
                f"{method})")
 
 
-def _check_ends(model, params, name, bracket):
+def _check_ends(model, params, name, bracket, constants=None):
     """The model's own checks for the bracket's ends (a mass or an inertia > 0, ...),
     before any work."""
     for end in bracket:
         try:
-            check_overrides(model, [*params, (name, end)])
+            check_overrides(model, [*params, (name, end)], constants=constants)
         except BgcError as exc:
             raise BgcError(exc.message, key="--bracket", hint=exc.hint) from None

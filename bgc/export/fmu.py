@@ -203,15 +203,17 @@ def export(model, fmu, method: str = "parasitic", fmi: int = 2, params=(),
 def _build(model, method, open_loops, params, parasitic, separation, out_dir):
     """The equation system and the parameter values the FMU starts from."""
     from bgc import pipeline
-    from bgc.cli.options import check_overrides, check_params
+    from bgc.cli.options import check_overrides, check_params, split_constants
     from bgc.export.inputs import add_inputs
     from bgc.model import load
+    constants, params = split_constants(model, params)    # -p N=40: another mechanism
     with progress.stage("load") as st:
-        m = load.load(model)
+        m = load.load(model, constants=constants)
         inputs = add_inputs(m)
         st.done(f"{m.name}: {progress.count(len(inputs), 'input')}")
     check_params(pipeline.Declared.of_model(m, method), params)     # before the build
-    check_overrides(model, [(n, v) for n, v in params if n in m.parameters], m)
+    check_overrides(model, [(n, v) for n, v in params if n in m.parameters], m,
+                    constants=constants)
     c = pipeline.build(m, method, open_loops)
     system = c.system
     names = [name for _, name, _ in system.params]
@@ -219,21 +221,23 @@ def _build(model, method, open_loops, params, parasitic, separation, out_dir):
     check_params(pipeline.Declared.of_system(system), params)       # the exact ones
     if parasitic == "auto":
         from bgc.methods import parasitic as par
-        module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
+        module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops,
+                                              constants=constants)
         given = _set(p.copy(), names, params)
         p, _ = par.auto(module, c.model, module.initial_state(given), given, separation)
     p = _set(p, names, params)
     if system.algebraic:
-        _check_index2(model, method, open_loops, out_dir, p)
+        _check_index2(model, method, open_loops, out_dir, p, constants)
     return system, p, inputs
 
 
-def _check_index2(model, method, open_loops, out_dir, p):
+def _check_index2(model, method, open_loops, out_dir, p, constants=None):
     """A zcp model with its loops kept closed is an index-2 DAE, whose Newton matrices
     are singular where its algebraic equations are dependent: refused here, at the
     FMU's parameter values, as bgc simulate refuses it, not at the importer's run."""
     from bgc import pipeline, simulate
-    module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops)
+    module, _, _ = pipeline.ensure_module(model, out_dir, method, open_loops,
+                                          constants=constants)
     x, q, _ = simulate.prepare(module, module.initial_state(p), p)
     simulate._check_index2(module, x, q, list(module.ALGEBRAIC), 0.0)
 

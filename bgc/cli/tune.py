@@ -103,7 +103,7 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
     check_out_dir(out_dir)
 
     constants, params = split_constants(model, params)
-    if name in constants:
+    if split_constants(model, [(name, 0.0)])[0]:
         raise BgcError(f"'{name}' is a compile-time constant of the model: another value is "
                        "another mechanism, which cannot be tuned", key="--tune",
                        hint="tune a parameter; set the constant with -p")

@@ -6,49 +6,13 @@ SCAP assigned. Adding an element kind means a rule here (and its schema in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import sympy as sp
 
 from bgc import methods
+from bgc.codegen.builder import Builder, Dt, State, matmul
 from bgc.errors import EquationError
 from bgc.graph.expand import AXES
 from bgc.model import symbols
-
-if TYPE_CHECKING:
-    from bgc.codegen.equations import Builder
-
-
-@dataclass
-class State:
-    """A state of the system: what an element in integral causality integrates."""
-    name: str            # display name, e.g. "spring.q"
-    sym: sp.Symbol
-    dsym: sp.Symbol
-    initial: sp.Expr     # in terms of parameters
-    element: str
-
-
-def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
-    """``A * B``, the same entries as sympy forms them (each the sum of the products of
-    the non-zero entries, in order), without sympy's conversions to and from its
-    DomainMatrix, which cost more than the products on the small matrices here."""
-    m, k, o = A.rows, A.cols, B.cols
-    if B.rows != k:
-        raise ValueError(f"matmul: {A.shape} x {B.shape}")
-    a, b = A.flat(), B.flat()
-    out = []
-    for i in range(m):
-        row = a[i * k:(i + 1) * k]
-        for j in range(o):
-            out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
-    return sp.Matrix(m, o, out)
-
-
-class Dt(sp.Function):
-    """Placeholder for the time derivative of a dependent storage variable."""
-    nargs = 1
 
 
 def _Se(bld: Builder, name, el):

@@ -41,7 +41,7 @@ from dataclasses import replace
 
 import sympy as sp
 
-from bgc.codegen.equations import LinearBlock, Regularized
+from bgc.symbolic.linear import LinearBlock, Regularized
 from bgc.errors import EquationError
 from bgc.methods.lagrange import Lagrange, acceleration_constraints, default_alpha
 from bgc.model import symbols

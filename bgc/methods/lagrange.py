@@ -37,9 +37,9 @@ from __future__ import annotations
 import sympy as sp
 
 from bgc import methods
-from bgc.codegen.forward_mode import directional, propagate
+from bgc.symbolic.forward_mode import directional, propagate
 from bgc.errors import EquationError
-from bgc.graph.algorithms import is_cyclic, strongly_connected
+from bgc.symbolic.algorithms import is_cyclic, strongly_connected
 from bgc.graph.bondgraph import Constraint
 from bgc.methods.base import ConstraintMethod
 from bgc.methods.consistent import RANK_PARAM

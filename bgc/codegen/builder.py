@@ -61,9 +61,10 @@ class Builder:
     """The causal equations of a CausalGraph, built element by element (``equations.build``), before
     they are sorted and solved. A constraint method extends them through this surface
     only (``ConstraintMethod.embed`` and ``constraint_equations``): ``define``, ``port``,
-    ``algebraic_state``, and the tables ``eqs``, ``origin``, ``display``, ``states``,
-    ``kkt_rows`` (lagrange's rows of the constraint block) and ``zcp_dependent`` (zcp's
-    momenta no longer integrated)."""
+    ``add_state``, ``algebraic_state``, the tables ``eqs``, ``origin``, ``display``,
+    ``states``, ``projection``, and one slot for the method's own state
+    (``method_state``: ``ConstraintMethod.new_state``), which the builder never reads
+    (``methods.base.Equations``)."""
 
     def __init__(self, cg: CausalGraph):
         self.cg, self.g, self.m = cg, cg.graph, cg.graph.model
@@ -74,11 +75,7 @@ class Builder:
         self.dependent: dict[str, sp.Symbol] = {}
         self.refs: dict[sp.Symbol, sp.Expr] = {}
         self.guards: list[tuple[str, sp.Expr]] = []
-        self.kkt_rows: dict = {}     # lagrange: multiplier -> {dynamic state: d rate/d x}
-        self.kkt_rates: dict = {}    # lagrange: net force on a massless body -> its column
-        self.kkt_constraint: dict = {}  # lagrange: multiplier -> (g, dg/dt)
-        self.pose_rows: dict = {}       # augmented: pose state -> {dynamic state: d rate/d x}
-        self.zcp_dependent: list = []   # zcp: (momentum, its rate, name) not integrated
+        self.method_state: object = None     # the constraint method's (``new_state``)
         self.algebraic: list = []       # states of a DAE whose row of M is zero
         self.projection: dict = {}      # state -> its correction after a step
         self._columns: dict = {}        # (bond, effort | flow) -> its column of symbols
@@ -137,6 +134,12 @@ class Builder:
         """A one-port element's bond, the sign of its power, its effort and flow."""
         b = self.g.ports[name][0]
         return b, self.g.port_sign(b, name), self.E(b), self.F(b)
+
+    def add_state(self, label: str, sym, dsym, initial, element: str):
+        """A state ``sym`` with its rate's symbol ``dsym`` (defined elsewhere), its initial
+        value in the parameters, shown as ``label``."""
+        self.states.append(State(label, sym, dsym, initial, element))
+        self.display[sym], self.display[dsym] = label, f"d({label})/dt"
 
     def algebraic_state(self, label: str, sym, dsym, residual, element: str):
         """A state with no derivative in the equations (a zero row of the mass matrix):

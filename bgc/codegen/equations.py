@@ -62,8 +62,8 @@ def build(b: Builder):
 def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
     """Build, sort and solve the causal equations of a causal graph. Loops with more
     than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
-    The method (what L became) was chosen by ``expand``; ``lagrange`` adds the
-    multipliers' acceleration-level equations."""
+    The method (what L became) was chosen by ``expand``; its hooks add its own
+    equations and solve its own loops (``methods.base``)."""
     with gc_paused():
         return _derive(cg, max_symbolic_loop)
 
@@ -86,6 +86,7 @@ def gc_paused():
 def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
     b = Builder(cg)
     method = methods.get(cg.graph.method)
+    b.method_state = method.new_state(b)
     build(b)
     b.resolve_refs()
     b.resolve_derivatives()
@@ -117,8 +118,7 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
                             projection=[(i, b.projection[st.sym].xreplace(aliases))
                                         for i, st in enumerate(b.states)
                                         if st.sym in b.projection],
-                            loops_closed=bool(cg.graph.zcp is not None
-                                              and cg.graph.zcp.closed))
+                            loops_closed=method.loops_closed(cg.graph))
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

@@ -1,9 +1,12 @@
 """Stage **equations**: the algebraic loops (strongly connected blocks of the causal
 equations) torn and solved: symbolically where small, else as a ``LinearBlock`` the
 kernels solve at run time (in all its variables, or reduced to its tearing variables);
-a constraint method's loops (multipliers, dependent momenta) as the method asks."""
+a constraint method's loops (its multipliers, say) as the method asks (``loop_block``)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
@@ -12,7 +15,6 @@ from bgc import methods
 from bgc.codegen.builder import Builder
 from bgc.codegen.system import Loop
 from bgc.errors import EquationError
-from bgc.methods.consistent import RANK_PARAM
 from bgc.model import symbols
 from bgc.symbolic.algorithms import is_cyclic, strongly_connected
 from bgc.symbolic.forward_mode import directional, propagate
@@ -107,39 +109,38 @@ def _reduced_block(b: Builder, tears: list, order: list, index: int,
                        tuple(b.eqs[t] for t in tears), chain, tuple(pre), rank)
 
 
-def _kkt_block(b: Builder, tears: list, order: list, index: int) -> LinearBlock:
-    """The constraint block of method lagrange: the acceleration-level equations are
-    linear in the multipliers u, ``resid = K (dp/dt) + ...`` with ``dp/dt = dp/dt|u=0 +
-    B u``; K (the rates' rows on the dynamic states, from ``lagrange``) and B (the
-    multipliers' rows on the dynamic states' rates, forward mode along the loop, which
-    is the force path) are sparse; their product ``J M^-1 J^T`` is formed numerically at
-    run time."""
-    chain = tuple((v, b.eqs[v]) for v in order)
-    dynamic = sorted({x for rows in b.kkt_rows.values() for x in rows},
-                     key=lambda x: x.name)
-    col = {x: j for j, x in enumerate(dynamic)}
-    dstate = {st.dsym: st.sym for st in b.states}
-    dstate.update({ds: x for x, ds, _ in b.zcp_dependent})
-    dstate.update(b.kkt_rates)
-    sens = {t: {k: sp.S.One} for k, t in enumerate(tears)}
-    pre = propagate(chain, sens, lambda v, k: f"S{index}_{v.name}__{k}")
-    B = tuple((col[dstate[dx]], k, d) for dx in sorted(sens, key=lambda s: s.name)
-              if dx in dstate and dstate[dx] in col for k, d in sens[dx].items())
-    K = tuple((i, col[x], d) for i, t in enumerate(tears)
-              for x, d in sorted(b.kkt_rows[t].items(), key=lambda kv: kv[0].name))
-    # a body of negligible mass adds its twist's rates, each one rank of the saddle point
-    rank = symbols.param(RANK_PARAM) + sum(symbols.kind(t) == "acceleration" for t in tears)
-    return LinearBlock(index, tuple(tears), (), None, tuple(b.eqs[t] for t in tears), chain,
-                       tuple(pre), rank, (len(dynamic), K, B))
+@dataclass
+class Torn:
+    """An algebraic loop torn (``methods.base.TornLoop``: what a method's ``loop_block``
+    is given): its variables, tears and the rest in causal order, the index of its first
+    block, and what the stage builds for a method."""
+    b: Builder
+    comp: list
+    tears: list
+    order: list
+    index: int
+    kind: str                   # as ``bgc check`` reports it; a method may rename it
+    refuse: Callable = None
+
+    def chain(self) -> list:
+        """The loop's other variables' assignments, in causal order (after its block)."""
+        return [(v, self.b.eqs[v]) for v in self.order]
+
+    def reduced_block(self, rank=None, numeric_rhs: bool = False) -> LinearBlock:
+        """The loop as a block in its tears (``_reduced_block``)."""
+        return _reduced_block(self.b, self.tears, self.order, self.index, self.refuse,
+                              rank=rank, numeric_rhs=numeric_rhs)
 
 
 def solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBOLIC_LOOP,
-                block_index: int = 0) -> tuple[list, Loop]:
+               block_index: int = 0) -> tuple[list, Loop]:
+    """Loop ``comp`` torn (the method's ``tear_first`` first) and solved: as the method
+    asks (``loop_block``), else numerically in its tears where it runs through the bodies'
+    rotations or a body of negligible mass, else symbolically where it has at most
+    ``max_symbolic`` tears, else numerically in all its variables."""
     eqs = b.eqs
-    multipliers = [v for v in comp if symbols.kind(v) in ("multiplier", "acceleration")]
-    zcp_dependent = {x for x, _, _ in b.zcp_dependent}
-    dependent = [v for v in comp if v in zcp_dependent]
-    tears = _tear(comp, deps, multipliers + dependent)
+    method = methods.get(b.g.method)
+    tears = _tear(comp, deps, method.tear_first(b, comp))
     torn = set(tears)
     rest = [v for v in comp if v not in torn]
     live = set(rest)
@@ -159,31 +160,16 @@ def solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMBO
                              loc=where.loc if where else None,
                              key=f"elements.{placed[0]}" if placed else None, hint=hint)
 
-    if multipliers and set(tears) == set(multipliers):
-        loop.kind = "constraint"
-        n_acc = sum(symbols.kind(v) == "acceleration" for v in tears)
-        loop.tearing = [f"numeric SVD of the {len(tears) - n_acc} Lagrange multipliers"
-                        + (f" and {n_acc} twist rates of bodies of negligible mass"
-                           if n_acc else "")]
-        block = _kkt_block(b, tears, order, block_index)
-        before, block, after = methods.get(b.g.method).constraint_block(b, block)
-        return before + [block] + [(v, eqs[v]) for v in order] + after, loop
-    if multipliers:
-        loop.kind = "constraint"
-        loop.tearing = [f"numeric SVD of {len(tears)} unknowns "
-                        f"({len(multipliers)} Lagrange multipliers)"]
-        # the constraints' rank at run time, plus the other tears (a storage in
-        # derivative causality on the mechanism's ports), which are never redundant
-        regular = sum(symbols.kind(v) != "multiplier" for v in tears)
-        block = _reduced_block(b, tears, order, block_index, refuse,
-                               rank=symbols.param(RANK_PARAM) + regular)
-        return [block] + [(v, eqs[v]) for v in order], loop
-    if dependent:
-        loop.kind = "imposed-flow"
-        loop.tearing = [f"numeric LU of the {len(dependent)} dependent momenta (class-1 "
-                        "ZCP: velocities imposed by the flow sources)"]
-        block = _reduced_block(b, tears, order, block_index, refuse, numeric_rhs=True)
-        return [block] + [(v, eqs[v]) for v in order], loop
+    torn = Torn(b, comp, tears, order, block_index, kind)
+
+    def refuse_torn(why, hint):
+        loop.kind = torn.kind
+        return refuse(why, hint)
+    torn.refuse = refuse_torn
+    solved = method.loop_block(b, torn)
+    if solved is not None:
+        loop.kind, loop.tearing = torn.kind, list(solved.tearing)
+        return list(solved.items), loop
     if kind == "derivative" and any(b.g.elements[e].kind == "XTF" or b.g.elements[e].orthogonal
                                     for e in placed):
         # a storage geared rigidly to the mechanism through a port: its loop runs through

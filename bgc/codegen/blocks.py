@@ -7,16 +7,11 @@ expressions of parameters, so ``-p`` retunes a controller without recompiling.""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import sympy as sp
 
-from bgc.codegen.elements import State
+from bgc.codegen.builder import Builder, State
 from bgc.model import symbols
 from bgc.model.model import Block
-
-if TYPE_CHECKING:
-    from bgc.codegen.equations import Builder
 
 
 def build(bld: Builder):
@@ -24,12 +19,6 @@ def build(bld: Builder):
     for name, blk in bld.m.blocks.items():
         u = _signal(bld, blk, "u", blk.input)
         RULES[blk.kind](bld, blk, u)
-
-
-def refs(model, want) -> dict:
-    """``block.y`` and ``block.u`` -> their symbols, for the blocks ``want`` accepts."""
-    return {symbols.ref(n, a): symbols.block(n, a)
-            for n in model.blocks if want(n) for a in Block.ATTRS}
 
 
 def _signal(bld: Builder, blk: Block, attr: str, expr) -> sp.Symbol:

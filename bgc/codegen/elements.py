@@ -6,49 +6,13 @@ SCAP assigned. Adding an element kind means a rule here (and its schema in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import sympy as sp
 
 from bgc import methods
+from bgc.codegen.builder import Builder, Dt, State, matmul
 from bgc.errors import EquationError
 from bgc.graph.expand import AXES
 from bgc.model import symbols
-
-if TYPE_CHECKING:
-    from bgc.codegen.equations import Builder
-
-
-@dataclass
-class State:
-    """A state of the system: what an element in integral causality integrates."""
-    name: str            # display name, e.g. "spring.q"
-    sym: sp.Symbol
-    dsym: sp.Symbol
-    initial: sp.Expr     # in terms of parameters
-    element: str
-
-
-def matmul(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
-    """``A * B``, the same entries as sympy forms them (each the sum of the products of
-    the non-zero entries, in order), without sympy's conversions to and from its
-    DomainMatrix, which cost more than the products on the small matrices here."""
-    m, k, o = A.rows, A.cols, B.cols
-    if B.rows != k:
-        raise ValueError(f"matmul: {A.shape} x {B.shape}")
-    a, b = A.flat(), B.flat()
-    out = []
-    for i in range(m):
-        row = a[i * k:(i + 1) * k]
-        for j in range(o):
-            out.append(sp.Add(*[x * y for x, y in zip(row, b[j::o]) if x != 0 and y != 0]))
-    return sp.Matrix(m, o, out)
-
-
-class Dt(sp.Function):
-    """Placeholder for the time derivative of a dependent storage variable."""
-    nargs = 1
 
 
 def _Se(bld: Builder, name, el):
@@ -273,39 +237,17 @@ def _XTF(bld: Builder, name, el):
 
 def _M0(bld: Builder, name, el):
     """A body of negligible mass: its velocity is an unknown U of the algebraic loop
-    closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``).
-
-    Methods lagrange and zcp (whose tree leaves such bodies out, ``zcp._spanning_tree``):
-    the constraints fix U only at the velocity level, so U is a state
-    and its rate A an unknown of the constraint block next to the multipliers, defined
-    by the same balance ``A = A + e``: the block becomes the saddle point
-    ``[J M^-1 J^T, J_U; J_U^T, 0]``, regular where the blocked directions fix U."""
+    closed by the balance of forces, written as ``U = U + e`` (i.e. ``e = 0``), unless the
+    constraint method writes it its own way (``ConstraintMethod.massless_body``: a method
+    with multipliers makes U a state and its rate an unknown of its constraint block)."""
     b, s, E, F = bld.port(name)
-    if methods.get(bld.g.method).ideal:
-        return _massless_lagrange(bld, name, b, s, E, F)
+    if methods.get(bld.g.method).massless_body(bld, name, b, s, E, F):
+        return
     U = sp.Matrix([symbols.unknown(name, k) for k in range(len(E))])
     bld.define(F, s * U, name, b)
     bld.define(U, U + s * E, name, b)
     for k, u in enumerate(U):
         bld.display[u] = f"{name.replace('__', '.')}.{AXES[k]}"
-
-
-def _massless_lagrange(bld: Builder, name, b, s, E, F):
-    for k in range(len(E)):
-        u, du = symbols.state(name, f"u{AXES[k]}"), symbols.dstate(name, f"u{AXES[k]}")
-        acc = symbols.acceleration(name, k)
-        bld.define(F[k], s * u, name, b)
-        bld.define(du, acc, name, b)
-        bld.define(acc, acc + s * E[k], name, b)
-        label = f"{name.replace('__', '.')}.{AXES[k]}"
-        bld.states.append(State(label, u, du, sp.S.Zero, name))
-        bld.display[u], bld.display[du] = label, f"d({label})/dt"
-        bld.display[acc] = f"{label}.balance"
-        # the block's row of A: e, the net force on the body, as the rate of a virtual
-        # momentum (column ``net``) that must stay zero
-        net = symbols.state(name, f"net{AXES[k]}")
-        bld.kkt_rows[acc] = {net: sp.Integer(s)}
-        bld.kkt_rates[E[k]] = net
 
 
 RULES = {"Se": _Se, "MSe": _Se, "Sf": _Sf, "MSf": _Sf, "C": _C, "I": _I, "R": _R,

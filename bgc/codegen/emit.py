@@ -19,7 +19,7 @@ import jinja2
 import sympy as sp
 
 from bgc import __version__, methods, progress
-from bgc.codegen import kernels, start
+from bgc.codegen import kernels, start, workspace
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.codegen.jacobian import tape
 from bgc.codegen.module_file import (  # noqa: F401
@@ -199,7 +199,7 @@ def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
     system, hoisted = hoist_calls(system)
     dx = [st.dsym for st in system.states]
     rhs_asg, _ = cone(system.assignments, dx)
-    a_patterns = {it.index: kernels.factor_pattern(len(it.unknowns), *it.factors)
+    a_patterns = {it.index: workspace.factor_pattern(len(it.unknowns), *it.factors)
                   for it in rhs_asg if isinstance(it, LinearBlock)
                   and it.regularize is not None}
     with progress.stage("jacobian") as st:

@@ -3,8 +3,8 @@ kernels compute it once per instance in a loop over a table instead of writing i
 once per instance (issue 40; DESIGN.md: "compile cost follows the number of component
 kinds, not the model's size").
 
-A program's straight-line steps (``kernels._steps``: assignments, outputs, a Jacobian's
-partials) are independent of each other within one *level* of the causal order (the
+A program's straight-line steps (``steps.program_steps``: assignments, outputs, a
+Jacobian's partials) are independent of each other within one *level* of the causal order (the
 longest chain of assignments they are computed from), so any order within a level is
 correct. ``schedule`` orders them level by level; at each level it groups the steps by the
 instance they belong to (``owner``: the longest instance name in a symbol's name), and
@@ -12,7 +12,7 @@ the steps of one instance at one level by their structure: the expressions with 
 symbol a placeholder ``T0, T1, ...`` in the order it is met, every number kept where the
 group's instances agree on it and a placeholder ``C0, ...`` where they differ. A group of
 at least ``MIN_COPIES`` instances with the same structure becomes a ``Loop``: one
-template, written once in IR (``kernels._Module.loop``), and a table, a row per instance,
+template, written once in IR (``kernels.Module.loop``), and a table, a row per instance,
 of where each placeholder lives (a state, a parameter, a workspace slot, an output) and of
 the numbers that differ. The rest stays straight-line code, as before.
 
@@ -28,18 +28,18 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from bgc.codegen.lowering import Function
+from bgc.codegen.steps import STRAIGHT, Grad, LoopOver, Out, Set
 from bgc.model import symbols
 from bgc.model.signals import table, table_slope
 
 MIN_COPIES = 5           # the fewest instances of one structure that make a loop
-_STRAIGHT = ("set", "grad", "out")      # the step kinds a loop may take; others stay
 
 
 @dataclass
 class Loop:
-    """One loop of a program: its template ``steps`` (``("set", T, e)``, ``("out", j,
-    e)`` and ``("grad", e, [(j, T)])`` in placeholders; ``j``: a row's entry, an output
-    slot), where each placeholder lives (``bases``: "x", "p", "w" or "out"), and per
+    """One loop of a program: its template ``steps`` (``Set(T, e)``, ``Out(j, e)`` and
+    ``Grad(e, [(j, T)])`` in placeholders; ``j``: a row's entry, an output slot), where each placeholder lives (``bases``: "x", "p", "w" or "out"), and per
     instance its ``rows`` (the index of each placeholder in its base) and ``consts`` (the
     numbers that differ between instances)."""
     steps: list
@@ -89,8 +89,8 @@ def owners(instances) -> callable:
 
 def schedule(steps: list, instances, where, assigned: dict | None = None,
              min_copies: int | None = None, memo: dict | None = None) -> list:
-    """``steps`` (``kernels._steps``) with loops: the same steps, or, where some structure
-    repeats in ``min_copies`` instances or more, level by level with ``("loop", Loop)``
+    """``steps`` (``steps.program_steps``) with loops: the same steps, or, where some
+    structure repeats in ``min_copies`` instances or more, level by level with ``LoopOver``
     steps in place of the instances' own. ``where(symbol)``: (base, index) of a symbol's
     value ("x" state, "p" parameter, "w" workspace slot); ``assigned``: expression -> the
     symbol it is assigned to (a Jacobian step's partials are of an assignment's
@@ -107,17 +107,17 @@ def schedule(steps: list, instances, where, assigned: dict | None = None,
         return by_symbol(s)
 
     def own(step):
-        if step[0] == "set":
-            return by_symbol(step[1])
-        e = _expr(step)
-        if step[0] == "grad" and e in assigned:
+        if isinstance(step, Set):
+            return by_symbol(step.v)
+        e = step.e
+        if isinstance(step, Grad) and e in assigned:
             return by_symbol(assigned[e])
         found = {o for o in map(by_symbol, _symbols(e, owner.memo)) if o is not None}
         return found.pop() if len(found) == 1 else None
     owner.step, owner.memo = own, memo if memo is not None else {}
     out, segment = [], []
     for step in steps:
-        if step[0] in _STRAIGHT:
+        if isinstance(step, STRAIGHT):
             segment.append(step)
             continue
         out += _segment(segment, owner, where, min_copies)
@@ -133,11 +133,11 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
         return steps
     level, defined = [], {}
     for step in steps:
-        reads = _symbols(_expr(step), owner.memo)
+        reads = _symbols(step.e, owner.memo)
         lv = 1 + max((defined[s] for s in reads if s in defined), default=-1)
         level.append(lv)
-        if step[0] == "set":
-            defined[step[1]] = lv
+        if isinstance(step, Set):
+            defined[step.v] = lv
     by_level: dict[int, list] = {}
     for lv, step in zip(level, steps):
         by_level.setdefault(lv, []).append(step)
@@ -145,7 +145,7 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
     for lv in sorted(by_level):
         straight, loops = _level(by_level[lv], owner, where, min_copies)
         looped = looped or bool(loops)
-        out += straight + [("loop", lp) for lp in loops]
+        out += straight + [LoopOver(lp) for lp in loops]
     return out if looped else steps
 
 
@@ -165,16 +165,12 @@ def _symbols(e, memo: dict) -> frozenset:
     return out
 
 
-def _expr(step):
-    return step[2] if step[0] in ("set", "out") else step[1]
-
-
 def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]]:
     """One level's steps: those left straight, and the loops."""
     per: dict[str, list] = {}
     straight = []
     for step in steps:
-        o = owner.step(step) if step[0] in _STRAIGHT else None
+        o = owner.step(step) if isinstance(step, STRAIGHT) else None
         if o is None:
             straight.append(step)
         else:
@@ -211,25 +207,25 @@ def _canonical(block: list, o: str, where, memo: dict):
     out) and what the template and the table need (the ordered steps, the placeholders'
     symbols and bases, the numbers in order)."""
     def sort_key(step):
-        if step[0] == "set":
-            return ("set", _local(step[1], o))
-        if step[0] == "out":
-            return ("out", tuple(sorted(_local(w, o) for w in step[2].free_symbols)))
-        e = step[1]
-        return ("grad", tuple(sorted(_local(w, o) for _, w in step[2])), str(len(e.args)))
+        if isinstance(step, Set):
+            return ("set", _local(step.v, o))
+        if isinstance(step, Out):
+            return ("out", tuple(sorted(_local(w, o) for w in step.e.free_symbols)))
+        return ("grad", tuple(sorted(_local(w, o) for _, w in step.partials)),
+                str(len(step.e.args)))
     ordered = sorted(block, key=sort_key)
     ph: dict = {}
     nums: list = []
     key = []
     for step in ordered:
-        if step[0] == "set":
-            lhs = _place(step[1], ph)
-            key.append(("set", lhs) + _shape(step[2], ph, nums, memo))
-        elif step[0] == "out":
-            key.append(("out",) + _shape(step[2], ph, nums, memo))
+        if isinstance(step, Set):
+            lhs = _place(step.v, ph)
+            key.append(("set", lhs) + _shape(step.e, ph, nums, memo))
+        elif isinstance(step, Out):
+            key.append(("out",) + _shape(step.e, ph, nums, memo))
         else:
-            key.append(("grad",) + _shape(step[1], ph, nums, memo)
-                       + (tuple(_place(w, ph) for _, w in step[2]),))
+            key.append(("grad",) + _shape(step.e, ph, nums, memo)
+                       + (tuple(_place(w, ph) for _, w in step.partials),))
     syms = list(ph)
     bases = tuple(_where(s, where, memo)[0] for s in syms)
     return (tuple(key), bases), (ordered, syms, nums)
@@ -315,22 +311,23 @@ def _loop(members: list, where) -> Loop:
 
     steps, n_out = [], 0
     for step in first_steps:
-        if step[0] == "set":
-            steps.append(("set", sym_map[step[1]], rebuild(step[2])))
-        elif step[0] == "out":
-            steps.append(("out", len(T) + n_out, rebuild(step[2])))
+        if isinstance(step, Set):
+            steps.append(Set(sym_map[step.v], rebuild(step.e)))
+        elif isinstance(step, Out):
+            steps.append(Out(len(T) + n_out, rebuild(step.e)))
             n_out += 1
         else:
-            e = rebuild(step[1])
-            steps.append(("grad", e, [(len(T) + n_out + k, sym_map[w])
-                                      for k, (_, w) in enumerate(step[2])]))
-            n_out += len(step[2])
+            e = rebuild(step.e)
+            steps.append(Grad(e, [(len(T) + n_out + k, sym_map[w])
+                                  for k, (_, w) in enumerate(step.partials)]))
+            n_out += len(step.partials)
     bases = [where(s)[0] for s in first_syms] + ["out"] * n_out
     lp = Loop(steps, T, bases, C)
     for o, _, (ordered, syms, nums) in members:
         row = [where(s)[1] for s in syms]
-        row += [slot for step in ordered if step[0] != "set"
-                for slot in ([step[1]] if step[0] == "out" else [m for m, _ in step[2]])]
+        row += [slot for step in ordered if not isinstance(step, Set)
+                for slot in ([step.slot] if isinstance(step, Out)
+                             else [m for m, _ in step.partials])]
         lp.rows.append(row)
         lp.consts.append([float(nums[k]) for k in differ])
         lp.owners.append(o)
@@ -344,13 +341,12 @@ TEMPLATE_ARGS = ("double %t, double* noalias %x, double* noalias %p, double* noa
 def template_ir(lp: Loop, name: str, layout, decls: set) -> str:
     """``@name(t, x, p, w, out, row, crow)``: the loop's template for one instance, each
     placeholder read and written at ``base[row[j]]``, each differing number ``crow[k]``;
-    lowered as the straight-line chunks are (``kernels._Function``)."""
-    from bgc.codegen.kernels import _Function
+    lowered as the straight-line chunks are (``lowering.Function``)."""
     slot = {s: j for j, s in enumerate(lp.placeholders)}
     const = {c: k for k, c in enumerate(lp.constants)}
     base = {"x": "%x", "p": "%p", "w": "%w", "out": "%out"}
 
-    class Template(_Function):
+    class Template(Function):
         def index(self, j: int) -> str:
             at = self.op(f"getelementptr inbounds i64, i64* %row, i64 {j}")
             return self.op(f"load i64, i64* {at}, align 8")
@@ -376,13 +372,13 @@ def template_ir(lp: Loop, name: str, layout, decls: set) -> str:
 
     fn = Template(name, layout, {}, {}, decls)
     for step in lp.steps:
-        if step[0] == "set":
-            fn.assign(step[1], step[2])
-        elif step[0] == "out":
-            fn.store("%out", fn.index(step[1]), fn.val(step[2]))
+        if isinstance(step, Set):
+            fn.assign(step.v, step.e)
+        elif isinstance(step, Out):
+            fn.store("%out", fn.index(step.slot), fn.val(step.e))
         else:
-            d = fn.grad(step[1], [w for _, w in step[2]])
-            for j, w in step[2]:
+            d = fn.grad(step.e, [w for _, w in step.partials])
+            for j, w in step.partials:
                 fn.store("%out", fn.index(j), d[w])
     return "\n".join([f"define void @{name}({TEMPLATE_ARGS}) noinline nounwind {{",
                       "entry:", *fn.body, "  ret void", "}"])
@@ -393,7 +389,7 @@ def driver_ir(name: str, template: str, n: int, width: int, rows: str, consts: s
     """``@name(t, x, p, w, out)``: the template called for each of the ``n`` instances,
     with its row of the table ``rows`` (``width`` entries a row) and of ``consts`` (a
     pointer and its row's length); ``rows`` and ``consts[0]`` typed pointers
-    (``kernels._Module.array``)."""
+    (``kernels.Module.array``)."""
     return "\n".join([
         f"define internal void @{name}({args}) nounwind {{",
         "entry:",

@@ -1,6 +1,6 @@
-"""Generated modules on disk: where a model's module lives, which names it may take,
-whether it is fresh (``MODEL_HASH``: the model's digest, method, bgc version and the
-compiler's own code) and importing it.
+"""Generated modules on disk: where a model's module lives (the names it may take:
+``bgc.model.names``), whether it is fresh (``MODEL_HASH``: the model's digest, method, bgc
+version and the compiler's own code) and importing it.
 
 Apart from ``emit`` (which renders and writes a module, with sympy and jinja2), so that a
 run whose module is fresh finds and imports it without loading either.
@@ -8,15 +8,20 @@ run whose module is fresh finds and imports it without loading either.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import importlib.util
-import keyword
 import re
 import sys
 from pathlib import Path
 
 from bgc import __version__, methods
+# the names a module may take are the model's rule (a model's name names its module)
+from bgc.model.names import (  # noqa: F401 (this module's interface too)
+    _installed_top_level,
+    module_name_problem,
+    module_name_syntax_problem,
+    suggest_module_name,
+)
 
 _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
 
@@ -25,8 +30,8 @@ _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
 # scene's reduction passes). Solvers, analysis, the CLI and the run-time side of bgc are
 # not in it, so editing them leaves every generated module fresh. tests/codegen checks
 # that a compile imports nothing of bgc outside these but the cross-cutting helpers.
-CODEGEN_SOURCES = ("model", "mechanics", "graph", "methods", "codegen", "pipeline.py",
-                   "scene/reduce.py")
+CODEGEN_SOURCES = ("model", "mechanics", "graph", "methods", "codegen", "symbolic",
+                   "pipeline.py", "scene/reduce.py")
 
 
 def codegen_files(root: Path | None = None) -> list[Path]:
@@ -62,69 +67,6 @@ def model_hash(model_digest: str, method: str) -> str:
     key = f"{model_digest}|{method}|{__version__}|{_COMPILER_DIGEST}"
     return hashlib.sha256(key.encode()).hexdigest()[:32]
 
-
-
-@functools.lru_cache(maxsize=1)
-def _taken_names() -> frozenset:
-    """Top-level module names a generated module must not shadow: the standard library's,
-    the interpreter's built-in modules and every installed distribution's (from the
-    installed metadata: deterministic, no search of sys.path or the working directory)."""
-    return frozenset(sys.stdlib_module_names) | frozenset(sys.builtin_module_names) | \
-        _installed_top_level() | {"bgc"}
-
-
-def _installed_top_level() -> frozenset:
-    """The top-level names of the installed distributions, as the keys of
-    ``importlib.metadata.packages_distributions()``: a distribution's ``top_level.txt``,
-    else the first part of each ``.py`` file its RECORD lists. Without the distribution
-    names that function also reads (each one's METADATA parsed: half its time, which
-    every run would pay, a fresh module's included)."""
-    import importlib.metadata
-    names = set()
-    for dist in importlib.metadata.distributions():
-        declared = (dist.read_text("top_level.txt") or "").split()
-        names.update(declared or (f.parts[0] if len(f.parts) > 1 else f.with_suffix("").name
-                                  for f in dist.files or () if f.suffix == ".py"))
-    return frozenset(names)
-
-
-def module_name_syntax_problem(name) -> str | None:
-    """Why ``name`` cannot be a module's name as Python reads it (None if it can): a
-    Python identifier, not a keyword, not a dunder such as ``__init__`` (which would
-    overwrite the output package's ``__init__.py``). Cheap: the warm path asks only this
-    of a module it finds fresh (which passed ``module_name_problem`` when written)."""
-    if not (isinstance(name, str) and name.isascii() and name.isidentifier()):
-        return f"{name!r} is not a valid Python module name"
-    if keyword.iskeyword(name):
-        return f"{name!r} is a Python keyword"
-    if name.startswith("__") and name.endswith("__"):
-        return f"{name!r} is a special (dunder) name"
-    return None
-
-
-def module_name_problem(name) -> str | None:
-    """Why ``name`` cannot name a generated module (None if it can): it must pass
-    ``module_name_syntax_problem`` and must not shadow a standard library module or an
-    installed package (``numpy.py`` beside other modules breaks their imports)."""
-    problem = module_name_syntax_problem(name)
-    if problem is not None:
-        return problem
-    if name in _taken_names():
-        what = "standard library module" if name in sys.stdlib_module_names \
-            else "built-in module" if name in sys.builtin_module_names else "installed package"
-        return f"{name!r} would shadow the {what} '{name}'"
-    return None
-
-
-def suggest_module_name(name) -> str:
-    """A valid module name close to ``name`` (for the hint of a rejected one)."""
-    base = re.sub(r"[^0-9A-Za-z_]+", "_", str(name)).strip("_") or "model"
-    if base[0].isdigit():
-        base = "m_" + base
-    for cand in (base, f"{base}_model"):
-        if module_name_problem(cand) is None:
-            return cand
-    return "bgc_model"
 
 
 def module_path(name: str, out_dir: str | Path = "generated",

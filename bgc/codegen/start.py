@@ -88,7 +88,7 @@ class _Unknown(Exception):
 
 class _Doubles:
     """Sympy expressions valued in float64 as the generated kernels compute them
-    (``kernels._Function._lower``'s operations), memoized per node."""
+    (``lowering.Function``'s operations), memoized per node."""
 
     def __init__(self, env: dict, tables: dict):
         self.env, self.tables, self.memo = env, tables, {}

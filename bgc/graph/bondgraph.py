@@ -40,7 +40,9 @@ class BondGraph:
     joints: dict[str, list] = field(default_factory=dict)   # joint -> its Directions
     method: str = "parasitic"     # the name of its constraint method (bgc.methods)
     constraints: list = field(default_factory=list)          # lagrange, zcp: [Constraint]
-    zcp: object = None      # method zcp: the zcp.Plan (spanning tree, loops, dependents)
+    # the constraint method's plan from its graph pass (``restructure``), read by its own
+    # hooks only: zcp's ``zcp.Plan`` (spanning tree, loops, dependents); None: no plan
+    method_plan: object = None
     port_junctions: dict[str, str] = field(default_factory=dict)   # junction -> port name
 
     def label(self, node: str) -> str:

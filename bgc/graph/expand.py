@@ -85,7 +85,11 @@ def joint_param(joint: str, role: str) -> str:
     return f"{joint}__{role}"
 
 
-class _Expander:
+class Expander:
+    """A Model being expanded into a BondGraph: the elements and bonds so far, the
+    constraints a method's constraint elements add (``methods.base.Expander``: what a
+    method may use), and a joint's directions per shape."""
+
     def __init__(self, model: Model, method: ConstraintMethod):
         self.m, self.method = model, method
         self.constraints: list = []         # bondgraph.Constraint, added by the method
@@ -417,7 +421,7 @@ def expand(model: Model, method: str = methods.DEFAULT) -> BondGraph:
     ``parasitic`` a stiff spring || damper, under ``lagrange`` an effort source (the
     multiplier); ``zcp`` starts from the latter and its ``restructure`` pass turns the
     tree joints' L into flow sources."""
-    ex = _Expander(model, methods.get(method))
+    ex = Expander(model, methods.get(method))
     for body in model.bodies.values():
         ex.body(body)
     joint_dirs = {name: (j, ex.joint(j)) for name, j in model.joints.items()}

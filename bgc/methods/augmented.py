@@ -5,7 +5,7 @@ which Cuadrado, Dopico and Gonzalez set the IFToMM benchmarks' references).
 
 Each blocked direction's constraint element L is an effort source whose effort is the
 multiplier, defined as lagrange's by the constraint at the acceleration level with
-Baumgarte stabilisation (``lagrange.acceleration_constraints``). The multipliers' block
+Baumgarte stabilisation (``multipliers.acceleration_constraints``). The multipliers' block
 ``J M^-1 J^T lambda = c`` (formed at run time from its sparse factors K and B) is solved
 regularized, in each row's own scale::
 
@@ -41,10 +41,11 @@ from dataclasses import replace
 
 import sympy as sp
 
-from bgc.codegen.equations import LinearBlock, Regularized
 from bgc.errors import EquationError
-from bgc.methods.lagrange import Lagrange, acceleration_constraints, default_alpha
+from bgc.methods.lagrange import Lagrange
+from bgc.methods.multipliers import MultiplierState, acceleration_constraints, default_alpha
 from bgc.model import symbols
+from bgc.symbolic.linear import LinearBlock, Regularized
 
 EPS = "augmented__eps"
 DEFAULT_EPS = 1e-8
@@ -57,6 +58,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     it the projection: one regularized block on the same factors with two right-hand
     sides (velocities: ``dg/dt``; positions: ``g``), the pose motions of the position
     impulse, and each state's correction (``b.projection``)."""
+    st: MultiplierState = b.method_state
     tears = block.unknowns
     rows = tuple(i for i, u in enumerate(tears) if symbols.kind(u) == "multiplier")
     if len(rows) != len(tears):         # (bodies of negligible mass: refused before)
@@ -94,11 +96,11 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
         raise AssertionError("augmented: the constraint block's sensitivities read its "
                              "unknowns (a nonlinear loop)")
     block = replace(block, rank=None, regularize=reg, tear_eqs=tear)
-    dynamic = sorted({x for t in tears for x in b.kkt_rows[t]}, key=lambda x: x.name)
+    dynamic = sorted({x for t in tears for x in st.rows[t]}, key=lambda x: x.name)
     names = [t.name[len("LAM_"):] for t in tears]
     mu = {tag: [sp.Symbol(f"MU{tag}_{n}", real=True) for n in names] for tag in "VG"}
     unknowns = tuple(u for pair in zip(mu["V"], mu["G"]) for u in pair)
-    rhs = tuple(e for t in tears for e in (b.kkt_constraint[t][1], b.kkt_constraint[t][0]))
+    rhs = tuple(e for t in tears for e in (st.constraint[t][1], st.constraint[t][0]))
     after = [LinearBlock(block.index + 1, unknowns, (), rhs,
                          tuple(sp.S.Zero for _ in unknowns), factors=(d, K, B),
                          regularize=reg, columns=2)]
@@ -116,7 +118,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
         push[x] = v
     for x, e in impulse["V"].items():
         b.projection[x] = e
-    for q, prow in b.pose_rows.items():
+    for q, prow in st.pose_rows.items():
         e = sum((c * push[x] for x, c in prow.items() if x in push), sp.S.Zero)
         if e != 0:
             b.projection[q] = e

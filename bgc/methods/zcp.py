@@ -44,7 +44,7 @@ import sympy as sp
 from bgc.errors import EquationError
 from bgc.graph.bondgraph import BondGraph
 from bgc.graph.expand import AXES, initial_pose, twist_row
-from bgc.methods.lagrange import Lagrange
+from bgc.methods.multipliers import MultiplierState, Multipliers
 from bgc.model import symbols
 
 ALPHA = "zcp__alpha"
@@ -208,7 +208,7 @@ def _pivot_columns(A: np.ndarray, k: int) -> list[int]:
 
 def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
     """Choose the flow-source (tree) and break-variable (loop-closing) directions and the
-    dependent velocity components; return a copy of the graph with its ``zcp`` plan and
+    dependent velocity components; return a copy of the graph with its plan (``method_plan``) and
     its constraints marked ``imposed`` where L is a flow source (``graph`` unchanged)."""
     model = graph.model
     tree, chords, relays = _spanning_tree(graph)
@@ -243,7 +243,7 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
         plan.tree.append(TreeJoint(name, par, child, dep))
     imposed = {tj.joint for tj in plan.tree}
     closed = {lp.cut for lp in plan.loops} if plan.closed else set()
-    return replace(graph, zcp=plan, constraints=[
+    return replace(graph, method_plan=plan, constraints=[
         replace(c, imposed=c.joint in imposed, closed=c.joint in closed)
         for c in graph.constraints])
 
@@ -251,7 +251,7 @@ def assign(graph: BondGraph, open_loops: bool = True) -> BondGraph:
 def dependent_states(graph: BondGraph) -> list[tuple[sp.Symbol, sp.Symbol, str]]:
     """(momentum symbol, its rate's symbol, display name) of every dependent component."""
     out = []
-    for el, k in graph.zcp.dependent:
+    for el, k in graph.method_plan.dependent:
         label = f"{el.replace('__', '.')}.p{AXES[k]}"
         out.append((symbols.state(el, f"p{AXES[k]}"), symbols.dstate(el, f"p{AXES[k]}"),
                     label))
@@ -267,14 +267,16 @@ def embed(b) -> set:
     dep = dependent_states(g)
     syms = {s for s, _, _ in dep}
     b.states = [st for st in b.states if st.sym not in syms]
-    b.zcp_dependent = dep
+    state: MultiplierState = b.method_state
+    state.dependent = dep
     alpha = symbols.param(ALPHA)
     imposed = [c for c in g.constraints if c.imposed]
     by_joint: dict[str, list] = {}
     for c in imposed:
         by_joint.setdefault(c.joint, []).append(c)
-    sources = [c for tj in g.zcp.tree for c in by_joint[tj.joint]]   # as plan.dependent
-    for c, (el, _), (p, _, label) in zip(sources, g.zcp.dependent, dep):
+    plan: Plan = g.method_plan
+    sources = [c for tj in plan.tree for c in by_joint[tj.joint]]   # as plan.dependent
+    for c, (el, _), (p, _, label) in zip(sources, plan.dependent, dep):
         bond, s, E, F = b.port(c.element)
         gap = c.g if c.g is not None else sp.S.Zero
         b.eqs[p] = p - s * F + alpha * gap         # -s F: the direction's rate dg/dt
@@ -287,7 +289,7 @@ def paths(graph: BondGraph, system) -> list[Path]:
     """Every zero-order causal path of the compiled model, classified 1-4: flow sources of
     tree joints and dependent storage (1), algebraic loops (2-4), and what the plan
     opened or kept closed (4)."""
-    plan = getattr(graph, "zcp", None)
+    plan = graph.method_plan
     out = _tree_paths(graph, plan) if plan is not None else []
     out += _dependent_paths(graph, system) + _algebraic_paths(graph, system)
     if plan is not None:
@@ -413,7 +415,7 @@ def _components(nodes: set, edges) -> int:
     return len({find(n) for n in nodes})
 
 
-class Zcp(Lagrange):
+class Zcp(Multipliers):
     """Zero-order causal paths (paper 11.2.5.1): starts from lagrange's effort sources and
     turns the blocked directions of a spanning tree's joints into flow sources
     (``assign``), whose imposed flows make the children's momenta dependent (``embed``);
@@ -434,8 +436,12 @@ class Zcp(Lagrange):
     def hides_loop(self, loop) -> bool:
         return loop.kind in ("imposed-flow", "constraint")
 
+    def loops_closed(self, graph) -> bool:
+        return graph.method_plan is not None and graph.method_plan.closed
+
     def storage(self, graph, name):
-        return graph.zcp.storage(name) if graph.zcp is not None else None
+        plan = graph.method_plan
+        return plan.storage(name) if plan is not None else None
 
     def report(self, compiled):
         s = compiled.system

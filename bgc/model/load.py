@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bgc.codegen.module_file import module_name_problem, suggest_module_name
+from bgc.model.names import module_name_problem, suggest_module_name
 from bgc.errors import Loc, ModelError
 from bgc.model import components, library, symbols
 from bgc.model.document import (  # noqa: F401  (MAX_*, read_source: bgc's limits, here too)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers import MODELS
 
-from bgc.codegen import elimination, kernels
+from bgc.codegen import elimination, linalg, workspace
 from bgc.codegen.emit import import_module
 from bgc.pipeline import compile_model
 
@@ -35,7 +35,7 @@ def _saddle(rng, n_free: int = 6, n_mult: int = 30):
 
 def _splu():
     """The IR kernel, JIT-compiled alone: f(n, m, A, X, LU, *plan tables) -> bool."""
-    ir = "declare double @llvm.fabs.f64(double)\n" + kernels._splu_ir("t")
+    ir = "declare double @llvm.fabs.f64(double)\n" + linalg.splu_ir("t")
     module = llvm.parse_assembly(ir)
     module.verify()
     llvm.initialize_native_target()
@@ -114,7 +114,7 @@ def test_module_solving_blocks_sparse_matches_dense(tmp_path, monkeypatch, compi
     same rhs and Jacobian as the shipped threshold's dense solves, at states off the
     start (where the start's pivots are no longer exact)."""
     dense = compiled("four_bar", method)
-    monkeypatch.setattr(kernels, "SPARSE_MIN", 2)
+    monkeypatch.setattr(workspace, "SPARSE_MIN", 2)
     _, path = compile_model(MODELS / "four_bar.yaml", tmp_path, method)
     assert "_splu(" in path.read_text()
     sparse = import_module(path)

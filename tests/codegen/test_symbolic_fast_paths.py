@@ -7,8 +7,8 @@ import random
 import sympy as sp
 
 from bgc import pipeline
-from bgc.codegen.equations import matmul
-from bgc.codegen.forward_mode import derivative, directional, trivial
+from bgc.codegen.builder import matmul
+from bgc.symbolic.forward_mode import derivative, directional, trivial
 
 x, y, z, w = sp.symbols("x y z w", real=True)
 
@@ -60,7 +60,7 @@ def test_references_resolve_to_the_same_expressions_as_a_full_map(tmp_path):
     model = load.load("models/double_pendulum.yaml")
     cg = causality.assign(expand.expand(model, "parasitic"))
     b = equations.Builder(cg)
-    b.build()
+    equations.build(b)
     b.resolve_refs()
     full = b.ref_map()
     assert b.refs and all(full[k] == v for k, v in b.refs.items())

@@ -16,13 +16,13 @@ from bgc.model.load import load, loads
 def test_a_hinge_fixes_all_but_the_rotation_about_its_axis():
     expanded = expand(loads(HINGE), "zcp")
     g = zcp.assign(expanded)
-    assert expanded.zcp is None and not any(c.imposed for c in expanded.constraints)
-    (tree,) = g.zcp.tree
+    assert expanded.method_plan is None and not any(c.imposed for c in expanded.constraints)
+    (tree,) = g.method_plan.tree
     assert (tree.joint, tree.parent, tree.child) == ("hinge", None, "rod")
     # the rod's three translations and its rotations about body x and z (the axis is y)
     assert tree.dependent == [("rod__m", 0), ("rod__m", 1), ("rod__m", 2),
                               ("rod__J", 0), ("rod__J", 2)]
-    assert g.zcp.loops == []
+    assert g.method_plan.loops == []
     assert all(c.imposed and not c.closed for c in g.constraints) and len(g.constraints) == 5
 
 
@@ -30,8 +30,8 @@ def test_a_hinge_fixes_all_but_the_rotation_about_its_axis():
 def test_the_four_bars_loop_is_cut_at_a_chord_of_the_joint_tree(open_loops):
     model = load(MODELS / "four_bar.yaml")
     g = zcp.assign(expand(model, "zcp"), open_loops)
-    tree = {t.joint: t for t in g.zcp.tree}
-    (loop,) = g.zcp.loops
+    tree = {t.joint: t for t in g.method_plan.tree}
+    (loop,) = g.method_plan.loops
     # three bodies: three tree joints; the fourth joint closes the loop through all four
     assert len(tree) == 3 and loop.cut not in tree
     assert set(tree) | {loop.cut} == set(model.joints) == set(loop.joints)
@@ -41,4 +41,4 @@ def test_the_four_bars_loop_is_cut_at_a_chord_of_the_joint_tree(open_loops):
     cut = [c for c in g.constraints if c.joint == loop.cut]
     assert cut and all(not c.imposed and c.closed != open_loops for c in cut)
     assert all(c.imposed and not c.closed for c in g.constraints if c.joint != loop.cut)
-    assert g.zcp.closed != open_loops
+    assert g.method_plan.closed != open_loops

@@ -177,7 +177,7 @@ def test_a_component_from_another_file_and_the_digest_of_what_is_used(tmp_path):
 def test_a_compile_time_constant_changes_the_structure_and_the_digest(tmp_path):
     path = MODELS / "n_four_bar.yaml"
     doc = document.read(path)
-    assert doc["constants"]["N"] == 2
+    assert doc["constants"]["N"] == 2          # the model's default (-p N=40 for more)
     m = load(path, constants={"N": 3})
     assert len(m.bodies) == 7 and len(m.joints) == 10 and list(m.instances) == [
         "w_1", "w_2", "w_3"]

@@ -11,7 +11,7 @@ import math
 
 import sympy as sp
 
-from bgc.graph.algorithms import is_cyclic, strongly_connected
+from bgc.symbolic.algorithms import is_cyclic, strongly_connected
 from bgc.model import symbols
 from bgc.model.document import YList, YMap
 from bgc.model.model import BLOCK_KINDS, Block

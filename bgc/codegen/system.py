@@ -1,0 +1,71 @@
+"""The data structure of stage **equations**: the ``EquationSystem`` (states, parameters,
+assignments in causal order, outputs, what the constraint method adds) and the algebraic
+``Loop``s found on the way."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from bgc import methods
+from bgc.codegen.builder import State
+from bgc.model.model import Model, Table
+
+
+@dataclass
+class Loop:
+    """An algebraic loop (a strongly connected block of equations) and how it was solved."""
+    kind: str            # "algebraic" | "derivative" (through a derivative-causal storage)
+    variables: list[str]
+    bonds: list[str]
+    elements: list[str]
+    tearing: list[str]
+
+    def describe(self) -> str:
+        return (f"{self.kind} loop through {', '.join(self.elements)} (bonds "
+                f"{', '.join(self.bonds)}), {len(self.variables)} equations, solved for "
+                f"{', '.join(self.tearing)}")
+
+
+@dataclass
+class EquationSystem:
+    model: Model
+    method: str
+    states: list[State]
+    params: list[tuple[sp.Symbol, str, float]]   # (symbol, name, default)
+    assignments: list  # causal order: (symbol, expr) pairs and LinearBlocks
+    outputs: list[tuple[str, sp.Expr]]
+    loops: list[Loop] = field(default_factory=list)
+    dependent: dict[str, str] = field(default_factory=dict)  # storage -> dependent state
+    display: dict[sp.Symbol, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    # (what, margin expression): the run stops where a margin reaches GUARD_TOLERANCE
+    guards: list[tuple[str, sp.Expr]] = field(default_factory=list)
+    # lagrange: (joint.direction, deflection g or None, rate dg/dt) per multiplier
+    constraints: list[tuple[str, sp.Expr | None, sp.Expr]] = field(default_factory=list)
+    # zcp: the constraints whose flow is imposed (tree joints), not break variables
+    imposed: set[str] = field(default_factory=set)
+    # a DAE M dx/dt = rhs: the states whose row of M is zero (index 2: zcp, loops kept
+    # closed); empty for an ODE
+    algebraic: list[int] = field(default_factory=list)
+    # method augmented: the projection onto the constraints after a step, as (state
+    # index, its correction) (``methods.augmented``)
+    projection: list[tuple[int, sp.Expr]] = field(default_factory=list)
+    loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
+    scene: str = ""                 # reduced for a scene (bgc/scene.py): its name
+
+    @property
+    def variant(self) -> str:
+        """What the generated module is named and hashed by: the method, for zcp whether
+        its loops were kept closed (``zcp_closed``), and the scene it was reduced for."""
+        v = methods.variant(self.method, not self.loops_closed)
+        return f"{v}_{self.scene}" if self.scene else v
+
+    @property
+    def tables(self) -> list[Table]:
+        return self.model.tables
+
+    @property
+    def breakpoints(self) -> list[float]:
+        return sorted({bp for s in self.model.signals.values() for bp in s.breakpoints})

@@ -75,11 +75,11 @@ def step_counter():
 
 @pytest.mark.parametrize("name", ["bdf", "radau", "lsoda", "rk45"])
 def test_scipy_solvers_report_the_work_they_did(name):
-    module, solver = oscillator(), SOLVERS[name]
-    stats, counter = solver.new_stats(), step_counter()
+    module, counter = oscillator(), step_counter()
+    solver = SOLVERS[name](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
     t_eval = np.linspace(0.0, T_END, 5)
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, t_eval, stats, [counter])
+    seg = solver.integrate(0.0, T_END, X0, t_eval, [counter])
     assert seg.ok and seg.t_reached == T_END
     assert np.allclose(seg.x_eval[-1], exact(T_END), atol=1e-6)
     assert stats.steps == counter.calls - 1 > 0
@@ -95,10 +95,10 @@ def test_scipy_solvers_report_the_work_they_did(name):
 
 @pytest.mark.parametrize("name", ["cvode", "ida"])
 def test_sundials_solvers_report_evaluations_and_no_steps(name):
-    module, solver = oscillator(), SOLVERS[name]
-    stats = solver.new_stats()
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, np.linspace(0.0, T_END, 5), stats)
+    module = oscillator()
+    solver = SOLVERS[name](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
+    seg = solver.integrate(0.0, T_END, X0, np.linspace(0.0, T_END, 5))
     assert seg.ok and np.allclose(seg.x_end, exact(T_END), atol=1e-6)
     assert stats.rhs_calls == module.calls["rhs"] > 0
     assert stats.jac_calls == module.calls["jac"] > 0
@@ -107,11 +107,11 @@ def test_sundials_solvers_report_evaluations_and_no_steps(name):
 
 
 def test_native_radau_counts_in_its_loop_what_it_calls():
-    module, solver = oscillator(), SOLVERS["native"]
-    stats = solver.new_stats()
+    module = oscillator()
+    solver = SOLVERS["native"](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
     t_eval = np.linspace(0.0, T_END, 5)
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, t_eval, stats)
+    seg = solver.integrate(0.0, T_END, X0, t_eval)
     assert seg.ok and seg.x_eval.shape == (5, 2)
     assert np.allclose(seg.x_eval, [exact(t) for t in t_eval], atol=1e-6)
     assert stats.rhs_calls == module.calls["rhs"] > 0
@@ -124,10 +124,10 @@ def test_native_radau_counts_in_its_loop_what_it_calls():
 def test_rk4_counts_its_steps_and_the_jacobians_of_its_stability_check():
     """Fixed steps: T / h of them, four rhs each and one at the start; the stability
     check (every n^2 / 4 steps, here every step) evaluates the Jacobian: counted too."""
-    module, solver = oscillator(), SOLVERS["rk4"]
-    stats, h = solver.new_stats(), 0.01
-    seg = solver.integrate(Problem(module, np.zeros(0), step=h), 0.0, T_END, X0,
-                           np.array([T_END]), stats)
+    module, h = oscillator(), 0.01
+    solver = SOLVERS["rk4"](Problem(module, np.zeros(0), step=h))
+    stats = solver.counts
+    seg = solver.integrate(0.0, T_END, X0, np.array([T_END]))
     steps = round(T_END / h)
     assert seg.ok and np.allclose(seg.x_end, exact(T_END), atol=1e-6)
     assert stats.steps == steps

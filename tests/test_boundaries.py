@@ -114,3 +114,21 @@ def test_no_import_cycle_outside_codegen():
                                        "kernels <-> instances (issue 41, item 4)")
 def test_no_import_cycle():
     assert cycles(list(MODULES)) == []
+
+
+LONGEST = 120       # lines of a function, its docstring included (issue 41, item 3)
+
+
+def test_no_function_over_120_lines_outside_codegen():
+    """A long body is parts not yet named: the step loop calls its Newton solve, error
+    estimate, step-size control and dense output (radau5's parts, inlined by numba)."""
+    long = []
+    for name, path in MODULES.items():
+        if name.startswith(CODEGEN):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > LONGEST:
+                    long.append(f"{name}.{node.name}: {lines} lines")
+    assert long == []

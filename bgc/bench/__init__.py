@@ -50,7 +50,7 @@ from bgc.bench import (
     startup,
     symmetry,
 )
-from bgc.bench.cases import ANDREWS, BRICARD, FOUR_BAR, MODELS, SLIDER, Bench, Scenario, sarib
+from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, sarib
 from bgc.bench.rows import write_rows
 from bgc.bench.peers import at_equal_error, peers
 from bgc.fileio import atomic_write

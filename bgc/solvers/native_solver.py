@@ -82,9 +82,9 @@ class NativeSolver(Solver):
     def _run(self, t0, t1, x0, t_eval, h_start=0.0, max_steps=0, keep=None,
              monitor=None, count=True) -> Call:
         """One call of the loop from (t0, x0) towards t1, pausing after ``max_steps``
-        steps (0: none); its counts added to the run's (``count``). ``keep``: the loop's state across
-        pauses (``_carry``; None: a fresh start); ``monitor`` (``rank.Monitor``): the
-        rank monitor the loop checks (None: none)."""
+        steps (0: none); its counts added to the run's (``count``). ``keep``: the loop's
+        state across pauses (``_carry``; None: a fresh start); ``monitor``
+        (``rank.Monitor``): the rank monitor the loop checks (None: none)."""
         module = self.problem.module
         model = native.Model(*module.native_entry_points(), len(module.GUARD_NAMES),
                              self.problem.p)
@@ -189,11 +189,12 @@ class NativeSolver(Solver):
     def _locate(self, start, end, sel, event, h, xs):
         """An event changed sign on [a, b]: from ``start`` = (a, x), where it was ``before``
         (``event`` = (its index, function, before)), to ``end`` = (b, its value there,
-        ``after``; None: taken from the scan). One re-integration of [a, b] scans the event on a grid of the
-        dense output; from the integrated state at the grid point before the change,
-        regula falsi with the Illinois modification (superlinear on a smooth event, the
-        bracket always holding the change) re-integrates short intervals only. Every
-        restart takes the step size ``h`` the loop had; the requested outputs are kept."""
+        ``after``; None: taken from the scan). One re-integration of [a, b] scans the event
+        on a grid of the dense output; from the integrated state at the grid point before
+        the change, regula falsi with the Illinois modification (superlinear on a smooth
+        event, the bracket always holding the change) re-integrates short intervals only.
+        Every restart takes the step size ``h`` the loop had; the requested outputs are
+        kept."""
         (a, x), (b, after), (k, fun, before) = start, end, event
         sign = np.sign(before)
         grid = np.linspace(a, b, LOCATE_GRID + 1)[1:-1]

@@ -30,7 +30,7 @@ demo: run
 # setpoint under each method, and the absorber retuning to a rotor-frequency step: CSV,
 # PNG and summary.md in results/semiactive (a few minutes).
 semiactive: install
-	$(PYTHON) bench/semiactive.py --out results/semiactive
+	$(PYTHON) -m bgc.bench.semiactive --out results/semiactive
 
 # Fast suite (slow SARIB runs are marked `slow` and left to test-all).
 test:
@@ -40,8 +40,8 @@ test-all:
 	$(PYTHON) -m pytest -q -n 2 -m ""
 
 # Speed against accuracy (issue 6): peers, work-precision, parasitic stiffness, stability
-# maps, compile cost; CSV + PNG + summary.md in bench/results (an hour or more; --quick:
-# minutes).
+# maps, compile cost, an assembly's compile cost (--part components); CSV + PNG +
+# summary.md in bench/results (an hour or more; --quick: minutes).
 bench: install
 	bgc bench --results bench/results
 

@@ -3,10 +3,11 @@ solver statistics).
 
 ``simulate`` refuses what cannot run, makes the start consistent (``prepare``), checks it
 (``check_start``) and integrates segment by segment with one of ``SOLVERS``: the methods
-in ``bgc/solvers``, one file each behind one small interface (``base.Solver.integrate``
-over one smooth segment). The run is split at the model's breakpoints (step times, table
-knots) so no step straddles a jump. Statistics are counted by the solvers, where the work
-happens: what an integrator does not report is ``None``, not 0.
+in ``bgc/solvers``, one class per method behind one small interface (``base.Solver``:
+one object per run, ``integrate`` over one smooth segment). The run is split at the
+model's breakpoints (step times, table knots) so no step straddles a jump. Statistics are
+counted by the solvers, where the work happens (``Counts``: what an integrator does not
+report is ``None``, not 0); ``Stats`` adds the facts of the run around them.
 """
 
 from __future__ import annotations
@@ -18,9 +19,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bgc.errors import SimulationError
-from bgc.methods import consistent
 from bgc.model.model import SOLVERS as SOLVER_NAMES
-from bgc.solvers import native
+from bgc.solvers import consistent, native
 from bgc.solvers.base import (
     GUARD_TOLERANCE,
     Problem,
@@ -29,9 +29,9 @@ from bgc.solvers.base import (
     Stats,
     names_where,
 )
-from bgc.solvers.native_solver import NativeSolver
-from bgc.solvers.scipy_ivp import ScipySolver
-from bgc.solvers.sundials import SundialsSolver
+from bgc.solvers.native_solver import NativeRadau, NativeRk4, NativeSolver
+from bgc.solvers.scipy_ivp import Bdf, Lsoda, Radau, Rk45
+from bgc.solvers.sundials import Cvode, Ida
 
 
 class Interrupted(SimulationError):
@@ -49,7 +49,7 @@ class Result:
     stats: Stats = field(default_factory=Stats)
     success: bool = True
     message: str = ""
-    projection: object = None     # method lagrange: consistent.Projection of the start
+    projection: object = None     # a constrained model: consistent.Projection of the start
     params: np.ndarray | None = None  # the parameter values integrated (loads, rank set)
 
     def column(self, name: str) -> np.ndarray:
@@ -70,25 +70,13 @@ def precompile_loop(solver: str | None):
     """Start compiling the step loop of a native solver in a separate process
     (``native.precompile``), for the caller to go on with the model meanwhile."""
     method = SOLVERS.get(solver)
-    if isinstance(method, NativeSolver):
+    if method is not None and issubclass(method, NativeSolver):
         native.precompile(method.loop)
 
 
-SOLVERS: dict[str, Solver] = {s.name: s for s in (
-    NativeSolver("native", "radau5", "Radau IIA order 5, numba step loop "
-                                     "(bgc/solvers/radau5.py), stiff, mass matrices (DAEs "
-                                     "of index 1 and 2)"),
-    NativeSolver("rk4", "rk4", "classical Runge-Kutta 4, fixed step (--step), explicit, "
-                               "numba step loop (bgc/solvers/rk4.py)"),
-    ScipySolver("bdf", "BDF", "scipy BDF (variable order 1-5), stiff"),
-    ScipySolver("radau", "Radau", "scipy Radau IIA order 5, stiff"),
-    ScipySolver("lsoda", "LSODA", "scipy LSODA (ODEPACK), switches stiff/non-stiff"),
-    ScipySolver("rk45", "RK45", "scipy Dormand-Prince 5(4), non-stiff"),
-    SundialsSolver("cvode", "cvode", "SUNDIALS CVODE (scikit-sundae): variable-order BDF "
-                                     "1-5, stiff"),
-    SundialsSolver("ida", "ida", "SUNDIALS IDA (scikit-sundae): BDF on the residual, "
-                                 "mass matrices (index-1 DAEs)"),
-)}
+# the methods by name: a run makes one object of its method's class (``Solver(problem)``)
+SOLVERS: dict[str, type[Solver]] = {s.name: s for s in (
+    NativeRadau, NativeRk4, Bdf, Radau, Lsoda, Rk45, Cvode, Ida)}
 assert tuple(SOLVERS) == SOLVER_NAMES, "bgc.model.model.SOLVERS lists the solvers here"
 
 
@@ -323,7 +311,6 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
     budget = _budget(method, step, max_steps, t_start, t_end)
     p = np.array(module.PARAMS if params is None else params, dtype=np.float64)
     x = np.array(module.initial_state(p) if x0 is None else x0, dtype=np.float64)
-    stats = method.new_stats()
 
     with _one_blas_thread():
         t0 = time.perf_counter()
@@ -336,20 +323,22 @@ def simulate(module, *, t_end: float, rtol: float = 1e-6, atol: float = 1e-8,
         problem = Problem(module, p, step, mass, check_stability,
                           index2 if check_index else None, max_steps=budget, rtol=rtol,
                           atol=atol, max_step=max_step)
-        method.check(problem, t_start, x)
-        method.warm_up(problem, x)
+        run_solver = method(problem)
+        run_solver.check(t_start, x)
+        run_solver.warm_up(x)
         module.outputs(t_start, x, p)
         events, monitor = _events(module, x, p, t_start, projection)
         problem.monitor = monitor
-        stats.compile_time = time.perf_counter() - t0
+        compile_time = time.perf_counter() - t0
 
-        stats.max_step = max_step if np.isfinite(max_step) else None
         grid = np.linspace(t_start, t_end, int(points))
         wall = time.perf_counter()
-        run = _integrate(method, problem, x, grid,
-                         _segments(t_start, t_end, module.BREAKPOINTS), stats, events, monitor)
-        stats.wall_time = time.perf_counter() - wall
-        return _result(module, method, problem, run, stats, projection, monitor, check_drift)
+        run = _integrate(run_solver, x, grid, _segments(t_start, t_end, module.BREAKPOINTS),
+                         events, monitor)
+        stats = Stats.of_run(run_solver.counts, wall_time=time.perf_counter() - wall,
+                             compile_time=compile_time,
+                             max_step=max_step if np.isfinite(max_step) else None)
+        return _result(module, run_solver, run, stats, projection, monitor, check_drift)
 
 
 # A run keeps every state and output at every output time: at most this many values (a
@@ -370,8 +359,8 @@ def check_result_size(points: int, columns: int) -> None:
                  "with a scene that keeps only the outputs asked for")
 
 
-def _method(solver: str, t_start: float, t_end: float) -> Solver:
-    """The solver named ``solver``, for a run from t_start to t_end."""
+def _method(solver: str, t_start: float, t_end: float) -> type[Solver]:
+    """The class of the solver named ``solver``, for a run from t_start to t_end."""
     if solver not in SOLVERS:
         raise SimulationError(f"unknown solver '{solver}'",
                               hint="valid solvers: " + ", ".join(SOLVERS))
@@ -381,7 +370,7 @@ def _method(solver: str, t_start: float, t_end: float) -> Solver:
     return SOLVERS[solver]
 
 
-def _mass_matrix(module, method: Solver, mass, check_index: bool):
+def _mass_matrix(module, method: type[Solver], mass, check_index: bool):
     """The mass matrix of the run (a module that is an index-2 DAE brings its own unless
     given one) and ``index2`` (1.0 where a state is algebraic of index 2; None for an
     ODE or index-1 DAE); refused where ``method`` cannot take it."""
@@ -391,7 +380,7 @@ def _mass_matrix(module, method: Solver, mass, check_index: bool):
         index2 = np.zeros(len(module.STATE_NAMES))
         index2[algebraic] = 1.0
         mass = np.diag(1.0 - index2) if mass is None else mass
-        if method.max_index < 2 and (check_index or not method.takes_mass):
+        if method.max_index < 2 and (check_index or not method.takes_mass()):
             loops = sorted({module.STATE_NAMES[i].split(".")[0] for i in algebraic})
             raise SimulationError(
                 f"{module.MODEL_NAME} ({module.METHOD}, kinematic loops kept closed by joint "
@@ -406,24 +395,23 @@ def _mass_matrix(module, method: Solver, mass, check_index: bool):
         if mass.shape != (n, n):
             raise SimulationError(f"the mass matrix must be {n} x {n}, got "
                                   f"{' x '.join(map(str, mass.shape))}")
-        if not method.takes_mass:
+        if not method.takes_mass():
             raise SimulationError(f"solver {method.name} cannot integrate a system with a "
                                   "mass matrix", hint="solvers that can: " + ", ".join(
-                                      s.name for s in SOLVERS.values() if s.takes_mass))
+                                      s.name for s in SOLVERS.values() if s.takes_mass()))
     return mass, index2
 
 
-def _budget(method: Solver, step, max_steps, t_start: float, t_end: float) -> int:
+def _budget(method: type[Solver], step, max_steps, t_start: float, t_end: float) -> int:
     """The run's step budget: ``max_steps`` if given (refused below rk4's plan of fixed
     steps), else rk4's plan, else ``MAX_STEPS``."""
     if max_steps is not None and not (isinstance(max_steps, (int, np.integer))
                                       and max_steps >= 1):
         raise SimulationError(f"the step budget must be a whole number >= 1, got "
                               f"{max_steps!r}", key="--max-steps")
-    planned = (int(np.ceil((t_end - t_start) / step * (1 - 1e-9)))
-               if method.name == "rk4" and step and step > 0 else None)
+    planned = method.planned_steps(step, t_start, t_end)
     if planned is not None and max_steps is not None and planned > max_steps:
-        raise SimulationError(f"rk4 with --step {step:g} takes {planned} steps from t = "
+        raise SimulationError(f"{method.name} with --step {step:g} takes {planned} steps from t = "
                               f"{t_start:g} to {t_end:g}, more than the step budget "
                               f"{max_steps}; nothing was run", key="--max-steps",
                               hint=f"take --max-steps {planned} or a larger --step")
@@ -462,12 +450,12 @@ class _Run:
     last: Segment | None = None
 
 
-def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
-               monitor) -> _Run:
+def _integrate(solver: Solver, x, grid, segs, events, monitor) -> _Run:
     """Integrate segment by segment (``segs``: no jump inside one), the outputs at the
     ``grid`` times; stop at a guard, a singular configuration the rank ``monitor`` sees
     (where only its minor went singular it re-picks one and goes on), Ctrl-C or a
     failure."""
+    problem = solver.problem
     module = problem.module
     ts, xs = [], []
     run = _Run(grid[:0], np.empty((0, len(x))))
@@ -481,7 +469,7 @@ def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
                 ts.append(sel)
                 xs.append(np.zeros((len(sel), 0)))
                 continue
-            seg = run.last = method.integrate(problem, a, b, x, sel, stats, events)
+            seg = run.last = solver.integrate(a, b, x, sel, events)
             ts.append(sel[:len(seg.x_eval)])
             xs.append(seg.x_eval)
             done = ts[-1][-1] if len(ts[-1]) else done
@@ -505,7 +493,7 @@ def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
                 break
             if not seg.ok:
                 run.ok = False
-                run.message = (f"{method.name} failed at t = {seg.t_reached:.6g}: "
+                run.message = (f"{solver.name} failed at t = {seg.t_reached:.6g}: "
                                f"{seg.message}")
                 break
             x = np.array(seg.x_end, dtype=np.float64)
@@ -514,11 +502,12 @@ def _integrate(method: Solver, problem: Problem, x, grid, segs, stats, events,
     return run
 
 
-def _result(module, method: Solver, problem: Problem, run: _Run, stats: Stats, projection,
-            monitor, check_drift: bool) -> Result:
+def _result(module, solver: Solver, run: _Run, stats: Stats, projection, monitor,
+            check_drift: bool) -> Result:
     """The run's Result, its outputs computed and, for a constrained model, its drift
-    checked (a run whose joints came apart ends where they did); raised with its failure
-    (``Interrupted`` for Ctrl-C) if it has one."""
+    measured and checked (a run whose joints came apart ends where they did); raised with
+    its failure (``Interrupted`` for Ctrl-C) if it has one."""
+    problem = solver.problem
     p = problem.p
     t_all, x_all = run.t, run.x
     y_all = module.outputs_at(t_all, x_all, p)
@@ -538,7 +527,7 @@ def _result(module, method: Solver, problem: Problem, run: _Run, stats: Stats, p
             ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
-                    tuple(module.OUTPUT_NAMES), method.name, stats, ok, message, projection,
+                    tuple(module.OUTPUT_NAMES), solver.name, stats, ok, message, projection,
                     p)
     if run.interrupted:
         raise Interrupted(message, result=result, hint=hint)

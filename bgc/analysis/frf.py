@@ -20,7 +20,7 @@ from scipy.optimize import minimize_scalar
 from threadpoolctl import threadpool_limits
 
 from bgc.errors import BgcError, SimulationError
-from bgc.methods.consistent import static_loads
+from bgc.solvers.consistent import static_loads
 
 
 @dataclass

@@ -126,7 +126,7 @@ def constraint_basis(module, x, p) -> tuple[np.ndarray | None, int]:
     module without constraints."""
     if not len(getattr(module, "CONSTRAINT_NAMES", ())):
         return None, 0
-    from bgc.methods.consistent import RANK_TOL, equilibration
+    from bgc.solvers.consistent import RANK_TOL, equilibration
     x = np.asarray(x, dtype=np.float64)
     J = central_differences(lambda y: module.constraints(0.0, y, p), x, rel=1e-7)
     r, c = equilibration(J)

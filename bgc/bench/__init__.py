@@ -17,6 +17,8 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
   its speed (``symmetry.py``);
 - ``scenes``: each shipped scene's reduced module against the full model: states,
   compile and run time, output difference (``scenes.py``);
+- ``components``: an assembly's cold time from its model file to the first result, the
+  A02 N-four-bar at N = 10, 40, 160 (``components.py``);
 - ``iftomm``: the IFToMM basic benchmark problems (A01 pendulum, A02 N-four-bar at N = 2,
   10, 40, A03 Andrews, A04 Bricard, A05 flyball governor) under every method against their
   exact or published references, work-precision per problem (``iftomm.py``).
@@ -27,7 +29,6 @@ and 10 links) for the tests.
 
 from __future__ import annotations
 
-import csv
 import datetime
 import json
 import os
@@ -38,34 +39,26 @@ from pathlib import Path
 import numpy as np
 
 from bgc import methods as constraint_methods
-from bgc.bench import charts, compile_cost, iftomm, precision, scenes, stability, startup, symmetry
-from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, Scenario, sarib
+from bgc.bench import (
+    charts,
+    compile_cost,
+    components,
+    iftomm,
+    precision,
+    scenes,
+    stability,
+    startup,
+    symmetry,
+)
+from bgc.bench.cases import ANDREWS, MODELS, SLIDER, Bench, sarib
+from bgc.bench.rows import write_rows
 from bgc.bench.peers import at_equal_error, peers
 from bgc.fileio import atomic_write
 
 PARTS = ("peers", "precision", "stiffness", "stability", "compile", "startup", "symmetry",
-         "scenes", "iftomm")
+         "scenes", "iftomm", "components")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 METHODS = constraint_methods.NAMES
-
-FOUR_BAR = Scenario("four_bar", "spatial RSSR four-bar, 1 s", MODELS / "four_bar.yaml", 1.0,
-                    ("crank_angle", "rocker_angle"), points=101)
-BRICARD = Scenario("bricard", "Bricard's overconstrained mechanism, 1 s",
-                   MODELS / "bricard.yaml", 1.0, ("tip_x", "tip_y", "tip_z", "P3_x",
-                                                  "P3_y", "P3_z"), points=101)
-
-
-def write_rows(path: Path, rows: list[dict]) -> Path:
-    """Rows (dicts) as a CSV, columns in first-seen order, written atomically."""
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-
-    def writer(tmp):
-        with open(tmp, "w", newline="") as fh:
-            w = csv.DictWriter(fh, keys)
-            w.writeheader()
-            w.writerows(rows)
-    return atomic_write(path, writer, "CSV")
-
 
 def machine() -> str:
     import numba
@@ -346,6 +339,11 @@ class Run:
         """The IFToMM benchmark problems under every method (quick: A01 and A02 at N = 2,
         two tolerances)."""
         iftomm.report(self)
+
+    def components(self):
+        """A02 from the model file to its first result for N = 10, 40, 160 (quick: 2, 4),
+        cold, the step loop cached."""
+        components.report(self)
 
     def run_part(self, part: str) -> None:
         """Run one part and keep what it says in ``out/parts/<part>.json``, so a part

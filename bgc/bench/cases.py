@@ -187,3 +187,10 @@ class Bench:
         size = np.abs(r).max(axis=0)
         size = np.maximum(size, 1e-3 * size.max())
         return float((np.abs(y - r).max(axis=0) / size).max())
+
+
+FOUR_BAR = Scenario("four_bar", "spatial RSSR four-bar, 1 s", MODELS / "four_bar.yaml", 1.0,
+                    ("crank_angle", "rocker_angle"), points=101)
+BRICARD = Scenario("bricard", "Bricard's overconstrained mechanism, 1 s",
+                   MODELS / "bricard.yaml", 1.0, ("tip_x", "tip_y", "tip_z", "P3_x",
+                                                  "P3_y", "P3_z"), points=101)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from bgc.analysis.results import panels, save_figure
+from bgc.bench.rows import as_number as num
 
 _MARKERS = {"parasitic": "o", "lagrange": "s", "zcp": "^", "augmented": "D"}
 _LINES = {"native": "-", "bdf": "--", "radau": "-.", "lsoda": ":", "cvode": (0, (5, 1)),
@@ -174,7 +175,6 @@ def compile_cost(rows, path: Path, title: str) -> Path:
     method's smallest chain; below, per method, the cold time of each model split into
     the stages its report gives (without any: the integrator's JIT time from its solver
     statistics), the rest unattributed (interpreter start, imports)."""
-    from bgc.bench.compile_cost import as_number as num
     methods = list(dict.fromkeys(r["method"] for r in rows))
     fig, axes = panels(1 + len(methods), 3.4, sharex=False)
     _cold_against_states(axes[0, 0], rows, methods, num)
@@ -254,10 +254,9 @@ def _cold_by_stage(ax, rs, m, stage_cols, num) -> None:
     ax.legend(fontsize=6, ncol=4)
 
 
-def startup(row: dict, phases, path: Path, title: str) -> Path:
+def startup(row: dict, phases, path: Path, title: str, target: float) -> Path:
     """A small model's warm start to its first result: the phases (wall seconds) as one
-    stacked bar beside the command's own median, with the target."""
-    from bgc.bench.startup import TARGET_S
+    stacked bar beside the command's own median, with the ``target`` [s]."""
     fig, axes = panels(1, 2.6)
     ax = axes[0, 0]
     left = 0.0
@@ -268,9 +267,9 @@ def startup(row: dict, phases, path: Path, title: str) -> Path:
         left += w
     ax.barh([0], [row["command_s"]], color="0.5",
             label=f"bgc simulate (the command) {row['command_s']:.2f} s")
-    ax.axvline(TARGET_S, color="k", ls="--", lw=0.8)
+    ax.axvline(target, color="k", ls="--", lw=0.8)
     ax.set_yticks([0, 1], ["command", "phases"])
-    ax.set_xlabel(f"wall time [s] (dashed: target {TARGET_S} s)")
+    ax.set_xlabel(f"wall time [s] (dashed: target {target} s)")
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.35))
     return save_figure(fig, path, title)

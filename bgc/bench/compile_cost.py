@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from bgc.bench.chain import write_chain
+from bgc.bench.rows import as_number, write_rows
 from bgc.codegen.kernels import program_functions
 from bgc.pipeline import build
 
@@ -243,14 +244,6 @@ def sweep(cases, methods, work: Path, log=print, timeout: float = TIMEOUT) -> li
 # --- what the rows say ----------------------------------------------------------------
 
 
-def as_number(v) -> float:
-    """A CSV cell (or a row's value) as a float, NaN for none."""
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return math.nan
-
-
 def _verdict(value: float, limit: float, *runs) -> str:
     """pass/FAIL against ``limit``; a run that timed out or failed fails the target (its
     status said), one not run is 'not measured'."""
@@ -298,7 +291,7 @@ def report(run, rows) -> None:
     ``bgc bench`` (``run``: its ``bench.Run``)."""
     import numpy as np
 
-    from bgc.bench import charts, write_rows
+    from bgc.bench import charts
     write_rows(run.out / "compile_cost.csv", rows)
     charts.compile_cost(rows, run.out / "compile_cost.png",
                         "cold time to first result against model size")

@@ -183,7 +183,8 @@ def best(rows, method: str, limit: float):
 
 def report(run) -> None:
     """The part: runs, CSV, a chart per problem, the summary's table."""
-    from bgc.bench import charts, write_rows
+    from bgc.bench import charts
+    from bgc.bench.rows import write_rows
     bench = IFToMM(run.bench.build / "iftomm", run.log, run.quick, run.budget)
     run.summary.append("## IFToMM benchmark problems: every method against the "
                        "references\n")

@@ -21,7 +21,7 @@ import numpy as np
 from bgc.bench.cases import Bench, Scenario
 from bgc.bench.precision import stiffness_overrides
 from bgc.errors import SimulationError
-from bgc.methods import consistent
+from bgc.solvers import consistent
 from bgc.solvers.rk4 import stable_step
 
 RK4_STEP_FRACTIONS = (0.5, 0.8, 0.95, 1.05, 1.25, 2.0)
@@ -189,15 +189,9 @@ def zcp_map(bench: Bench, scn: Scenario, tolerances=(1e-3, 1e-4, 1e-5, 1e-6, 1e-
 def report(run) -> None:
     """The stability part of ``bgc bench`` (``run``: its ``bench.Run``): the maps, their CSV
     and charts, and their section of the summary."""
-    from bgc.bench import (
-        BRICARD,
-        FOUR_BAR,
-        SLIDER,
-        charts,
-        precision,
-        sarib,
-        write_rows,
-    )
+    from bgc.bench import charts, precision
+    from bgc.bench.cases import BRICARD, FOUR_BAR, SLIDER, sarib
+    from bgc.bench.rows import write_rows
     run.summary.append("## Stability maps: where each method fails\n")
     # RK4 on the parasitic model
     if run.quick:

@@ -289,3 +289,37 @@ def run_parameters(module, model, method, params, parasitic_mode, separation=Non
     args = () if separation is None else (separation,)
     p, choice = parasitic.auto(module, model, module.initial_state(p), p, *args)
     return parse_params(module, params, base=p), choice
+
+
+# what the run commands (simulate, sweep) share
+def output_points(st, t_end: float | None) -> int:
+    """The model's output times over ``t_end`` (``st``: its ``Settings``): its spacing
+    (``st.points`` over its own t_end) kept, so that ``--t-end 0.01`` on the 28 s SARIB
+    (28001 points, 1 ms) gives 11 output times, not 28001 within 10 ms."""
+    if t_end is None or t_end == st.t_end or not st.t_end > 0:
+        return st.points
+    n = (st.points - 1) * (t_end / st.t_end) + 1       # a float: --t-end 1e308 is inf
+    return MAX_POINTS if not n < MAX_POINTS else max(round(n), 2)   # (refused before)
+
+
+def set_excitation(module, m, p, o) -> dict | None:
+    """Set the parameters of the excitation the options ``o`` choose (``exc_kind``,
+    ``exc_dir``, ``amplitude``, ``frequency``: simulate's and sweep's) in ``p`` (in place);
+    what was chosen."""
+    kind, direction = o.exc_kind, o.exc_dir
+    if kind is None and direction is None:
+        return None
+    exc = m.excitation
+    if exc is None:
+        raise BgcError(f"{m.file} has no 'excitation' section", key="--excitation",
+                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
+    if kind is None or direction is None:
+        raise BgcError("--excitation and --direction go together", key="--excitation",
+                       hint=f"kinds: {', '.join(exc.kinds)}; directions: "
+                            f"{', '.join(exc.directions)}")
+    for name, value in exc.select(kind, direction, o.amplitude, o.frequency).items():
+        p[module.PARAM_NAMES.index(name)] = value
+    return {"kind": kind, "direction": direction,
+            "amplitude": float(p[module.PARAM_NAMES.index(exc.param(direction))]),
+            "frequency": (float(p[module.PARAM_NAMES.index(exc.FREQUENCY)])
+                          if exc.kinds[kind].kind == "sine" else None)}

@@ -37,10 +37,12 @@ from bgc.cli.options import (
     loops_option,
     method_option,
     out_dir_option,
+    output_points,
     params_option,
     parse_params,
     split_constants,
     progress_option,
+    set_excitation,
 )
 from bgc.errors import BgcError
 from bgc.fileio import check_writable
@@ -115,16 +117,6 @@ class _Run:
     explained: dict | None = None   # name -> (anti-resonances, transients) of the minima
     noise: dict = field(default_factory=dict)   # name -> peak of outputs that are noise
     units: dict = field(default_factory=dict)   # name -> unit the model declares
-
-
-def output_points(st: Settings, t_end: float | None) -> int:
-    """The model's output times over ``t_end``: its spacing (``st.points`` over its own
-    t_end) kept, so that ``--t-end 0.01`` on the 28 s SARIB (28001 points, 1 ms) gives 11
-    output times, not 28001 within 10 ms."""
-    if t_end is None or t_end == st.t_end or not st.t_end > 0:
-        return st.points
-    n = (st.points - 1) * (t_end / st.t_end) + 1       # a float: --t-end 1e308 is inf
-    return MAX_POINTS if not n < MAX_POINTS else max(round(n), 2)   # (refused before)
 
 
 @main.command()
@@ -342,27 +334,6 @@ def _check_plan(module, p, t_end, step, key):
                        hint="a lower frequency (--frequency, -p) or a shorter --t-end")
 
 
-def set_excitation(module, m, p, o: SimulateOptions) -> dict | None:
-    """Set the parameters of the excitation the options choose (in place); what was chosen."""
-    kind, direction = o.exc_kind, o.exc_dir
-    if kind is None and direction is None:
-        return None
-    exc = m.excitation
-    if exc is None:
-        raise BgcError(f"{m.file} has no 'excitation' section", key="--excitation",
-                       hint="declare excitation: {directions: ..., kinds: ...} in the model")
-    if kind is None or direction is None:
-        raise BgcError("--excitation and --direction go together", key="--excitation",
-                       hint=f"kinds: {', '.join(exc.kinds)}; directions: "
-                            f"{', '.join(exc.directions)}")
-    for name, value in exc.select(kind, direction, o.amplitude, o.frequency).items():
-        p[module.PARAM_NAMES.index(name)] = value
-    return {"kind": kind, "direction": direction,
-            "amplitude": float(p[module.PARAM_NAMES.index(exc.param(direction))]),
-            "frequency": (float(p[module.PARAM_NAMES.index(exc.FREQUENCY)])
-                          if exc.kinds[kind].kind == "sine" else None)}
-
-
 def _integrate(o: SimulateOptions, run: _Run) -> None:
     """The integrate stage: the options' settings, else the model's."""
     from bgc.simulate import simulate as integrate
@@ -372,7 +343,9 @@ def _integrate(o: SimulateOptions, run: _Run) -> None:
                            atol=o.atol or st.atol, solver=o.solver or st.solver,
                            points=o.points or output_points(st, o.t_end), params=run.p,
                            step=o.step, max_steps=o.max_steps)
-        stage.done(f"{result.solver}, {progress.count(result.stats.steps, 'step')} to "
+        steps = result.stats.steps
+        stage.done(f"{result.solver}, "
+                   f"{progress.count(steps, 'step') if steps is not None else 'n/a steps'} to "
                    f"t = {result.t[-1]:g} s, "
                    f"{progress.seconds(result.stats.compile_time)} of it JIT/cache load")
     run.result = result
@@ -484,10 +457,11 @@ def _report(o: SimulateOptions, run: _Run) -> None:
         click.echo(proj.describe())
     if choice is not None:
         click.echo(choice.describe())
+    count = result.stats.text          # "n/a": a count the solver does not report
     click.echo(f"{module.MODEL_NAME}: {result.solver} to t = {result.t[-1]:g} s: "
-               f"{stats['steps']} steps, "
-               f"{stats['rhs_calls']} rhs and {stats['jac_calls']} Jacobian calls, "
-               f"{stats['lu_decompositions']} LU, {stats['wall_time']:.3f} s "
+               f"{count('steps')} steps, "
+               f"{count('rhs_calls')} rhs and {count('jac_calls')} Jacobian calls, "
+               f"{count('lu_decompositions')} LU, {stats['wall_time']:.3f} s "
                f"(+{stats['compile_time']:.2f} s JIT/cache load"
                f"{', recompiled' if run.compiled else ''})")
     if stats["drift_position"] is not None:

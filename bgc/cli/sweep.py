@@ -28,9 +28,11 @@ from bgc.cli.options import (
     loops_option,
     method_option,
     out_dir_option,
+    output_points,
     parasitic_option,
     parse_params,
     progress_option,
+    set_excitation,
     split_constants,
 )
 from bgc.errors import BgcError
@@ -148,7 +150,6 @@ def _job(o, axes, fixed, frfs, windows):
     """The module (compiled if stale), the names checked against it, the base parameters
     (defaults, the excitation, the fixed -p values), the run of the window metrics: the
     runner's Job, and the module."""
-    from bgc.cli.simulate import output_points, set_excitation
     from bgc.model.model import Settings
     from bgc.pipeline import ensure_module
     from bgc.simulate import precompile_loop

@@ -292,7 +292,7 @@ def describe(system, p, inputs=None) -> Unit:
     inputs = inputs or {}
     from bgc import methods
     from bgc.codegen import emit, kernels
-    from bgc.methods.consistent import RANK_PARAM
+    from bgc.solvers.consistent import RANK_PARAM
     from bgc.solvers import sparse_lu
     m = system.model
     system_h, progs, jt = emit.programs(system)

@@ -1,7 +1,8 @@
 """The integrator interface every solver implements (scipy's ``_ivp/base.py`` in spirit):
 a ``Problem`` (a generated module at parameter values, with an optional mass matrix), one
-``integrate`` call per smooth segment returning a ``Segment``, and ``Stats`` kept honestly:
-what an integrator does not report is ``None``, never a made-up 0.
+``Solver`` object per run, one ``integrate`` call per smooth segment returning a
+``Segment``, and ``Counts`` kept honestly: what an integrator does not report is ``None``,
+never a made-up 0 (printed "n/a"). ``Stats``: a run's counts and the facts set around it.
 """
 
 from __future__ import annotations
@@ -25,19 +26,58 @@ _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 GUARD_TOLERANCE = 1e-3
 
 
+# the solver's counts, in the order a summary names them
+COUNTS = ("steps", "rhs_calls", "jac_calls", "lu_decompositions", "rejected_steps")
+
+
 @dataclass
-class Stats:
-    steps: int | None = 0
-    rhs_calls: int = 0
-    jac_calls: int = 0
-    lu_decompositions: int | None = 0
-    rejected_steps: int | None = None     # scipy's solve_ivp does not report them
-    wall_time: float = 0.0                # integration only
-    max_step: float | None = None         # the step limit the input signals set
-    compile_time: float = 0.0             # JIT / cache load, scipy.integrate's import
-    # method lagrange: largest |g| and |dg/dt| of the blocked directions over the outputs
+class Counts:
+    """The work a solver did, counted by the solver where it happens (its own loop, or
+    what its library reports). ``None``: this solver does not report the count; a count
+    it reports starts at 0 (``Counts.of``)."""
+    steps: int | None = None              # accepted steps
+    rhs_calls: int | None = None          # evaluations of rhs (ida: of its residual)
+    jac_calls: int | None = None          # evaluations of the Jacobian
+    # LU factorizations of Newton matrices (native Radau: its real and complex ones apart)
+    lu_decompositions: int | None = None
+    rejected_steps: int | None = None     # steps tried and rejected (error test, Newton)
+
+    @classmethod
+    def of(cls, reported=COUNTS) -> "Counts":
+        """The counts before a run's first step: 0 for those ``reported``, else None."""
+        return cls(**{k: 0 if k in reported else None for k in COUNTS})
+
+    def add(self, **counts: int) -> None:
+        """Add to the counts this solver reports (one it does not report stays None)."""
+        for k, v in counts.items():
+            if getattr(self, k) is not None:
+                setattr(self, k, getattr(self, k) + int(v))
+
+    def text(self, name: str) -> str:
+        """One count as a summary prints it: "n/a" where it is not reported."""
+        v = getattr(self, name)
+        return "n/a" if v is None else str(v)
+
+
+@dataclass
+class Stats(Counts):
+    """A run's statistics: the solver's ``Counts`` (above), then the facts ``simulate``
+    sets around the run."""
+    # seconds integrating: the segments, their events and the Python between them
+    wall_time: float = 0.0
+    # seconds before the first step: the start's checks and projection, the step loop's
+    # JIT or cache load, scipy.integrate's import
+    compile_time: float = 0.0
+    max_step: float | None = None         # the step limit the input signals set (None: none)
+    # a constrained run: the largest |g| (position) and |dg/dt| (velocity) of its blocked
+    # directions over the output times (None: the model has no constraints)
     drift_position: float | None = None
     drift_velocity: float | None = None
+
+    @classmethod
+    def of_run(cls, counts: Counts, **facts) -> "Stats":
+        """A run's statistics from its solver's ``counts`` and the ``facts`` set."""
+        return cls(**{k: getattr(counts, k) for k in COUNTS}, **facts)
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -53,6 +93,9 @@ class Segment:
     message: str = ""
     event: int | None = None      # index of the event that stopped the segment
     interrupted: bool = False     # stopped by Ctrl-C (``Interrupt``)
+    # native Radau: each state's share of the error of the last rejected step (inf where
+    # its derivative was not finite), what names the culprits of a failure; else None
+    error_share: np.ndarray | None = None
 
 
 @dataclass
@@ -76,9 +119,9 @@ class Problem:
     # native Radau checks it in its loop (``bgc.solvers.rank``), the others as an event
     monitor: object = None
 
-    def budget(self, stats: "Stats") -> int | None:
-        """Steps left of the run's budget (None: no budget)."""
-        return max(self.max_steps - (stats.steps or 0), 0) if self.max_steps else None
+    def budget(self, counts: Counts) -> int | None:
+        """Steps left of the run's budget after ``counts`` (None: no budget)."""
+        return max(self.max_steps - (counts.steps or 0), 0) if self.max_steps else None
 
     def rhs(self, t, x):
         return self.module.rhs(t, x, self.p)
@@ -122,34 +165,41 @@ class Problem:
 
 
 class Solver(abc.ABC):
-    """One integration method. ``integrate`` covers a segment with no discontinuity."""
+    """One integration method, one object per run (scipy's ``OdeSolver`` in spirit):
+    ``Solver(problem)`` is made by ``simulate`` for one run and holds that run's state
+    only, its ``counts`` among it. ``integrate`` covers a segment with no discontinuity;
+    what it learns comes back in its ``Segment``."""
     name = ""
     description = ""
     # the highest DAE index it integrates, M dx/dt = f with a singular M (0: ODEs only)
     max_index = 0
+    # the counts it reports (``Counts``; the others stay None)
+    reports: tuple = COUNTS
 
-    @property
-    def takes_mass(self) -> bool:
-        return self.max_index > 0
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.counts = Counts.of(self.reports)
 
-    def check(self, problem: Problem, t0: float, x0: np.ndarray):
+    @classmethod
+    def takes_mass(cls) -> bool:
+        return cls.max_index > 0
+
+    @classmethod
+    def planned_steps(cls, step, t0: float, t1: float) -> int | None:
+        """The steps a fixed-step method plans from t0 to t1 (None: adaptive)."""
+        return None
+
+    def check(self, t0: float, x0: np.ndarray):
         """Refuse, before the run, what this method cannot integrate (SimulationError)."""
 
-    def warm_up(self, problem: Problem, x0: np.ndarray):
+    def warm_up(self, x0: np.ndarray):
         """Compile (or load from a cache) what the method runs, so wall time is the run's."""
 
-    def new_stats(self) -> Stats:
-        """The statistics of a run before its first step: 0 for what this method counts,
-        ``None`` for what it does not report."""
-        return Stats()
-
     @abc.abstractmethod
-    def integrate(self, problem: Problem, t0, t1, x0, t_eval, stats: Stats,
-                  events=()) -> Segment:
+    def integrate(self, t0, t1, x0, t_eval, events=()) -> Segment:
         """Integrate from t0 to t1, recording the states at ``t_eval`` and adding the
-        work done to ``stats`` (made by ``new_stats``); stop early where one of
-        ``events`` (functions of (t, x), ``terminal`` and ``direction`` as in scipy)
-        falls through zero."""
+        work done to ``self.counts``; stop early where one of ``events`` (functions of
+        (t, x), ``terminal`` and ``direction`` as in scipy) falls through zero."""
 
 
 def names_where(names, mask, most: int = 6) -> str:

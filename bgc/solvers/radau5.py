@@ -524,284 +524,380 @@ def _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p, guard_tol, kg
     return b, kg
 
 
-# One function for the step loop (~190 lines; the guideline is ~80), by measurement: numba
-# compiles every function it calls on its own (typing, lowering, LLVM passes, a cache
-# entry), and a helper holding part of the loop's state takes that state as arguments (a
-# NamedTuple of its 16 work arrays reaches LLVM as ~150 scalars). Cold ``compile_loop``
-# CPU time, alternating with this loop: the Newton solve, error estimate, predictor and
-# work arrays as functions of a ``Work`` tuple, 13.1 s against 11.2 s (+17%); only the
-# three smallest pieces (step-size multiplier, polynomial coefficients, first output
-# rows) as functions, 11.9 s against 11.2 s (+6%). Grouping the arguments (``System``,
-# ``Settings``) and the result (``native.Outcome``) costs nothing measurable.
+# The step loop in named parts: each part below is a function the loop calls, inlined into
+# it by numba (``part``: ``inline='always'``, at numba's IR level, before typing), so the
+# loop still compiles as one function. A part compiled on its own (``inner``) is typed,
+# lowered and cached apart and takes the loop's state as arguments: the Newton solve, error
+# estimate, predictor and work arrays as ``inner`` functions of a tuple of the work arrays
+# cost +17% of the loop's cold compile (13.1 s against 11.2 s). Inlined, the arguments,
+# tuples and records included, cost nothing measurable (issue 41, alternating with the
+# single-function loop, fresh caches, on a loaded 2-core machine: cold ``compile_loop``
+# with its dependencies 30.9 and 34.3 s CPU against 32.3 and 35.3 s; the SARIB main job's
+# loop, 16 pairs alternating, new/old CPU time 0.99 (median of the pairs), the states
+# bitwise identical). ``_newton`` and the linear algebra stay ``inner``: large enough to
+# compile apart, at no cost measured.
+part = njit(inline="always")
+
+
+class Work(NamedTuple):
+    """The loop's work arrays for n states: the stages ``Z``, their predictor ``Z0``, the
+    transformed variables ``W`` and Newton increments ``dW``, the stages' rhs ``F``, a
+    scratch row ``work``, ``M`` times the error estimate's stage combination ``ZE``, the
+    right-hand sides of the real and complex systems, the error ``scale``."""
+    Z: np.ndarray
+    Z0: np.ndarray
+    W: np.ndarray
+    dW: np.ndarray
+    F: np.ndarray
+    work: np.ndarray
+    ZE: np.ndarray
+    f_real: np.ndarray
+    f_cplx: np.ndarray
+    scale: np.ndarray
+
+
+@part
+def _work(n):
+    return Work(np.zeros((3, n)), np.empty((3, n)), np.empty((3, n)), np.empty((3, n)),
+                np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n),
+                np.empty(n, dtype=np.complex128), np.empty(n))
+
+
+@part
+def _begin(system, settings, keep, t0, t1, y, f, p, stats):
+    """The loop's state at its start: going on from where the last call paused (``keep``),
+    else fresh (the first step estimated unless given, a Jacobian at the start). Returns
+    the step ``h_abs``, the step control's memory ``(h_abs_old, err_old)``, the Newton
+    state ``(have_lu, lu_kind, current_jac, faccon)``, whether the last step's polynomial
+    predicts the next stages (``have_sol``) and that polynomial's ``(t_old, h_last,
+    y_old)`` (its coefficients are ``keep.Q``)."""
+    kept, h_start, max_step = keep.state, settings.h_start, settings.max_step
+    if kept[0] == 1.0 and kept[1] == t0 and h_start > 0.0:     # going on from a pause
+        h_abs = min(h_start, t1 - t0, max_step)
+        have_lu = kept[6] == 1.0 and h_abs == h_start
+        return (h_abs, (kept[4], kept[5]), (have_lu, int(kept[7]), kept[8] == 1.0, kept[10]),
+                kept[9] == 1.0, (kept[2], kept[3], keep.y_old.copy()))
+    if h_start > 0.0:
+        h_abs = h_start
+    else:
+        h_abs = _initial_step(system.model.rhs, t0, t1, y, f, p, settings.rtol,
+                              settings.atol, stats)
+    h_abs = min(h_abs, t1 - t0, max_step)
+    _jacobian(system, t0, y, p, keep.J, keep.V)
+    stats[ST_JAC] += 1
+    Q = keep.Q
+    for i in range(y.shape[0]):
+        Q[i, 0] = Q[i, 1] = Q[i, 2] = 0.0
+    return h_abs, (-1.0, -1.0), (False, NO_LU, True, 1.0), False, (t0, 0.0, y.copy())
+
+
+@part
+def _pause(keep, t, control, newton, have_sol, poly):
+    """Keep the loop's state in ``keep`` for the next call to go on from t."""
+    kept = keep.state
+    have_lu, lu_kind, current_jac, faccon = newton
+    kept[0], kept[1], kept[2], kept[3] = 1.0, t, poly[0], poly[1]
+    kept[4], kept[5] = control
+    kept[6], kept[7] = 1.0 if have_lu else 0.0, float(lu_kind)
+    kept[8], kept[9] = 1.0 if current_jac else 0.0, 1.0 if have_sol else 0.0
+    kept[10] = faccon
+    y_old = poly[2]
+    for i in range(y_old.shape[0]):
+        keep.y_old[i] = y_old[i]
+
+
+@part
+def _predict(have_sol, poly, Q, t, h, y, Z0):
+    """The stages' first guess: the last step's collocation polynomial at the new
+    collocation times (dense output extrapolated), else zero."""
+    n = y.shape[0]
+    for i in range(3):
+        if have_sol:
+            _dense_into(poly[0], poly[1], poly[2], Q, t + h * _C[i], Z0[i])
+            for k in range(n):
+                Z0[i, k] -= y[k]
+        else:
+            for k in range(n):
+                Z0[i, k] = 0.0
+
+
+@part
+def _collocation(system, keep, t, h, y, p, wk, newton, newton_tol, stats, diag):
+    """Solve the collocation system of a step of size h: Newton iterations on factors of
+    the Newton matrices (formed again where there are none), with a fresh Jacobian once
+    when they converge slowly on an old one. Returns (converged, singular, iterations,
+    rate, the Newton state)."""
+    have_lu, lu_kind, current_jac, faccon = newton
+    M = system.mass
+    singular = False
+    converged = False
+    n_iter, rate = 0, 0.0
+    while not converged:
+        if not have_lu:
+            stats[ST_LU] += 2
+            lu_kind = _newton_matrices(keep.J, keep.V, system,
+                                       system.aug_mass if system.aug_mass.shape[0] > 0
+                                       else M, h, keep.lu_real, keep.lu_complex,
+                                       keep.piv_real, keep.piv_complex, system.plan)
+            if lu_kind == NO_LU:
+                singular = True
+                break      # a smaller step shifts the spectrum
+            have_lu = True
+        faccon = max(faccon, 2.220446049250313e-16) ** 0.8   # (Hairer's decay)
+        converged, n_iter, rate, finite, faccon = _newton(
+            system.model.rhs, t, h, y, p, M, wk.Z0, wk.Z, wk.W, wk.F, wk.dW, wk.work,
+            wk.f_real, wk.f_cplx, keep.lu_real, keep.lu_complex, keep.piv_real,
+            keep.piv_complex, system.plan, lu_kind, wk.scale, newton_tol, stats, diag,
+            faccon)
+        if converged or not finite or current_jac:
+            break
+        _jacobian(system, t, y, p, keep.J, keep.V)    # slow convergence: a fresh Jacobian
+        stats[ST_JAC] += 1
+        current_jac = True
+        have_lu = False
+    return converged, singular, n_iter, rate, (have_lu, lu_kind, current_jac, faccon)
+
+
+@part
+def _error_estimate(system, keep, settings, t, h, y, f, p, wk, lu_kind, rejected, stats):
+    """The step's end ``y_new`` and its error norm (Hairer's ESTRAD with M; after a
+    rejected step, an error above 1 is estimated again from one more rhs)."""
+    M, plan, rhs = system.mass, system.plan, system.model.rhs
+    Z, work, ZE, scale = wk.Z, wk.work, wk.ZE, wk.scale
+    n = y.shape[0]
+    y_new = np.empty(n)
+    for k in range(n):
+        y_new[k] = y[k] + Z[2, k]
+        work[k] = (Z[0, k] * _E[0] + Z[1, k] * _E[1] + Z[2, k] * _E[2]) / h
+    _times_mass(M, work, ZE)
+    for k in range(n):
+        work[k] = f[k] + ZE[k]
+    error = _solve(keep.lu_real, keep.piv_real, work, plan, lu_kind)
+    _scale(y, y_new, settings.rtol, settings.atol, system.index2, h, scale)
+    err_norm = _rms_ratio(error, scale)
+    if rejected and err_norm > 1.0:
+        for k in range(n):
+            work[k] = y[k] + error[k]
+        call_entry(rhs, t, work, p, wk.F[0])
+        for k in range(n):
+            work[k] = wk.F[0, k] + ZE[k]
+        error = _solve(keep.lu_real, keep.piv_real, work, plan, lu_kind)
+        stats[ST_RHS] += 1
+        err_norm = _rms_ratio(error, scale)
+    return y_new, error, err_norm
+
+
+@part
+def _mult(h_abs, err_norm, control):
+    """Gustafsson's predictive factor from the last accepted step (1: none)."""
+    h_abs_old, err_old = control
+    return 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
+        h_abs / h_abs_old * (err_old / err_norm) ** 0.25
+
+
+@part
+def _next_step(h_abs, err_norm, control, safety, n_iter, rate, max_step):
+    """After an accepted step: the next step size (kept unless it may grow by
+    ``GROW_AT``, or the Jacobian is renewed) and whether the Jacobian is renewed."""
+    recompute_jac = n_iter > 2 and rate > JAC_RATE
+    if err_norm == 0.0:
+        factor = MAX_FACTOR
+    else:
+        factor = min(MAX_FACTOR, safety * min(1.0, _mult(h_abs, err_norm, control))
+                     * err_norm ** -0.25)
+    if not recompute_jac and factor < GROW_AT:
+        factor = 1.0
+    return min(h_abs * factor, max_step), recompute_jac
+
+
+@part
+def _step(system, settings, keep, t, t1, y, f, p, wk, h_abs, min_step, control, newton,
+          have_sol, poly, newton_tol, stats, diag):
+    """One step from (t, y), tried with h_abs and made smaller until its Newton
+    iterations converge and its error is within the tolerances. Returns (status, the
+    step taken, t_new, y_new, err_norm, iterations, rate, safety, the Newton state):
+    status REACHED for a step taken, else STEP_TOO_SMALL or SINGULAR."""
+    rejected = False
+    while True:
+        if h_abs < min_step:
+            return (STEP_TOO_SMALL, h_abs, t, y, 0.0, 0, 0.0, 0.9, newton)
+        if t + h_abs >= t1:     # landing on t1: a shorter step, new factors
+            t_new = t1
+            if t1 - t != h_abs:
+                newton = (False, newton[1], newton[2], newton[3])
+            h_abs = t1 - t
+        else:                   # (t + h) - t differs from h by round-off: not a new h
+            t_new = t + h_abs
+        h = h_abs
+        _predict(have_sol, poly, keep.Q, t, h, y, wk.Z0)
+        _scale(y, y, settings.rtol, settings.atol, system.index2, h, wk.scale)
+        converged, singular, n_iter, rate, newton = _collocation(
+            system, keep, t, h, y, p, wk, newton, newton_tol, stats, diag)
+        if not converged:
+            h_abs *= 0.5
+            newton = (False, newton[1], newton[2], newton[3])
+            stats[ST_REJECTED] += 1
+            if singular and h_abs < min_step:
+                return (SINGULAR, h_abs, t, y, 0.0, n_iter, rate, 0.9, newton)
+            continue
+        y_new, error, err_norm = _error_estimate(system, keep, settings, t, h, y, f, p, wk,
+                                                 newton[1], rejected, stats)
+        safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
+        if err_norm <= 1.0:
+            return (REACHED, h_abs, t_new, y_new, err_norm, n_iter, rate, safety, newton)
+        for k in range(y.shape[0]):
+            diag[k] = abs(error[k] / wk.scale[k])
+        factor = min(1.0, _mult(h_abs, err_norm, control)) * err_norm ** -0.25
+        h_abs *= max(MIN_FACTOR, safety * factor)
+        newton = (False, newton[1], newton[2], newton[3])
+        rejected = True
+        stats[ST_REJECTED] += 1
+
+
+@part
+def _dense_coefficients(Z, Q):
+    """The collocation polynomial of the step just taken (dense output), from its stages."""
+    for k in range(Q.shape[0]):
+        for j in range(3):
+            Q[k, j] = Z[0, k] * _P[0, j] + Z[1, k] * _P[1, j] + Z[2, k] * _P[2, j]
+
+
+@part
+def _watch_minor(mon, msc, t, y, p, watch):
+    """The rank monitor after an accepted step (``watch``: its scale, last value, steps
+    between checks and left until the next): where the monitored minor went through zero,
+    another is picked. Returns (lost, watch); lost: no minor is well conditioned there
+    (a possibly singular configuration, handed back from the step's start)."""
+    m_scale, m_last, m_wait, m_left = watch
+    m_left -= 1
+    if m_scale == 0.0 or m_left > 0:
+        return False, (m_scale, m_last, m_wait, m_left)
+    d = rank.minor(mon, msc, t, y, p) / m_scale
+    if d <= 0.0:
+        m_scale = rank.settle(mon, msc, t, y, p)
+        if m_scale == 0.0:
+            return True, (m_scale, m_last, m_wait, m_left)
+        d = 1.0
+    fall = (m_last - d) / m_wait            # per step, since the last check
+    m_wait = 1
+    if d > MONITOR_NEAR:
+        m_wait = MONITOR_MAX if fall <= 0.0 else int(
+            max(1.0, min(MONITOR_MAX, 0.25 * (d - MONITOR_NEAR) / fall)))
+    return False, (m_scale, d, m_wait, m_wait)
+
+
+@part
+def _first_rows(out, t_eval, t0, x0):
+    """The output rows at or before t0: the initial state. Returns how many."""
+    k_out = 0
+    while k_out < t_eval.shape[0] and t_eval[k_out] <= t0:
+        for i in range(x0.shape[0]):
+            out[k_out, i] = x0[i]
+        k_out += 1
+    return k_out
+
+
 @njit(cache=True)
 def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
     """Integrate ``system`` (``M dx/dt = rhs(t, x, p)``, ``System``) from t0 to t1 as
-    ``settings`` (``Settings``) ask; ``index2`` states have their error tolerances scaled
-    by 1/h, as RADAU5 does for index-2 DAEs. States at ``t_eval`` come from the
-    collocation polynomial. ``settings.h_start`` > 0 is the first step (a continuation
-    keeps its step size), else it is estimated. Stops where a guard margin falls to
-    ``guard_tol`` (located by bisection on the polynomial).
+    ``settings`` (``Settings``) ask (``index2`` states: their error tolerances scaled by
+    1/h, as RADAU5 does for index-2 DAEs); states at ``t_eval`` from the collocation
+    polynomial. ``settings.h_start`` > 0 is the first step (a continuation keeps its step
+    size), else it is estimated. Stops where a guard margin falls to ``guard_tol``
+    (located by bisection on the polynomial).
 
-    Returns a ``native.Outcome``: states at t_eval and how many were reached, t reached,
-    state there, status, guard index, the next step size; status PAUSED after
-    ``max_steps`` accepted steps (0: no limit), so that Python can watch its events and
-    go on from there, INTERRUPTED as soon as the ``stop`` flag is set. ``stats`` counts
-    the work (``native.ST_*``); ``diag`` (length n) holds each state's share of the last
-    rejected step's error (error over its scale; inf where the stages were not finite),
-    to name the states that made a step size collapse (STEP_TOO_SMALL). ``keep`` (a
-    ``Carry``) holds the loop's own state across a pause: a call that starts where the
-    last one paused goes on as if it had not (same Jacobian, factors and predictor).
+    Returns a ``native.Outcome``; status PAUSED after ``max_steps`` accepted steps (0: no
+    limit), for Python to watch its events and go on, INTERRUPTED as soon as the ``stop``
+    flag is set. ``stats`` counts the work (``native.ST_*``); ``diag`` (length n) holds
+    each state's share of the last rejected step's error (inf where the stages were not
+    finite), to name the states that made a step size collapse. ``keep`` (a ``Carry``)
+    holds the loop's state across a pause: a call that starts where the last one paused
+    goes on as if it had not (same Jacobian, factors and predictor).
 
-    The rank monitor (``system.monitor``) is checked after accepted steps: where its
-    minor crossed zero another is picked there if the constraints are well conditioned;
-    else the loop returns at the start of that step with status MINOR (its outputs
-    recorded up to there, ``h`` the step that crossed). Every step while the minor's
-    determinant (1 where it was picked) is below ``MONITOR_NEAR`` or falling fast; else
-    (a mechanism vibrating about its pose: the SARIB's checks were a sixth of its steps'
-    cost) after as many steps as a quarter of the fall to ``MONITOR_NEAR`` would take at
-    the rate measured since the last check, at most ``MONITOR_MAX``."""
-    rhs, jac, guards, n_guards, p = system.model
-    M, index2, plan, mon = system.mass, system.index2, system.plan, system.monitor
-    aug = system.aug_mass.shape[0] > 0
-    rtol, atol, max_step, h_start = (settings.rtol, settings.atol, settings.max_step,
-                                     settings.h_start)
-    guard_tol, max_steps, stop = settings.guard_tol, settings.max_steps, settings.stop
+    The rank monitor (``system.monitor``) is checked after accepted steps
+    (``_watch_minor``): every step while the minor's determinant (1 where it was picked)
+    is below ``MONITOR_NEAR`` or falling fast, else after as many steps as a quarter of
+    the fall to ``MONITOR_NEAR`` would take, at most ``MONITOR_MAX``; status MINOR where
+    no other minor is well conditioned (returned at the start of that step)."""
+    rhs, _, guards, n_guards, p = system.model
+    guard_tol, max_steps, max_step = settings.guard_tol, settings.max_steps, settings.max_step
     n = x0.shape[0]
     out = np.empty((t_eval.shape[0], n))
-    k_out = 0
-    while k_out < t_eval.shape[0] and t_eval[k_out] <= t0:
-        for i in range(n):
-            out[k_out, i] = x0[i]
-        k_out += 1
+    k_out = _first_rows(out, t_eval, t0, x0)
     t, y = t0, x0.copy()
     if t1 <= t0:
-        return Outcome(out, k_out, t, y, REACHED, -1, h_start)
+        return Outcome(out, k_out, t, y, REACHED, -1, settings.h_start)
     f = evaluate(rhs, t, y, p, n)
     stats[ST_RHS] += 1
     if not _finite(f):     # no step size follows from it (a NaN one never ends)
         for i in range(n):
             diag[i] = np.inf if not np.isfinite(f[i]) else 0.0
-        return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_start)
-    J, V, lu_real, lu_complex, piv_real, piv_complex, Q = (
-        keep.J, keep.V, keep.lu_real, keep.lu_complex, keep.piv_real, keep.piv_complex,
-        keep.Q)
-    kept = keep.state
-    newton_tol = max(10.0 * 2.220446049250313e-16 / rtol, min(0.03, rtol ** 0.5))
-    if kept[0] == 1.0 and kept[1] == t0 and h_start > 0.0:     # going on from a pause
-        h_abs = min(h_start, t1 - t0, max_step)
-        t_old, h_last, h_abs_old, err_old = kept[2], kept[3], kept[4], kept[5]
-        have_lu, lu_kind = kept[6] == 1.0, int(kept[7])
-        current_jac, have_sol = kept[8] == 1.0, kept[9] == 1.0
-        faccon = kept[10]
-        y_old = keep.y_old.copy()
-        if h_abs != h_start:
-            have_lu = False
-    else:
-        if h_start > 0.0:
-            h_abs = h_start
-        else:
-            h_abs = _initial_step(rhs, t0, t1, y, f, p, rtol, atol, stats)
-        h_abs = min(h_abs, t1 - t0, max_step)
-        h_abs_old, err_old = -1.0, -1.0
-        _jacobian(system, t, y, p, J, V)
-        stats[ST_JAC] += 1
-        current_jac = True
-        have_lu = False
-        lu_kind = NO_LU
-        for i in range(n):
-            Q[i, 0] = Q[i, 1] = Q[i, 2] = 0.0
-        have_sol = False
-        t_old, h_last, y_old = t, 0.0, y.copy()
-        faccon = 1.0
-    kept[0] = 0.0
+        return Outcome(out, k_out, t, y, NOT_FINITE, -1, settings.h_start)
+    Q = keep.Q
+    newton_tol = max(10.0 * 2.220446049250313e-16 / settings.rtol,
+                     min(0.03, settings.rtol ** 0.5))
+    h_abs, control, newton, have_sol, poly = _begin(system, settings, keep, t0, t1, y, f,
+                                                    p, stats)
+    keep.state[0] = 0.0
+    mon = system.monitor
     msc = rank.scratch(mon, n)
-    m_scale = rank.start(mon, msc, t, y, p) if mon.con != 0 else 0.0
-    m_last, m_wait, m_left = 1.0, 1, 1      # the minor: last value, steps between checks
-    # work arrays: the stages, their predictor, the transformed variables and Newton
-    # increments, the stages' rhs, the error scale and estimate
-    Z = np.zeros((3, n))
-    Z0 = np.empty((3, n))
-    W = np.empty((3, n))
-    dW = np.empty((3, n))
-    F = np.empty((3, n))
-    work = np.empty(n)
-    ZE = np.empty(n)
-    f_real = np.empty(n)
-    f_cplx = np.empty(n, dtype=np.complex128)
-    scale = np.empty(n)
+    watch = (rank.start(mon, msc, t, y, p) if mon.con != 0 else 0.0, 1.0, 1, 1)
+    wk = _work(n)
     taken = 0
     while t < t1:
-        if stopped(stop):
+        if stopped(settings.stop):
             return Outcome(out, k_out, t, y, INTERRUPTED, -1, h_abs)
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
-        if h_abs > max_step:
-            h_abs, h_abs_old, err_old = max_step, -1.0, -1.0
-            have_lu = False
-        elif h_abs < min_step:
-            h_abs, h_abs_old, err_old = min_step, -1.0, -1.0
-            have_lu = False
-        rejected = False
-        accepted = False
-        n_iter, rate, err_norm, safety = 0, 0.0, 0.0, 0.9
-        y_new = y
-        t_new = t
-        while not accepted:
-            if h_abs < min_step:
-                return Outcome(out, k_out, t, y, STEP_TOO_SMALL, -1, h_abs)
-            if t + h_abs >= t1:     # landing on t1: a shorter step, new factors
-                t_new = t1
-                if t1 - t != h_abs:
-                    have_lu = False
-                h_abs = t1 - t
-            else:                   # (t + h) - t differs from h by round-off: not a new h
-                t_new = t + h_abs
-            h = h_abs
-            if have_sol:
-                for i in range(3):
-                    _dense_into(t_old, h_last, y_old, Q, t + h * _C[i], Z0[i])
-                    for k in range(n):
-                        Z0[i, k] -= y[k]
-            else:
-                for i in range(3):
-                    for k in range(n):
-                        Z0[i, k] = 0.0
-            _scale(y, y, rtol, atol, index2, h, scale)
-            converged = False
-            singular = False
-            while not converged:
-                if not have_lu:
-                    stats[ST_LU] += 2
-                    lu_kind = _newton_matrices(J, V, system,
-                                               system.aug_mass if aug else M, h,
-                                               lu_real, lu_complex, piv_real,
-                                               piv_complex, plan)
-                    if lu_kind == NO_LU:
-                        singular = True
-                        break      # a smaller step shifts the spectrum
-                    have_lu = True
-                faccon = max(faccon, 2.220446049250313e-16) ** 0.8   # (Hairer's decay)
-                converged, n_iter, rate, finite, faccon = _newton(
-                    rhs, t, h, y, p, M, Z0, Z, W, F, dW, work, f_real, f_cplx, lu_real,
-                    lu_complex, piv_real, piv_complex, plan, lu_kind, scale, newton_tol,
-                    stats, diag, faccon)
-                if converged or not finite or current_jac:
-                    break
-                _jacobian(system, t, y, p, J, V)    # slow convergence: a fresh Jacobian
-                stats[ST_JAC] += 1
-                current_jac = True
-                have_lu = False
-            if not converged:
-                h_abs *= 0.5
-                have_lu = False
-                stats[ST_REJECTED] += 1
-                if singular and h_abs < min_step:
-                    return Outcome(out, k_out, t, y, SINGULAR, -1, h_abs)
-                continue
-            y_new = np.empty(n)
-            for k in range(n):
-                y_new[k] = y[k] + Z[2, k]
-                work[k] = (Z[0, k] * _E[0] + Z[1, k] * _E[1] + Z[2, k] * _E[2]) / h
-            _times_mass(M, work, ZE)
-            for k in range(n):
-                work[k] = f[k] + ZE[k]
-            error = _solve(lu_real, piv_real, work, plan, lu_kind)
-            _scale(y, y_new, rtol, atol, index2, h, scale)
-            err_norm = _rms_ratio(error, scale)
-            safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
-            if rejected and err_norm > 1.0:
-                for k in range(n):
-                    work[k] = y[k] + error[k]
-                call_entry(rhs, t, work, p, F[0])
-                for k in range(n):
-                    work[k] = F[0, k] + ZE[k]
-                error = _solve(lu_real, piv_real, work, plan, lu_kind)
-                stats[ST_RHS] += 1
-                err_norm = _rms_ratio(error, scale)
-            if err_norm > 1.0:
-                for k in range(n):
-                    diag[k] = abs(error[k] / scale[k])
-                mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
-                    h_abs / h_abs_old * (err_old / err_norm) ** 0.25
-                factor = min(1.0, mult) * err_norm ** -0.25
-                h_abs *= max(MIN_FACTOR, safety * factor)
-                have_lu = False
-                rejected = True
-                stats[ST_REJECTED] += 1
-            else:
-                accepted = True
+        if h_abs > max_step or h_abs < min_step:    # clipped: no prediction, new factors
+            h_abs = max_step if h_abs > max_step else min_step
+            control, newton = (-1.0, -1.0), (False, newton[1], newton[2], newton[3])
+        status, h_abs, t_new, y_new, err_norm, n_iter, rate, safety, newton = _step(
+            system, settings, keep, t, t1, y, f, p, wk, h_abs, min_step, control, newton,
+            have_sol, poly, newton_tol, stats, diag)
+        if status != REACHED:
+            return Outcome(out, k_out, t, y, status, -1, h_abs)
         stats[ST_STEPS] += 1
-        recompute_jac = n_iter > 2 and rate > JAC_RATE
-        if err_norm == 0.0:
-            factor = MAX_FACTOR
-        else:
-            mult = 1.0 if (err_old < 0.0 or h_abs_old < 0.0) else \
-                h_abs / h_abs_old * (err_old / err_norm) ** 0.25
-            factor = min(MAX_FACTOR, safety * min(1.0, mult) * err_norm ** -0.25)
-        if not recompute_jac and factor < GROW_AT:
-            factor = 1.0
         # the factors depend on h: keep them while the step stays (also when the input
         # signals' max_step clips it back to where it was)
-        h_next = min(h_abs * factor, max_step)
+        h_next, recompute_jac = _next_step(h_abs, err_norm, control, safety, n_iter, rate,
+                                           max_step)
         if recompute_jac or h_next != h_abs:
-            have_lu = False
+            newton = (False, newton[1], newton[2], newton[3])
         if system.project != 0:         # back onto the constraints (Newton steps)
             for _ in range(PROJECTIONS):
-                call_entry(system.project, t_new, y_new, p, work)
+                call_entry(system.project, t_new, y_new, p, wk.work)
                 for k in range(n):
-                    y_new[k] += work[k]
+                    y_new[k] += wk.work[k]
         f_new = evaluate(rhs, t_new, y_new, p, n)
         stats[ST_RHS] += 1
         if not _finite(y_new):
             return Outcome(out, k_out, t, y, NOT_FINITE, -1, h_abs)
         if recompute_jac:
-            _jacobian(system, t_new, y_new, p, J, V)
+            _jacobian(system, t_new, y_new, p, keep.J, keep.V)
             stats[ST_JAC] += 1
-            current_jac = True
-        else:
-            current_jac = False
-        h_abs_old, err_old = h_abs, err_norm
-        for k in range(n):
-            for j in range(3):
-                Q[k, j] = Z[0, k] * _P[0, j] + Z[1, k] * _P[1, j] + Z[2, k] * _P[2, j]
+        newton = (newton[0], newton[1], recompute_jac, newton[3])
+        control = (h_abs, err_norm)
+        _dense_coefficients(wk.Z, Q)
         have_sol = True
-        t_old, h_last, y_old = t, t_new - t, y
+        poly = (t, t_new - t, y)
         t, y, f = t_new, y_new, f_new
         h_abs = h_next
         # a guard margin reaching its tolerance: locate it on the polynomial (bisection)
         if guard_tol > 0.0 and n_guards > 0:
             kg, low = guard_min(guards, n_guards, t, y, p, guard_tol)
             if low <= 0.0:
-                b, kg = _guard_bisect(guards, n_guards, t_old, t, h_last, y_old, Q, p,
-                                      guard_tol, kg, work)
-                k_out = _record(out, k_out, t_eval, b, t_old, h_last, y_old, Q)
-                return Outcome(out, k_out, b, dense(t_old, h_last, y_old, Q, b), GUARD,
+                b, kg = _guard_bisect(guards, n_guards, poly[0], t, poly[1], poly[2], Q, p,
+                                      guard_tol, kg, wk.work)
+                k_out = _record(out, k_out, t_eval, b, poly[0], poly[1], poly[2], Q)
+                return Outcome(out, k_out, b, dense(poly[0], poly[1], poly[2], Q, b), GUARD,
                                kg, h_abs)
-        # the monitored minor through zero: pick another, or hand a possibly singular
-        # configuration back from the step's start
-        m_left -= 1
-        if m_scale != 0.0 and m_left <= 0:
-            d = rank.minor(mon, msc, t, y, p) / m_scale
-            if d <= 0.0:
-                m_scale = rank.settle(mon, msc, t, y, p)
-                if m_scale == 0.0:
-                    return Outcome(out, k_out, t_old, y_old.copy(), MINOR, -1, h_last)
-                d = 1.0
-            fall = (m_last - d) / m_wait            # per step, since the last check
-            m_wait = 1
-            if d > MONITOR_NEAR:
-                m_wait = MONITOR_MAX if fall <= 0.0 else int(
-                    max(1.0, min(MONITOR_MAX, 0.25 * (d - MONITOR_NEAR) / fall)))
-            m_last, m_left = d, m_wait
-        k_out = _record(out, k_out, t_eval, t, t_old, h_last, y_old, Q)
+        lost, watch = _watch_minor(mon, msc, t, y, p, watch)
+        if lost:
+            return Outcome(out, k_out, poly[0], poly[2].copy(), MINOR, -1, poly[1])
+        k_out = _record(out, k_out, t_eval, t, poly[0], poly[1], poly[2], Q)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:
-            kept[0], kept[1], kept[2], kept[3] = 1.0, t, t_old, h_last
-            kept[4], kept[5] = h_abs_old, err_old
-            kept[6], kept[7] = 1.0 if have_lu else 0.0, float(lu_kind)
-            kept[8], kept[9] = 1.0 if current_jac else 0.0, 1.0 if have_sol else 0.0
-            kept[10] = faccon
-            for i in range(n):
-                keep.y_old[i] = y_old[i]
+            _pause(keep, t, control, newton, have_sol, poly)
             return Outcome(out, k_out, t, y, PAUSED, -1, h_abs)
     return Outcome(out, k_out, t, y, REACHED, -1, h_abs)
 

@@ -15,40 +15,30 @@ import numpy as np
 from bgc.solvers.base import (
     Segment,
     Solver,
-    Stats,
     budget_message,
     collapse_message,
     fastest,
 )
 
-# solve_ivp's methods that take the Jacobian (and factor Newton matrices)
-IMPLICIT = ("BDF", "Radau", "LSODA")
-
 
 class ScipySolver(Solver):
-    """scipy.integrate.solve_ivp with the generated analytic Jacobian."""
+    """scipy.integrate.solve_ivp's ``method`` with the generated analytic Jacobian (an
+    ``implicit`` method takes it, and factors Newton matrices). Rejected steps solve_ivp
+    does not report."""
+    method = ""
+    implicit = True
+    reports = ("steps", "rhs_calls", "jac_calls", "lu_decompositions")
 
-    def __init__(self, name: str, method: str, description: str):
-        self.name, self.method, self.description = name, method, description
-
-    def warm_up(self, problem, x0):
+    def warm_up(self, x0):
         """Import scipy.integrate (0.3 s, which only these solvers need: imported here, not
         with bgc), so wall time is the run's."""
         import scipy.integrate  # noqa: F401
 
-    @property
-    def implicit(self) -> bool:
-        """Whether the method solves its steps by Newton (a Jacobian, LU factors)."""
-        return self.method in IMPLICIT
-
-    def new_stats(self):
-        """Rejected steps solve_ivp does not report; an explicit method factors nothing."""
-        return Stats(rejected_steps=None, lu_decompositions=0 if self.implicit else None)
-
-    def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
+    def integrate(self, t0, t1, x0, t_eval, events=()):
         from scipy.integrate import solve_ivp
+        problem = self.problem
         kw = {"jac": problem.jac} if self.implicit else {}
-        stop = StopEvent(problem, stats, span=t1 - t0)
+        stop = StopEvent(problem, self.counts, span=t1 - t0)
         try:
             sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=problem.rtol,
                             atol=problem.atol, dense_output=True, events=[*events, stop],
@@ -60,11 +50,8 @@ class ScipySolver(Solver):
             return Segment(np.empty((0, len(x0))), np.array(x_ok), t_ok, False,
                            f"{self.name} stopped after t = {t_ok:.6g} ({exc})"
                            + fastest(problem, t_ok, x_ok))
-        stats.steps += max(len(sol.t) - 1, 0)
-        stats.rhs_calls += int(sol.nfev)
-        stats.jac_calls += int(sol.njev)
-        if stats.lu_decompositions is not None:
-            stats.lu_decompositions += int(sol.nlu)
+        self.counts.add(steps=max(len(sol.t) - 1, 0), rhs_calls=sol.nfev,
+                        jac_calls=sol.njev, lu_decompositions=sol.nlu)
         t_ok = float(sol.t[-1]) if len(sol.t) else t0
         x_end = sol.y[:, -1] if sol.y.size else np.asarray(x0)
         if sol.status < 0 or sol.sol is None:
@@ -83,6 +70,28 @@ class ScipySolver(Solver):
         return Segment(_dense(sol, t_eval, len(x0)), x_end, t_ok, True)
 
 
+class Bdf(ScipySolver):
+    name, method = "bdf", "BDF"
+    description = "scipy BDF (variable order 1-5), stiff"
+
+
+class Radau(ScipySolver):
+    name, method = "radau", "Radau"
+    description = "scipy Radau IIA order 5, stiff"
+
+
+class Lsoda(ScipySolver):
+    name, method = "lsoda", "LSODA"
+    description = "scipy LSODA (ODEPACK), switches stiff/non-stiff"
+
+
+class Rk45(ScipySolver):
+    """Explicit: no Jacobian, no LU factorizations (not reported)."""
+    name, method, implicit = "rk45", "RK45", False
+    description = "scipy Dormand-Prince 5(4), non-stiff"
+    reports = ("steps", "rhs_calls", "jac_calls")
+
+
 class StopEvent:
     """A terminal event that stops a Python-driven integrator (scipy, SUNDIALS) at the end
     of the step where Ctrl-C was pressed (``Problem.interrupt``), the run's step budget
@@ -95,9 +104,9 @@ class StopEvent:
 
     terminal, direction = True, 0
 
-    def __init__(self, problem, stats, budget: bool = True, span: float = 0.0):
+    def __init__(self, problem, counts, budget: bool = True, span: float = 0.0):
         self.problem, self.t_stop, self.calls = problem, None, 0
-        self.left = problem.budget(stats) if budget else None
+        self.left = problem.budget(counts) if budget else None
         self.interrupted = False
         self.tiny, self.h, self.floor = 0, None, TINY_STEP * span
         self.last = (None, None)

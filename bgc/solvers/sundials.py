@@ -13,10 +13,12 @@ factorizations and rejected steps they do not, so those stay ``None``.
 
 from __future__ import annotations
 
+import abc
+
 import numpy as np
 
 from bgc.errors import SimulationError
-from bgc.solvers.base import Segment, Solver, Stats
+from bgc.solvers.base import Segment, Solver
 from bgc.solvers.scipy_ivp import StopEvent
 
 MAX_STEPS = 10 ** 8         # per output interval: the run's own budget, not SUNDIALS' 500
@@ -44,76 +46,45 @@ def _events(events, kind):
     return {"eventsfn": fn, "num_events": len(events)}
 
 
+def _import():
+    try:
+        from sksundae import cvode, ida
+    except ImportError as exc:       # pragma: no cover - a dependency of bgc
+        raise SimulationError(f"SUNDIALS is not available: {exc}",
+                              hint="pip install scikit-sundae") from None
+    return cvode, ida
+
+
+def _options(problem) -> dict:
+    """SUNDIALS' options of a run: tolerances, dense direct linear solver, step limits."""
+    h_max = problem.max_step
+    return dict(rtol=problem.rtol, atol=problem.atol, linsolver="dense",
+                max_num_steps=MAX_STEPS, max_step=float(h_max) if np.isfinite(h_max) else 0.0)
+
+
 class SundialsSolver(Solver):
-    """CVODE (``kind = "cvode"``) or IDA (``"ida"``) with the generated Jacobian."""
+    """A SUNDIALS integrator with the generated Jacobian: ``_solver`` makes it, ``_solve``
+    runs it over the output times. Steps, LU factorizations and rejected steps the
+    bindings do not report."""
+    reports = ("rhs_calls", "jac_calls")
 
-    def __init__(self, name: str, kind: str, description: str):
-        self.name, self.kind, self.description = name, kind, description
-        self.max_index = 1 if kind == "ida" else 0
+    @abc.abstractmethod
+    def _solver(self, events):
+        """The scikit-sundae solver object of this run, watching ``events``."""
 
-    @staticmethod
-    def _import():
-        try:
-            from sksundae import cvode, ida
-        except ImportError as exc:       # pragma: no cover - a dependency of bgc
-            raise SimulationError(f"SUNDIALS is not available: {exc}",
-                                  hint="pip install scikit-sundae") from None
-        return cvode, ida
+    def _solve(self, solver, tspan, x0):
+        return solver.solve(tspan, x0)
 
-    def new_stats(self):
-        """Steps, LU factorizations and rejected steps the bindings do not report."""
-        return Stats(steps=None, lu_decompositions=None, rejected_steps=None)
-
-    def _solver(self, problem, events):
-        cvode, ida = self._import()
-        m, p = problem.module, problem.p
-        # SUNDIALS hands read-only views of its vectors: numba would compile the model
-        # again for read-only arrays, so the states are copied (0.2 us)
-        h_max = problem.max_step
-        opts = dict(rtol=problem.rtol, atol=problem.atol, linsolver="dense",
-                    max_num_steps=MAX_STEPS,
-                    max_step=float(h_max) if np.isfinite(h_max) else 0.0)
-        if self.kind == "cvode":
-            def rhsfn(t, y, yp):
-                yp[:] = m.rhs(t, np.array(y), p)
-
-            def jacfn(t, y, yp, JJ):
-                JJ[:, :] = m.jac(t, np.array(y), p)
-            return cvode.CVODE(rhsfn, jacfn=jacfn, method="BDF", **opts,
-                               **_events(events, self.kind))
-        M = problem.mass
-
-        def resfn(t, y, yp, res):
-            f = m.rhs(t, np.array(y), p)
-            res[:] = (yp if M is None else M @ yp) - f
-
-        def jacfn(t, y, yp, res, cj, JJ):
-            JJ[:, :] = (cj * np.eye(len(y)) if M is None else cj * M) - m.jac(t, np.array(y), p)
-        algebraic = None if M is None else np.flatnonzero(~M.any(axis=0))   # x' unused
-        return ida.IDA(resfn, jacfn=jacfn, algebraic_idx=algebraic, **opts,
-                       **_events(events, self.kind))
-
-    def integrate(self, problem, t0, t1, x0, t_eval, stats, events=()):
+    def integrate(self, t0, t1, x0, t_eval, events=()):
         # Ctrl-C stops it at the end of a step (SUNDIALS calls events between steps too,
         # so they do not count its steps: the step budget is its own MAX_STEPS)
-        stop = StopEvent(problem, stats, budget=False)
+        stop = StopEvent(self.problem, self.counts, budget=False)
         watched = [*events, stop]
-        solver = self._solver(problem, watched)
+        solver = self._solver(watched)
         # output times: the segment's start and end always, so the end state is exact
         tspan = np.unique(np.concatenate([[t0], np.asarray(t_eval, dtype=float), [t1]]))
-        x0 = np.array(x0, dtype=np.float64)
-        if self.kind == "cvode":
-            sol = solver.solve(tspan, x0)
-        else:
-            # x' from M x' = f (least squares: an algebraic state's derivative enters no
-            # residual); x0 itself must be consistent
-            f0 = problem.rhs(t0, x0)
-            stats.rhs_calls += 1
-            M = problem.mass
-            yp0 = f0 if M is None else np.linalg.lstsq(M, f0, rcond=None)[0]
-            sol = solver.solve(tspan, x0, yp0)
-        stats.rhs_calls += int(sol.nfev)
-        stats.jac_calls += int(sol.njev)
+        sol = self._solve(solver, tspan, np.array(x0, dtype=np.float64))
+        self.counts.add(rhs_calls=sol.nfev, jac_calls=sol.njev)
         t, y = np.asarray(sol.t, dtype=float), np.asarray(sol.y, dtype=float)
         if y.ndim == 1:
             y = y.reshape(len(t), -1)
@@ -137,3 +108,55 @@ class SundialsSolver(Solver):
         if not sol.success or t_ok < t1:
             return Segment(x_eval, x_end, t_ok, False, str(sol.message))
         return Segment(x_eval, x_end, t_ok, True)
+
+
+class Cvode(SundialsSolver):
+    """CVODE: variable-order BDF on dx/dt = f(t, x)."""
+    name = "cvode"
+    description = "SUNDIALS CVODE (scikit-sundae): variable-order BDF 1-5, stiff"
+
+    def _solver(self, events):
+        cvode, _ = _import()
+        m, p = self.problem.module, self.problem.p
+        # SUNDIALS hands read-only views of its vectors: numba would compile the model
+        # again for read-only arrays, so the states are copied (0.2 us)
+
+        def rhsfn(t, y, yp):
+            yp[:] = m.rhs(t, np.array(y), p)
+
+        def jacfn(t, y, yp, JJ):
+            JJ[:, :] = m.jac(t, np.array(y), p)
+        return cvode.CVODE(rhsfn, jacfn=jacfn, method="BDF", **_options(self.problem),
+                           **_events(events, "cvode"))
+
+
+class Ida(SundialsSolver):
+    """IDA: BDF on the residual M dx/dt - f(t, x) = 0 (an index-1 DAE where M is
+    singular)."""
+    name = "ida"
+    description = ("SUNDIALS IDA (scikit-sundae): BDF on the residual, mass matrices "
+                   "(index-1 DAEs)")
+    max_index = 1
+
+    def _solver(self, events):
+        _, ida = _import()
+        m, p, M = self.problem.module, self.problem.p, self.problem.mass
+
+        def resfn(t, y, yp, res):       # the states copied: see Cvode
+            f = m.rhs(t, np.array(y), p)
+            res[:] = (yp if M is None else M @ yp) - f
+
+        def jacfn(t, y, yp, res, cj, JJ):
+            JJ[:, :] = (cj * np.eye(len(y)) if M is None else cj * M) - m.jac(t, np.array(y), p)
+        algebraic = None if M is None else np.flatnonzero(~M.any(axis=0))   # x' unused
+        return ida.IDA(resfn, jacfn=jacfn, algebraic_idx=algebraic, **_options(self.problem),
+                       **_events(events, "ida"))
+
+    def _solve(self, solver, tspan, x0):
+        """x' from M x' = f (least squares: an algebraic state's derivative enters no
+        residual); x0 itself must be consistent."""
+        f0 = self.problem.rhs(tspan[0], x0)
+        self.counts.add(rhs_calls=1)
+        M = self.problem.mass
+        yp0 = f0 if M is None else np.linalg.lstsq(M, f0, rcond=None)[0]
+        return solver.solve(tspan, x0, yp0)

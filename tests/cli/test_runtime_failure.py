@@ -188,9 +188,8 @@ def test_collapsing_step_size_stops_a_scipy_run_at_once(solver):
     module = types.SimpleNamespace(rhs=lambda t, x, p: -np.sign(x),
                                    jac=lambda t, x, p: np.zeros((1, 1)), STATE_NAMES=("x",))
     start = time.monotonic()
-    seg = SOLVERS[solver].integrate(Problem(module, np.zeros(0), rtol=1e-6, atol=1e-8), 0.0,
-                                    1.0, np.array([1e-13]), np.linspace(0.0, 1.0, 11),
-                                    SOLVERS[solver].new_stats())
+    seg = SOLVERS[solver](Problem(module, np.zeros(0), rtol=1e-6, atol=1e-8)).integrate(
+        0.0, 1.0, np.array([1e-13]), np.linspace(0.0, 1.0, 11))
     assert time.monotonic() - start < 30       # a hang guard; it takes well under a second
     assert not seg.ok and seg.t_reached < 1e-6
     assert seg.message.startswith("the step size collapsed to "), seg.message

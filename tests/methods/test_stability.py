@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bgc.errors import SimulationError
-from bgc.methods import consistent
+from bgc.solvers import consistent
 from bgc.simulate import prepare, simulate
 from bgc.solvers import rk4
 

@@ -129,12 +129,12 @@ def _loop_calls(monkeypatch):
     """Record every call of the native loops that integrates (t1 > t0: (t0, t1, status))
     and the rank monitors they were given (``rank.Monitor``, its ``counts[0]``: the minors
     picked again inside the loop)."""
-    from bgc.solvers.native_solver import NativeSolver
+    from bgc.solvers.native_solver import NativeRadau, NativeSolver
     calls, monitors = [], []
-    run, monitor = NativeSolver._run, NativeSolver._monitor
+    run, monitor = NativeSolver._run, NativeRadau._monitor
 
-    def counted_run(self, problem, t0, t1, *args, **kw):
-        res = run(self, problem, t0, t1, *args, **kw)
+    def counted_run(self, t0, t1, *args, **kw):
+        res = run(self, t0, t1, *args, **kw)
         if t1 > t0:
             calls.append((t0, t1, res.status))
         return res
@@ -144,7 +144,7 @@ def _loop_calls(monkeypatch):
         monitors.append(mon)
         return mon
     monkeypatch.setattr(NativeSolver, "_run", counted_run)
-    monkeypatch.setattr(NativeSolver, "_monitor", kept_monitor)
+    monkeypatch.setattr(NativeRadau, "_monitor", kept_monitor)
     return calls, monitors
 
 
@@ -202,8 +202,8 @@ def test_rk4_divergence_at_a_singular_configuration_is_reported_not_raised():
 
     from bgc.solvers.base import Problem
     module = SimpleNamespace(jac=lambda t, x, p: np.full((2, 2), np.nan))
-    why = SOLVERS["rk4"]._diverged(Problem(module, np.zeros(0), step=1e-3), 0.25,
-                                   np.zeros(2))
+    why = SOLVERS["rk4"](Problem(module, np.zeros(0), step=1e-3))._diverged(0.25, np.zeros(2),
+                                                                          None)
     assert "non-finite after t = 0.25" in why and "Jacobian" in why
 
 
@@ -235,8 +235,8 @@ def test_a_segment_with_no_output_point_in_it_yields_no_rows(compiled, solver):
     mod = compiled("msd_forced")
     p = np.array(mod.PARAMS, dtype=np.float64)
     x0 = np.array(mod.initial_state(p), dtype=np.float64)
-    seg = SOLVERS[solver].integrate(Problem(mod, p, rtol=1e-8, atol=1e-8), 0.0, 0.5, x0,
-                                    np.empty(0), SOLVERS[solver].new_stats())
+    seg = SOLVERS[solver](Problem(mod, p, rtol=1e-8, atol=1e-8)).integrate(0.0, 0.5, x0,
+                                                                          np.empty(0))
     assert seg.ok and seg.x_eval.shape == (0, len(x0)) and seg.t_reached == 0.5
     ref = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-10, solver="native", points=2)
     assert np.allclose(seg.x_end, ref.x[-1], rtol=1e-5, atol=1e-7)

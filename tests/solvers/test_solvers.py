@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from bgc.simulate import SOLVERS
+from bgc.solvers import native
 from bgc.solvers.base import Problem
 
 K, C = 4.0, 0.5                                 # x'' + C x' + K x = 0
@@ -74,12 +75,20 @@ def step_counter():
 
 
 @pytest.mark.parametrize("name", ["bdf", "radau", "lsoda", "rk45"])
-def test_scipy_solvers_report_the_work_they_did(name):
-    module, solver = oscillator(), SOLVERS[name]
-    stats, counter = solver.new_stats(), step_counter()
+def test_scipy_solvers_report_the_work_they_did(name, monkeypatch):
+    import scipy.integrate._ivp.bdf
+    import scipy.integrate._ivp.radau
+    factored = [0]
+    for mod in (scipy.integrate._ivp.bdf, scipy.integrate._ivp.radau):
+        def counted(a, *args, _lu=mod.lu_factor, **kw):
+            factored[0] += 1
+            return _lu(a, *args, **kw)
+        monkeypatch.setattr(mod, "lu_factor", counted)
+    module, counter = oscillator(), step_counter()
+    solver = SOLVERS[name](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
     t_eval = np.linspace(0.0, T_END, 5)
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, t_eval, stats, [counter])
+    seg = solver.integrate(0.0, T_END, X0, t_eval, [counter])
     assert seg.ok and seg.t_reached == T_END
     assert np.allclose(seg.x_eval[-1], exact(T_END), atol=1e-6)
     assert stats.steps == counter.calls - 1 > 0
@@ -88,17 +97,18 @@ def test_scipy_solvers_report_the_work_they_did(name):
     assert stats.rejected_steps is None                 # solve_ivp does not say
     if name == "rk45":                                  # explicit: no Jacobian, no LU
         assert stats.jac_calls == 0 and stats.lu_decompositions is None
-    else:
-        assert stats.lu_decompositions >= 0
-        assert name == "lsoda" or stats.jac_calls >= 1 and stats.lu_decompositions >= 1
+    elif name == "lsoda":                # ODEPACK factors once per Jacobian (scipy says)
+        assert stats.lu_decompositions == stats.jac_calls
+    else:                                # BDF and Radau factor through lu_factor: counted
+        assert stats.lu_decompositions == factored[0] > 0 and stats.jac_calls >= 1
 
 
 @pytest.mark.parametrize("name", ["cvode", "ida"])
 def test_sundials_solvers_report_evaluations_and_no_steps(name):
-    module, solver = oscillator(), SOLVERS[name]
-    stats = solver.new_stats()
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, np.linspace(0.0, T_END, 5), stats)
+    module = oscillator()
+    solver = SOLVERS[name](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
+    seg = solver.integrate(0.0, T_END, X0, np.linspace(0.0, T_END, 5))
     assert seg.ok and np.allclose(seg.x_end, exact(T_END), atol=1e-6)
     assert stats.rhs_calls == module.calls["rhs"] > 0
     assert stats.jac_calls == module.calls["jac"] > 0
@@ -107,27 +117,56 @@ def test_sundials_solvers_report_evaluations_and_no_steps(name):
 
 
 def test_native_radau_counts_in_its_loop_what_it_calls():
-    module, solver = oscillator(), SOLVERS["native"]
-    stats = solver.new_stats()
+    module = oscillator()
+    solver = SOLVERS["native"](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    stats = solver.counts
     t_eval = np.linspace(0.0, T_END, 5)
-    seg = solver.integrate(Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10), 0.0, T_END,
-                           X0, t_eval, stats)
+    seg = solver.integrate(0.0, T_END, X0, t_eval)
     assert seg.ok and seg.x_eval.shape == (5, 2)
     assert np.allclose(seg.x_eval, [exact(t) for t in t_eval], atol=1e-6)
     assert stats.rhs_calls == module.calls["rhs"] > 0
     assert stats.jac_calls == module.calls["jac"] >= 1
-    assert stats.steps > 0 and stats.rejected_steps >= 0
+    assert stats.steps > 0
     # the two Newton matrices (real and complex) are factored together
     assert stats.lu_decompositions >= 2 and stats.lu_decompositions % 2 == 0
+
+
+def test_native_radau_counts_every_rejected_step():
+    """An rhs that is not finite after t = 1: every step from there fails its Newton
+    iterations at their first evaluation of the stages, and is rejected with half the
+    step, until the step is below 10 spacings of t. Each attempt is one rejected step,
+    one pair of factorizations and three rhs calls (one more at the start); the Jacobian
+    is the start's."""
+    module = oscillator()
+    good = module.native_entry_points()
+
+    @_ENTRY
+    def rhs_nan_after_1(t, x, p, out):
+        module.calls["rhs"] += 1
+        out[0], out[1] = (x[1], -K * x[0] - C * x[1]) if t <= 1.0 else (np.nan, np.nan)
+    module.native_entry_points = lambda: (ctypes.cast(rhs_nan_after_1, ctypes.c_void_p).value,
+                                          *good[1:])
+    module._keep += (rhs_nan_after_1,)
+    solver = SOLVERS["native"](Problem(module, np.zeros(0), rtol=1e-8, atol=1e-10))
+    res = solver._run(1.0, 2.0, X0, np.empty(0), h_start=0.5)
+    h, attempts, min_step = 0.5, 0, 10 * (np.nextafter(1.0, 2.0) - 1.0)
+    while h >= min_step:
+        attempts, h = attempts + 1, h * 0.5
+    assert res.status == native.STEP_TOO_SMALL and res.t == 1.0 and attempts == 48
+    assert np.isinf(res.error_share).all()            # both states' d/dt not finite
+    counts = solver.counts
+    assert counts.steps == 0 and counts.rejected_steps == attempts
+    assert counts.lu_decompositions == 2 * attempts and counts.jac_calls == 1
+    assert counts.rhs_calls == module.calls["rhs"] == 1 + 3 * attempts
 
 
 def test_rk4_counts_its_steps_and_the_jacobians_of_its_stability_check():
     """Fixed steps: T / h of them, four rhs each and one at the start; the stability
     check (every n^2 / 4 steps, here every step) evaluates the Jacobian: counted too."""
-    module, solver = oscillator(), SOLVERS["rk4"]
-    stats, h = solver.new_stats(), 0.01
-    seg = solver.integrate(Problem(module, np.zeros(0), step=h), 0.0, T_END, X0,
-                           np.array([T_END]), stats)
+    module, h = oscillator(), 0.01
+    solver = SOLVERS["rk4"](Problem(module, np.zeros(0), step=h))
+    stats = solver.counts
+    seg = solver.integrate(0.0, T_END, X0, np.array([T_END]))
     steps = round(T_END / h)
     assert seg.ok and np.allclose(seg.x_end, exact(T_END), atol=1e-6)
     assert stats.steps == steps

@@ -220,7 +220,7 @@ def test_sweep_command_writes_the_frf_and_window_metrics_and_reports_failing_poi
 
 def points_of(mod, t_end):
     """The output times ``bgc simulate --t-end`` gives: the model's spacing kept."""
-    from bgc.cli.simulate import output_points
+    from bgc.cli.options import output_points
     from bgc.model.model import Settings
     return output_points(Settings(**mod.SETTINGS), t_end)
 

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from bgc.methods import consistent
+from bgc.solvers import consistent
 
 
 def _module(imposed: bool):

@@ -1,5 +1,5 @@
 """The semi-active SARIB (issue 26, models/sarib_semiactive.yaml), scripted with bgc's API
-as a user would: ``make semiactive`` (or ``python bench/semiactive.py --out DIR``).
+as a user would: ``make semiactive`` (or ``python -m bgc.bench.semiactive --out DIR``).
 
 1. The pumping anti-resonance of ``a_OF_z`` against the flapping masses' setpoint
    ``x_set`` (-10 ... +10 mm), from the linearization of the whole coupled model (the
@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 from bgc.analysis import frf, tune
 from bgc.analysis.results import panels, save_figure, write_table
+from bgc.bench.cases import MODELS
 from bgc.pipeline import ensure_module
 from bgc.simulate import simulate
 
-ROOT = Path(__file__).resolve().parent.parent
-MODEL = ROOT / "models" / "sarib_semiactive.yaml"
+MODEL = MODELS / "sarib_semiactive.yaml"
 METHODS = ("parasitic", "lagrange", "zcp")
 SETPOINTS_MM = (-10.0, -5.0, 0.0, 5.0, 10.0)
 BAND = (15.0, 21.0)

@@ -110,8 +110,6 @@ def test_no_import_cycle_outside_codegen():
     assert cycles(outside) == []
 
 
-@pytest.mark.xfail(strict=True, reason="codegen's blocks <-> elements <-> equations and "
-                                       "kernels <-> instances (issue 41, item 4)")
 def test_no_import_cycle():
     assert cycles(list(MODULES)) == []
 

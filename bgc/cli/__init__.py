@@ -1,5 +1,5 @@
 """The ``bgc`` command line: check, compile, simulate, report, frf, modes, tune, sweep, run,
-bench, draw, export.
+bench, draw, export, energy.
 
 One module per command (``check``, ``compile``, ``simulate``, ``report``, ``frf``,
 ``modes``, ``tune``, ``sweep``, ``run``, ``bench``, ``draw``, ``export``), each registering itself on the group ``app.main``; ``app``
@@ -15,6 +15,7 @@ module loads none of them (tests/cli/test_warm_start.py).
 
 from bgc.cli import (  # noqa: F401
     bench,
+    energy,
     check,
     compile,
     draw,

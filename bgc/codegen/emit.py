@@ -265,6 +265,7 @@ def render(system: EquationSystem) -> str:
         passes_singular=bool(methods.get(system.method).passes_singular),
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
+        energy=system.energy or [],
         static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),
     )
     return _ENV.get_template("module.py.j2").render(**ctx)

@@ -170,13 +170,17 @@ class EquationSystem:
     projection: list[tuple[int, sp.Expr]] = field(default_factory=list)
     loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
     scene: str = ""                 # reduced for a scene (bgc/scene.py): its name
+    # the energy variant (``codegen.energy``): (name, kind, column, body, joint) per
+    # element whose energy and activity are quadrature states; None: the ordinary module
+    energy: list | None = None
 
     @property
     def variant(self) -> str:
         """What the generated module is named and hashed by: the method, for zcp whether
         its loops were kept closed (``zcp_closed``), and the scene it was reduced for."""
         v = methods.variant(self.method, not self.loops_closed)
-        return f"{v}_{self.scene}" if self.scene else v
+        v = f"{v}_{self.scene}" if self.scene else v
+        return f"{v}_energy" if self.energy is not None else v
 
     @property
     def tables(self) -> list[Table]:
@@ -724,13 +728,15 @@ def _solve_loop(b: Builder, comp: list, deps: dict, max_symbolic: int = MAX_SYMB
     return out, loop
 
 
-def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
+def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP,
+           energy: bool = False) -> EquationSystem:
     """Build, sort and solve the causal equations of a causal graph. Loops with more
     than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
     The method (what L became) was chosen by ``expand``; ``lagrange`` adds the
-    multipliers' acceleration-level equations."""
+    multipliers' acceleration-level equations. ``energy``: the energy variant, every
+    element's work and activity as quadrature states (``codegen.energy``)."""
     with gc_paused():
-        return _derive(cg, max_symbolic_loop)
+        return _derive(cg, max_symbolic_loop, energy)
 
 
 @contextmanager
@@ -748,7 +754,7 @@ def gc_paused():
             gc.enable()
 
 
-def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
+def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False) -> EquationSystem:
     b = Builder(cg)
     method = methods.get(cg.graph.method)
     b.build()
@@ -784,6 +790,9 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
                                         if st.sym in b.projection],
                             loops_closed=bool(cg.graph.zcp is not None
                                               and cg.graph.zcp.closed))
+    if energy:
+        from bgc.codegen import energy as accounting
+        accounting.account(b, system, aliases)
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

@@ -266,6 +266,7 @@ def render(system: EquationSystem) -> str:
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
         energy=system.energy or [],
+        quadrature=system.quadrature,
         static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),
     )
     return _ENV.get_template("module.py.j2").render(**ctx)

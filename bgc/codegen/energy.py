@@ -160,6 +160,7 @@ def account(b, system, aliases: dict) -> None:
         for tag, rate in (("energy", P), ("activity", sp.Abs(P))):
             x, dx = symbols.state(e.element, tag), symbols.dstate(e.element, tag)
             system.assignments.append((dx, rate))
+            system.quadrature.append(len(system.states))
             system.states.append(State(f"{tag}[{e.name}]", x, dx, sp.S.Zero, e.element))
             system.display[x] = f"{tag}[{e.name}]"
         H = stored_function(b, e) if COLUMN[e.kind] == "stored" else None

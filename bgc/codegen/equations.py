@@ -173,6 +173,9 @@ class EquationSystem:
     # the energy variant (``codegen.energy``): (name, kind, column, body, joint) per
     # element whose energy and activity are quadrature states; None: the ordinary module
     energy: list | None = None
+    # the states no equation reads (the energy variant's quadratures): left out where the
+    # run-time side solves for the rates (static loads)
+    quadrature: list[int] = field(default_factory=list)
 
     @property
     def variant(self) -> str:

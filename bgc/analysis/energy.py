@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 COLUMNS = ("supplied", "stored", "dissipated")
 
 
@@ -59,11 +57,17 @@ class Balance:
 
     @property
     def scale(self) -> float:
-        """What the residual is measured against: the energy supplied, or where nothing
-        is supplied (a free motion), the largest of the columns' element magnitudes."""
-        big = max([abs(v) for ln in self.elements for v in (ln.supplied, ln.stored,
-                                                             ln.dissipated)] or [0.0])
-        return abs(self.supplied) if abs(self.supplied) > 0 else big
+        """What the residual is measured against: the energy the sources supplied, or
+        where they supplied none (a free motion; the constraints' work is not a supply),
+        the largest element's activity (the largest energy that moved)."""
+        sources = abs(sum(ln.supplied for ln in self.elements if ln.kind == "source"))
+        return sources if sources > 0 else max([ln.activity for ln in self.elements]
+                                               or [0.0])
+
+    @property
+    def measured_by(self) -> str:
+        sources = any(ln.kind == "source" and ln.supplied for ln in self.elements)
+        return "the sources' supply" if sources else "the largest activity"
 
     @property
     def relative_residual(self) -> float:
@@ -157,18 +161,5 @@ def describe(bal: Balance, top: int | None = None) -> list[str]:
         out += [row(g) for g in sorted(bal.groups, key=lambda g: -g.activity)]
     out.append(f"balance: supplied {bal.supplied:.6g} J = stored {bal.stored:.6g} J + "
                f"dissipated {bal.dissipated:.6g} J; residual {bal.residual:.3g} J "
-               f"({bal.relative_residual:.2g} of the "
-               f"{'supplied energy' if bal.supplied else 'largest energy'})")
+               f"({bal.relative_residual:.2g} of {bal.measured_by})")
     return out
-
-
-def mean_power(bal: Balance) -> dict[str, float]:
-    """Each group's (else element's) mean power [W] over the run, by column."""
-    span = bal.t1 - bal.t0
-    return {ln.name: {c: getattr(ln, c) / span for c in COLUMNS}
-            for ln in bal.elements} if span > 0 else {}
-
-
-def finite(bal: Balance) -> bool:
-    return all(np.isfinite([ln.supplied, ln.stored, ln.dissipated, ln.activity]).all()
-               for ln in bal.elements)

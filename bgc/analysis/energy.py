@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 COLUMNS = ("supplied", "stored", "dissipated")
 
 
@@ -84,12 +86,16 @@ def is_energy_module(module) -> bool:
     return bool(getattr(module, "ENERGY", ()))
 
 
-def account(module, result) -> Balance:
+def account(module, result, since: float | None = None) -> Balance:
     """The balance of a run (``simulate.Result``) of an energy variant: each element's
-    line from its quadrature states at the run's end (they start at zero), its stored
-    energy from its energy function at the end and the start where it has one."""
+    line from its quadrature states at the run's end less at its start, its stored
+    energy from its energy function at the end and the start where it has one. With
+    ``since``: from the first output time at or after it (the quadratures are exact at
+    the output times, not between), e.g. the steady state after a transient."""
     names, outs = list(result.state_names), list(result.output_names)
-    x_end, x_start = result.x[-1], result.x[0]
+    k0 = 0 if since is None else int(np.searchsorted(result.t, since - 1e-12 * abs(since)))
+    k0 = min(k0, len(result.t) - 1)
+    x_end, x_start = result.x[-1], result.x[k0]
     lines, owner = [], {}
     for name, kind, column, body, joint in module.ENERGY:
         work = float(x_end[names.index(f"energy[{name}]")]
@@ -99,7 +105,7 @@ def account(module, result) -> Balance:
         stored_out = f"stored[{name}]"
         if column == "stored" and stored_out in outs and result.y.size:
             k = outs.index(stored_out)
-            work = float(result.y[-1, k] - result.y[0, k])
+            work = float(result.y[-1, k] - result.y[k0, k])
         ln = Line(name, kind, activity=activity)
         setattr(ln, column, work)
         lines.append(ln)
@@ -110,7 +116,7 @@ def account(module, result) -> Balance:
     groups = _groups(lines, module.ENERGY, total)
     return Balance(lines, groups, *(float(sum(getattr(ln, c) for ln in lines))
                                     for c in COLUMNS),
-                   float(result.t[0]), float(result.t[-1]), owner)
+                   float(result.t[k0]), float(result.t[-1]), owner)
 
 
 def _groups(lines: list[Line], table, total: float) -> list[Line]:

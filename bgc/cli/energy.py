@@ -15,7 +15,7 @@ import click
 from bgc import progress
 from bgc.cli import simulate as sim
 from bgc.cli.app import main, user_errors
-from bgc.cli.options import json_option, progress_option
+from bgc.cli.options import NUMBER, json_option, progress_option
 from bgc.errors import BgcError
 from bgc.fileio import atomic_write, check_writable
 
@@ -32,12 +32,15 @@ _NOT_RUN_OPTIONS = {"model", "out", "plot", "states", "zoom", "report", "as_json
 @click.option("--sankey", type=click.Path(dir_okay=False),
               help="a Sankey chart of the mean power from the sources to where it is "
                    "stored and dissipated, per body, joint and component (.png or .svg)")
+@click.option("--since", type=NUMBER, metavar="T",
+              help="account from the first output time at or after T [s] to the end "
+                   "(e.g. the steady state, past a transient; default: the whole run)")
 @click.option("--top", type=click.IntRange(1), default=20, show_default=True,
               help="the text report's most active elements")
 @json_option
 @user_errors
 @progress_option
-def energy(out, sankey, top, as_json, **options):
+def energy(out, sankey, since, top, as_json, **options):
     """Run MODEL as bgc simulate does (the same options) and say where the power goes:
     for every element that supplies, stores or dissipates energy, and summed per body,
     per joint and per component instance, the energy supplied (sources; a method's
@@ -57,14 +60,24 @@ def energy(out, sankey, top, as_json, **options):
         from bgc.draw.sankey import image_format
         image_format(sankey, "--sankey")
         check_writable(sankey, "--sankey")
-    run = sim._prepare(o, functools.partial(sim._check_declared, o), energy=True)
+    if since is not None and since < 0:
+        raise BgcError(f"--since {since:g} is before the run's start (0)", key="--since",
+                       hint="a time within the run, from 0 to its end")
+
+    def check(decl):            # against what the model declares, before any compile
+        sim._check_declared(o, decl)
+        t_end = o.t_end or decl.settings.t_end
+        if since is not None and since >= t_end:
+            raise BgcError(f"--since {since:g} s is not before the run's end ({t_end:g} s)",
+                           key="--since", hint="a time before the end, or a longer --t-end")
+    run = sim._prepare(o, check, energy=True)
     sim._choose_parameters(o, run)
     sim._integrate(o, run)
     from bgc.analysis import energy as accounting
     if not accounting.is_energy_module(run.module):
         raise BgcError(f"{o.model}: the model has no element that supplies, stores or "
                        "dissipates energy", hint="add sources, storage or resistors")
-    bal = accounting.account(run.module, run.result)
+    bal = accounting.account(run.module, run.result, since)
     data = bal.to_dict()
     files = {}
     if out:

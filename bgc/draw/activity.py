@@ -14,15 +14,13 @@ from pathlib import Path
 from bgc.errors import BgcError
 
 FLOOR = 1e-5            # shares below this are drawn as thin as the unused
-WIDTH = (0.8, 7.0)      # the bond's width [pt] at the floor and at share 1
+WIDTH = (1.0, 10.0)     # the bond's width [pt] at the floor and at share 1
 CMAP = "viridis_r"      # light (little) to dark (much)
 
 
-def read(path: str | Path, diagram) -> int:
-    """Put RUN.json's shares on the Diagram's nodes (``diagram.activity``, by node
-    name); returns how many of its elements the graph has. A file that is not a
-    ``bgc energy`` JSON, or whose elements the graph does not have (another model or
-    method), is a one-line error."""
+def load(path: str | Path) -> list[dict]:
+    """RUN.json's elements (``name``, ``share``), read and checked before any work: a
+    file that is not a ``bgc energy`` JSON is a one-line error."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -35,11 +33,18 @@ def read(path: str | Path, diagram) -> int:
     els = data.get("elements") if isinstance(data, dict) else None
     if not isinstance(els, list) or not all(
             isinstance(e, dict) and isinstance(e.get("name"), str)
-            and isinstance(e.get("share"), (int, float)) and math.isfinite(e["share"])
-            for e in els):
-        raise BgcError(f"{path}: not a bgc energy result (no 'elements' with 'name' and "
-                       "'share')", key="--energy",
+            and isinstance(e.get("share"), (int, float)) and not isinstance(e["share"], bool)
+            and math.isfinite(e["share"]) and 0 <= e["share"] <= 1 for e in els):
+        raise BgcError(f"{path}: not a bgc energy result (no 'elements' with a 'name' and "
+                       "a 'share' between 0 and 1)", key="--energy",
                        hint="give the file bgc energy --out (or --json) wrote")
+    return els
+
+
+def apply(diagram, els: list[dict], path: str | Path) -> int:
+    """Put the shares on the Diagram (``diagram.activity``, by node name); returns how
+    many of the run's elements it has. None of them (another model or method) is a
+    one-line error; some missing (--only, another method) a note on the drawing."""
     by_name = {n.replace("__", "."): n for n in diagram.nodes}
     known = [e for e in els if e["name"] in by_name]
     if els and not known:
@@ -49,8 +54,8 @@ def read(path: str | Path, diagram) -> int:
     diagram.activity = {by_name[e["name"]]: float(e["share"]) for e in known}
     missing = len(els) - len(known)
     if missing:
-        diagram.notes.append(f"{missing} of the {len(els)} elements of {path.name} are not "
-                             "in this drawing (--only, or another --method's run)")
+        diagram.notes.append(f"{missing} of the {len(els)} elements of {Path(path).name} "
+                             "are not in this drawing (--only, or another --method's run)")
     return len(known)
 
 

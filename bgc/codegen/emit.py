@@ -215,7 +215,8 @@ def render(system: EquationSystem) -> str:
     system, progs, jt = programs(system)
     m = system.model
     dx = [st.dsym for st in system.states]
-    freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
+    freqs = [s.frequency.xreplace(system.folded) if system.folded else s.frequency
+             for s in m.signals.values() if s.frequency is not None]
     # every name the code assigns or reads is written as is: each must be an identifier
     for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
                 + dx + [v for it in system.assignments for v in _defines(it)]):

@@ -176,6 +176,12 @@ class EquationSystem:
     # the states no equation reads (the energy variant's quadratures): left out where the
     # run-time side solves for the rates (static loads)
     quadrature: list[int] = field(default_factory=list)
+    # the variables inlined as copies of others or numbers (``_drop_aliases``): a pass
+    # that reads a bond's variable by name finds where it went
+    aliases: dict = field(default_factory=dict)
+    # parameters folded into constants (a scene's ``fold_parameters``): symbol -> value,
+    # for what reads the model's parameters outside the equations (a signal's frequency)
+    folded: dict = field(default_factory=dict)
 
     @property
     def variant(self) -> str:
@@ -792,7 +798,7 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False) -> Eq
                                         for i, st in enumerate(b.states)
                                         if st.sym in b.projection],
                             loops_closed=bool(cg.graph.zcp is not None
-                                              and cg.graph.zcp.closed))
+                                              and cg.graph.zcp.closed), aliases=aliases)
     if energy:
         from bgc.codegen import energy as accounting
         accounting.account(b, system, aliases)

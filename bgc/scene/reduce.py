@@ -208,16 +208,25 @@ def removable(cg, name: str) -> tuple[str | None, str]:
     spring or mass taken out) or to a 0-junction that it gives its flow (an open branch).
     An element that sets its junction's common flow or effort (a mass carrying its
     junction's velocity, a spring holding its junction's force) cannot go without
-    changing the others' causality and states, and stays."""
+    changing the others' causality and states, and stays; so does one acting on a body
+    of negligible mass (its balance may need it), and the constraint elements of a
+    method (parasitic's stiff springs and dampers are how it holds a joint: their
+    little activity is that of a joint that holds, not of a part the scene can spare)."""
     g = cg.graph
     el = g.elements[name]
     if el.kind not in ("C", "I", "R") or len(g.ports[name]) != 1:
         return None, f"a {el.kind}"
+    if any(d.blocked and name.startswith(f"{j}__{d.label}__L")
+           for j, dirs in g.joints.items() for d in dirs):
+        return None, "the method's constraint element"
     b = g.ports[name][0]
     if g.bonds[b].dim != 1:
         return None, "on a multibond (a body's mass or inertia)"
     j = g.other(b, name)
     kind = g.elements[j].kind
+    light = _on_massless_body(g, j)
+    if light:
+        return None, f"it acts on {light}, of negligible mass, whose balance needs it"
     if kind == "1" and cg.receives_effort(b, j):
         return "effort", ""
     if kind == "0" and not cg.receives_effort(b, j):
@@ -226,6 +235,25 @@ def removable(cg, name: str) -> tuple[str | None, str]:
         return None, (f"it sets its {kind}-junction's common "
                       f"{'flow' if kind == '1' else 'effort'}")
     return None, f"bonded to a {kind}"
+
+
+def _on_massless_body(g, junction: str) -> str | None:
+    """The body of negligible mass a junction's element acts on (a free direction of one
+    of its joints, ``<joint>__<dir>__1`` or the direction's 0-junction, or a port at one
+    of its points), else None: such a body's velocity is fixed by the balance of what
+    acts on it, which taking an element out can leave singular."""
+    m = g.model
+    bodies = []
+    port = g.port_junctions.get(junction)
+    if port is not None and port in m.ports:
+        p = m.ports[port]
+        bodies = [p.body] if p.body else [m.joints[p.joint].body1, m.joints[p.joint].body2]
+    else:
+        for jn in sorted(g.joints, key=len, reverse=True):
+            if junction.startswith(f"{jn}__"):
+                bodies = [m.joints[jn].body1, m.joints[jn].body2]
+                break
+    return next((b for b in bodies if b is not None and m.bodies[b].mass == 0), None)
 
 
 def activity(system: EquationSystem, cg, shares: dict[str, float], keep: float) -> tuple:

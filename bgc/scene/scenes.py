@@ -294,7 +294,7 @@ def reduced_system(scene: Scene, gen_dir: str | Path = "generated/scenes"):
     first = reduce.report("merge_relays", c.system, merged_c.system, removed, note)
     activity_of = None
     if scene.activity_keep is not None:
-        shares, reference = activity_shares(scene, gen_dir)
+        shares, reference = activity_shares(scene, merged_c.model, gen_dir)
         activity_of = (merged_c.causal, shares, scene.activity_keep)
     system, reports = reduce.reduce(merged_c.system, scene.outputs,
                                     scene_values(scene, merged_c.model), scene.expose,
@@ -316,15 +316,21 @@ def _values(module, scene: Scene, model) -> "np.ndarray":
     return p
 
 
-def activity_shares(scene: Scene, gen_dir: str | Path = "generated/scenes"):
-    """Each element's share of the activity over the scene's run, from the full model's
-    energy variant (``bgc energy``) run on the scene's settings, and that run's outputs
-    (the reference the reduced module's error is measured against)."""
+def activity_shares(scene: Scene, model, gen_dir: str | Path = "generated/scenes"):
+    """Each element's share of the activity over the scene's run, from the energy
+    variant (``bgc energy``) of ``model`` (the scene's, its relays merged if they were)
+    run on the scene's settings, and that run's outputs (the reference the reduced
+    module's error is measured against). The variant is kept in ``gen_dir``/energy."""
     from bgc import progress
     from bgc.analysis import energy
-    from bgc.pipeline import ensure_module
+    from bgc.pipeline import compile_model
     from bgc.simulate import simulate
-    module, model, _ = ensure_module(scene.model, gen_dir, scene.method, energy=True)
+    kind = f"{methods.variant(scene.method)}_energy"
+    where = Path(gen_dir) / "energy"
+    path = emit.module_path(model.name, where, kind)
+    if emit.is_stale(path, model.digest, kind):
+        compile_model(model, where, scene.method, energy=True)
+    module = emit.import_module(path)
     with progress.stage("activity") as st:
         res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
                        atol=scene.atol, solver=scene.solver, points=scene.points,

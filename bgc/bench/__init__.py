@@ -371,7 +371,8 @@ class Run:
             methods = ("parasitic", "zcp")
         self.log(f"activity: {len(files)} scenes x {len(methods)} methods")
         rows = activity.measure([load_scene(f) for f in files], methods, self.bench.build,
-                                self.log, keep=0.999 if self.quick else activity.KEEP)
+                                self.log, keep=0.999 if self.quick else activity.KEEP,
+                                repeats=self.repeats)
         write_rows(self.out / "activity.csv", rows)
         self.summary.append("## Scenes: what the activity pass gains\n")
         self.summary.append(
@@ -381,14 +382,15 @@ class Run:
             "the exact passes (`merge_relays` where exact, `fold_parameters`, "
             "`idle_dofs`, `prune`), on each SARIB chirp scene under parasitic and zcp "
             "(`activity.csv`): states of the full model, after the exact passes and after "
-            "activity; the elements removed; run time of both reduced modules (warm, the "
-            "scene's settings) and the activity-reduced outputs' largest difference from "
+            "activity; the elements removed; the steps and run time (median of repeats) of "
+            "both reduced modules (warm, the scene's settings) and the activity-reduced outputs' largest difference from "
             "the full model's run, relative to each output's peak (the pass's report), "
             "and from the exact passes' run. Under parasitic every element of little "
             "activity is a constraint element of the method or acts on a body of "
             "negligible mass (the attach and membrane chains): none may go.\n")
         self.table(rows, ["scene", "method", "keep", "states_full", "states_exact_passes",
-                          "states_activity", "elements_removed", "run_exact_s",
+                          "states_activity", "elements_removed", "steps_exact",
+                          "steps_activity", "run_exact_s",
                           "run_activity_s", "run_gain", "activity_error",
                           "difference_from_exact"], {"run_gain": lambda v: f"{v:.3g}x",
                                                      "keep": lambda v: f"{v:g}"})

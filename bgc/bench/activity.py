@@ -2,9 +2,9 @@
 under parasitic and zcp, reduced by the exact passes (``merge_relays``, ``fold_parameters``,
 ``idle_dofs``, ``prune``) and then also by ``activity`` (Louca et al.'s element activity
 over the scene's run, ``keep``), side by side: states after each, the elements removed,
-the run time of both reduced modules (warm, the scene's own settings) and the outputs'
-largest difference from the full model's run (the activity pass's own report), beside
-the exact passes' difference (``scenes.py``'s measure: against the full model)."""
+the steps and run time of both reduced modules (warm, the scene's own settings, medians
+of repeats), and the outputs' largest difference from the full model's run (the activity
+pass's own report) and from the exact passes' run."""
 
 from __future__ import annotations
 
@@ -40,8 +40,9 @@ def _run(module, scene: Scene, model):
 
 
 def measure(scenes: list[Scene], methods, build: Path, log=print,
-            keep: float = KEEP) -> list[dict]:
-    """One row per scene and method (see the module's docstring)."""
+            keep: float = KEEP, repeats: int = 3) -> list[dict]:
+    """One row per scene and method (see the module's docstring); run times are the
+    medians of ``repeats`` runs of each module, taken in turns."""
     rows = []
     for base in scenes:
         model = load.load(base.model)
@@ -51,7 +52,12 @@ def measure(scenes: list[Scene], methods, build: Path, log=print,
             m0, passes0 = ensure_scene_module(exact, build / "activity")
             m1, passes1 = ensure_scene_module(reduced, build / "activity")
             act = next(p for p in passes1 if p["pass"] == "activity")
-            a, b = _run(m0, exact, model), _run(m1, reduced, model)
+            times = {0: [], 1: []}
+            for _ in range(max(1, repeats)):
+                a, b = _run(m0, exact, model), _run(m1, reduced, model)
+                times[0].append(a.stats.wall_time)
+                times[1].append(b.stats.wall_time)
+            t0, t1 = float(np.median(times[0])), float(np.median(times[1]))
             # the exact passes' module against the full run the activity pass measured
             # against is the reduced run's reference: compare the two reduced runs too
             diff = max((float(np.abs(a.column(o) - b.column(o)).max()
@@ -65,14 +71,15 @@ def measure(scenes: list[Scene], methods, build: Path, log=print,
                 "states_activity": len(m1.STATE_NAMES),
                 "elements_removed": len(removed),
                 "removed": " ".join(removed),
-                "run_exact_s": a.stats.wall_time, "run_activity_s": b.stats.wall_time,
-                "run_gain": a.stats.wall_time / b.stats.wall_time,
+                "steps_exact": a.stats.steps, "steps_activity": b.stats.steps,
+                "run_exact_s": t0, "run_activity_s": t1, "run_gain": t0 / t1,
                 "activity_error": max(act.get("output_error", {}).values(), default=0.0),
                 "difference_from_exact": diff,
                 "kept_because": act["note"].split("kept below the threshold: ")[-1]
                 if not removed else ""})
             log(f"    {exact.name}: states {rows[-1]['states_full']} -> "
                 f"{rows[-1]['states_exact_passes']} -> {rows[-1]['states_activity']}, "
-                f"{len(removed)} elements removed, run {a.stats.wall_time:.3g} -> "
-                f"{b.stats.wall_time:.3g} s, error {rows[-1]['activity_error']:.2g}")
+                f"{len(removed)} elements removed, {a.stats.steps} -> {b.stats.steps} "
+                f"steps, run {t0:.3g} -> {t1:.3g} s, error "
+                f"{rows[-1]['activity_error']:.2g}")
     return rows

@@ -45,19 +45,27 @@ simulation: {t_end: 2.0}
 """
 
 
+@pytest.fixture(scope="module")
+def gen(tmp_path_factory):
+    """One directory of generated modules for the module's scenes: the model's energy
+    variant is compiled once."""
+    return tmp_path_factory.mktemp("activity_gen")
+
+
 def scene(tmp_path, keep="0.9999", extra=""):
     (tmp_path / "weak.yaml").write_text(WEAK)
     path = tmp_path / "weak_scene.yaml"
-    path.write_text("model: weak.yaml\noutputs: [position, velocity]\n"
+    name = "weak_" + "".join(c if c.isalnum() else "_" for c in keep)
+    path.write_text(f"name: {name}\nmodel: weak.yaml\noutputs: [position, velocity]\n"
                     "time: {end: 2.0, points: 2001}\n"
                     "tolerances: {rtol: 1.0e-8, atol: 1.0e-10}\n"
                     f"activity: {{keep: {keep}}}\n" + extra)
     return path
 
 
-def test_a_known_inactive_element_goes_and_nothing_else(tmp_path):
+def test_a_known_inactive_element_goes_and_nothing_else(tmp_path, gen):
     sc = load_scene(scene(tmp_path))
-    module, passes = ensure_scene_module(sc, tmp_path / "gen")
+    module, passes = ensure_scene_module(sc, gen)
     act = next(p for p in passes if p["pass"] == "activity")
     assert act["removed"] == ["weak", "weak.q"]
     assert (act["states_before"], act["states_after"]) == (3, 2)
@@ -68,20 +76,20 @@ def test_a_known_inactive_element_goes_and_nothing_else(tmp_path):
     assert "1 elements" in act["note"]
 
 
-def test_keep_everything_removes_nothing(tmp_path):
+def test_keep_everything_removes_nothing(tmp_path, gen):
     sc = load_scene(scene(tmp_path, keep="1"))
-    _, passes = ensure_scene_module(sc, tmp_path / "gen")
+    _, passes = ensure_scene_module(sc, gen)
     act = next(p for p in passes if p["pass"] == "activity")
     assert act["removed"] == [] and act["states_before"] == act["states_after"] == 3
 
 
-def test_a_mass_that_carries_its_junctions_velocity_stays(tmp_path):
+def test_a_mass_that_carries_its_junctions_velocity_stays(tmp_path, gen):
     """Keep 0.5: the budget covers the weak spring and the damper (11.5 %), and would
     cover the mass, but the mass sets its junction's common flow (removing it would
     change the causality) and the drive is a source: they stay, and the report says
     why."""
     sc = load_scene(scene(tmp_path, keep="0.5"))
-    _, passes = ensure_scene_module(sc, tmp_path / "gen")
+    _, passes = ensure_scene_module(sc, gen)
     act = next(p for p in passes if p["pass"] == "activity")
     assert act["removed"] == ["weak", "damper", "weak.q"]
     assert "mass (it sets its 1-junction's common flow)" in act["note"]
@@ -95,4 +103,21 @@ def test_bad_activity_is_one_located_line(tmp_path, value, words):
     res = CliRunner().invoke(main, ["check", str(path), "-o", str(tmp_path / "gen")])
     assert res.exit_code == 2, res.output
     line = res.output.strip()
-    assert "\n" not in line and ":5:" in line and words in line, line
+    assert "\n" not in line and ":6:" in line and words in line, line
+
+
+@pytest.mark.slow      # the SARIB's energy variant, its reduced module and two 28 s chirps
+def test_the_shipped_activity_scene(tmp_path):
+    """scenes/pumping_chirp_activity.yaml: the merged attach and membrane joints' roll and
+    pitch springs and dampers go (the pumping chirp leaves them still), the membrane's
+    pumping spring stays, and the outputs stay within 1e-4 of the full model's run."""
+    from helpers import ROOT
+    sc = load_scene(ROOT / "scenes" / "pumping_chirp_activity.yaml")
+    module, passes = ensure_scene_module(sc, tmp_path / "gen")
+    act = next(p for p in passes if p["pass"] == "activity")
+    gone = {r for r in act["removed"] if not r.endswith((".q", ".p"))}
+    assert gone == {f"{j}.{d}.{e}" for j in ("attach", "membrane") for d in ("rx", "ry")
+                    for e in ("damper",)} | {"membrane.rx.spring", "membrane.ry.spring"}
+    assert act["states_before"] - act["states_after"] == 2
+    assert max(act["output_error"].values()) < 1e-4
+    assert len(module.STATE_NAMES) == act["states_after"]

@@ -81,7 +81,8 @@ def test_rlc_energies_against_the_closed_form(energy_module):
 PENDULUM = MODELS / "pendulum.yaml"
 
 
-@pytest.mark.parametrize("method", ["parasitic", "lagrange", "zcp", "augmented"])
+@pytest.mark.parametrize("method", ["parasitic", "lagrange", "zcp", pytest.param(
+    "augmented", marks=pytest.mark.slow)])     # its variant's machine code: ~10 s of CPU
 def test_pendulum_exchange_over_one_period(energy_module, method):
     """The rod (m = 2, d = 0.5, I_G = 0.2 about the hinge axis) released at 2 degrees:
     over one exact period T = 4 sqrt(I_O/(m g d)) K(sin^2(th0/2)) each of the kinetic and

@@ -16,7 +16,7 @@ from bgc import progress
 from bgc.cli import simulate as sim
 from bgc.cli.app import main, user_errors
 from bgc.cli.options import NUMBER, json_option, progress_option
-from bgc.errors import BgcError
+from bgc.errors import BgcError, SimulationError
 from bgc.fileio import atomic_write, check_writable
 
 # simulate's options that are not this command's: its files, its JSON and --quiet (this
@@ -72,8 +72,18 @@ def energy(out, sankey, since, top, as_json, **options):
                            key="--since", hint="a time before the end, or a longer --t-end")
     run = sim._prepare(o, check, energy=True)
     sim._choose_parameters(o, run)
-    sim._integrate(o, run)
     from bgc.analysis import energy as accounting
+    try:
+        sim._integrate(o, run)
+    except SimulationError as exc:      # the balance up to the failure, not a CSV
+        res = exc.result
+        if out and res is not None and len(res.t) > 1 and \
+                accounting.is_energy_module(run.module) and (since or 0) < res.t[-1]:
+            data = accounting.account(run.module, res, since).to_dict()
+            atomic_write(out, json.dumps(data, indent=2) + "\n", "--out")
+            click.echo(f"the balance up to t = {res.t[-1]:.6g} written to {out}", err=True)
+        exc.result = None           # (the command's --out is JSON: no partial CSV there)
+        raise
     if not accounting.is_energy_module(run.module):
         raise BgcError(f"{o.model}: the model has no element that supplies, stores or "
                        "dissipates energy", hint="add sources, storage or resistors")

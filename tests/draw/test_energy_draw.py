@@ -97,3 +97,16 @@ def test_sankey_from_what_fed_the_run_to_where_it_went(gen_dir, tmp_path):
     mean = 0.5 * F0 ** 2 * c * w ** 2 / ((k - m * w ** 2) ** 2 + (c * w) ** 2)
     assert els["damper"]["dissipated"] / 2.0 == pytest.approx(mean, rel=1e-3)
     assert els["drive"]["supplied"] / 2.0 == pytest.approx(mean, rel=1e-3)
+
+
+def test_a_failed_run_keeps_its_balance_so_far(gen_dir, tmp_path):
+    """The step budget spent part way: exit 2, one error line, and --out holds the
+    balance up to there as JSON (not the partial CSV other commands write there)."""
+    out = tmp_path / "part.json"
+    r = CliRunner().invoke(main, ["energy", str(MODELS / "rlc.yaml"), "-o", str(gen_dir),
+                                  "--max-steps", "200", "--out", str(out), "-q"])
+    assert r.exit_code == 2, r.output
+    data = json.loads(out.read_text())
+    bal = data["balance"]
+    assert bal["supplied"] > 0 and abs(bal["residual"]) <= 1e-3 * bal["supplied"]
+    assert "the balance up to t = " in r.output and "step budget" in r.output

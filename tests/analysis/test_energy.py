@@ -226,3 +226,33 @@ def test_shares_groups_and_json_shape(energy_module):
     assert len(names) == len(set(names))
     body = next(g for g in data["groups"] if g["kind"] == "body")
     assert set(body["elements"]) == {"rod.m", "rod.J", "rod.g"}
+
+
+def test_groups_by_body_joint_and_every_dotted_prefix():
+    """Components' instances name their parts with a dotted prefix (``leg_2.beater``;
+    ``leg_1.motor.coil.R``, element R of the nested instance ``leg_1.motor.coil``): each
+    element counts in its body or joint and in every prefix of its owner's name (its body,
+    its joint, else itself); the module and run here are stand-ins with that table."""
+    from types import SimpleNamespace
+
+    table = (("leg_2.beater.m", "kinetic", "stored", "leg_2.beater", ""),
+             ("leg_2.hinge.rx.damper", "R", "dissipated", "", "leg_2.hinge"),
+             ("leg_1.motor.coil.R", "R", "dissipated", "", ""),
+             ("drive", "source", "supplied", "", ""))
+    names = [f"{k}[{n}]" for n, *_ in table for k in ("energy", "activity")]
+    end = [0.5, 1.0, 0.2, 0.2, 0.1, 0.1, 0.8, 1.6]
+    result = SimpleNamespace(state_names=tuple(names), output_names=(),
+                             x=np.array([np.zeros(8), end]), y=np.zeros((2, 0)),
+                             t=np.array([0.0, 1.0]))
+    bal = accounting.account(SimpleNamespace(ENERGY=table), result)
+    groups = {(g.kind, g.name): g for g in bal.groups}
+    assert set(groups) == {("body", "leg_2.beater"), ("joint", "leg_2.hinge"),
+                           ("component", "leg_2"), ("component", "leg_1"),
+                           ("component", "leg_1.motor"), ("component", "leg_1.motor.coil")}
+    leg2 = groups["component", "leg_2"]
+    assert leg2.elements == ["leg_2.beater.m", "leg_2.hinge.rx.damper"]
+    assert (leg2.stored, leg2.dissipated, leg2.activity) == (0.5, 0.2, 1.2)
+    assert groups["component", "leg_1.motor"].dissipated == 0.1
+    assert bal.residual == pytest.approx(0.8 - 0.5 - 0.3)
+    assert sum(ln.share for ln in bal.elements) == pytest.approx(1.0)
+    assert leg2.share == pytest.approx(1.2 / 2.9)

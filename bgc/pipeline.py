@@ -175,7 +175,8 @@ def machine_code(path: Path):
 
 def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
                   method: str = "parasitic", open_loops: bool = True, on_load=None,
-                  need_model: bool = True, check=None, constants: dict | None = None):
+                  need_model: bool = True, check=None, constants: dict | None = None,
+                  energy: bool = False):
     """The generated module for a model, recompiled only if missing or stale (method zcp
     with ``open_loops=False``: its own module, ``<name>_zcp_closed.py``); returns the
     module, the Model and the Compiled (None if nothing was compiled). ``check`` is
@@ -185,8 +186,10 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
     other work beside the build). ``need_model=False``: a fresh module is found from the
     YAML alone (``_fresh``) and the Model comes back as None; the module's SETTINGS and
     MODEL_NAME are the model's. ``constants``: the model's compile-time constants given
-    (``-p N=40``), part of its digest: another value is another module."""
-    kind = methods.variant(method, open_loops)
+    (``-p N=40``), part of its digest: another value is another module. ``energy``: the
+    energy variant (``codegen.energy``, ``<name>_<method>_energy.py``), every element's
+    work and activity integrated."""
+    kind = methods.variant(method, open_loops) + ("_energy" if energy else "")
     with progress.record() as timings:
         with progress.stage("load") as st:
             doc = document.read(model_path)
@@ -211,7 +214,8 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
         compiled = None
         if is_stale(path, model.digest, kind):
             compiled, path = compile_model(model, out_dir, method, check=check,
-                                           open_loops=open_loops)
+                                           open_loops=open_loops,
+                                           **({"energy": True} if energy else {}))
         module = import_module(path)
     if compiled is not None:
         compiled.timings = timings        # its load too

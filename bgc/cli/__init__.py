@@ -1,8 +1,9 @@
 """The ``bgc`` command line: check, compile, simulate, report, frf, modes, tune, sweep, run,
-bench, draw, export, library.
+bench, draw, export, library, energy.
 
 One module per command (``check``, ``compile``, ``simulate``, ``report``, ``frf``,
-``modes``, ``tune``, ``sweep``, ``run``, ``bench``, ``draw``, ``export``, ``library``), each
+``modes``, ``tune``, ``sweep``, ``run``, ``bench``, ``draw``, ``export``, ``library``,
+``energy``), each
 registering itself on the group ``app.main``; ``app``
 holds the group and the error policy (user mistakes as one line, exit 2; Ctrl-C, exit 130),
 ``options`` what several commands share. The long stages report their progress on stderr
@@ -16,6 +17,7 @@ module loads none of them (tests/cli/test_warm_start.py).
 
 from bgc.cli import (  # noqa: F401
     bench,
+    energy,
     check,
     compile,
     draw,

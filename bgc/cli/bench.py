@@ -21,7 +21,7 @@ from bgc.fileio import check_writable
                          "names one output file in bgc's commands)")
 @click.option("--part", "parts", multiple=True,
               type=click.Choice(["peers", "precision", "stiffness", "stability", "compile",
-                                 "startup", "symmetry", "scenes", "iftomm",
+                                 "startup", "symmetry", "scenes", "activity", "iftomm",
                                  "components"]),
               help="run only this part (repeatable; default: all)")
 @click.option("--quick", is_flag=True,

@@ -51,7 +51,7 @@ def check(model, stage, out_dir, params, method, keep_loops, as_json):
             raise BgcError(f"--stage applies to a model file, not the scene {model}",
                            key="--stage", hint="give the scene's model file to see its "
                                                "stages")
-        _check_scene(bscene, model, as_json)
+        _check_scene(bscene, model, as_json, out_dir)
         return
     if stage is not None:
         _show_stage(stage, model, method, not keep_loops, out_dir, as_json)
@@ -80,10 +80,12 @@ def _show_stage(stage: str, model: str, method: str, open_loops: bool, out_dir: 
         click.echo(line)
 
 
-def _check_scene(bscene, path, as_json: bool) -> None:
-    """A scene's reduction passes, each with the states and assignments before and after."""
+def _check_scene(bscene, path, as_json: bool, out_dir: str = "generated") -> None:
+    """A scene's reduction passes, each with the states and assignments before and after
+    (a scene with ``activity`` runs its model's energy variant, in OUT_DIR/scenes)."""
+    from pathlib import Path
     sc = bscene.load_scene(path)
-    passes = bscene.check_scene(sc)
+    passes = bscene.check_scene(sc, Path(out_dir) / "scenes")
     if as_json:
         click.echo(json.dumps(passes, indent=2))
         return

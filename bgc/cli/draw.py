@@ -27,23 +27,33 @@ from bgc.cli.options import (
               help="draw some groups: a body (with its joints), a joint, an instance of a "
                    "component (all its parts), 'network' (the model's own elements) or a "
                    "pattern such as 'leg_*'; the SARIB's leg 1: --only leg_1")
+@click.option("--energy", "energy", type=click.Path(dir_okay=False), metavar="RUN.json",
+              help="a run's activities (bgc energy --out RUN.json): each element's bond "
+                   "drawn as wide and dark as its share of the run's activity")
 @method_option
 @loops_option
 @user_errors
 @progress_option
-def draw(model, out, only, method, keep_loops):
+def draw(model, out, only, energy, method, keep_loops):
     """Draw the bond graph: elements, 0- and 1-junctions, half-arrows for the power
     direction, causal strokes (at the end that receives the effort), multibonds with their
     dimension; constraint elements, zero-order causal paths and algebraic loops marked,
     grouped by body and joint. A causality conflict is drawn (no strokes, the conflicting
-    elements marked), then reported as an error."""
+    elements marked), then reported as an error. With --energy RUN.json (bgc energy
+    --out), each element's bond is as wide and dark as its share of the run's activity."""
     from bgc import progress
     from bgc.draw import diagram, layout, render
     from bgc.fileio import check_writable
     check_method_options(method, keep_loops)
     render.image_format(out)
     check_writable(out, "drawing")
+    run = None
+    if energy is not None:
+        from bgc.draw import activity
+        run = activity.load(energy)
     d, conflict = diagram.of_model(model, method, only, open_loops=not keep_loops)
+    if run is not None:
+        activity.apply(d, run, energy)
     with progress.stage("draw") as st:
         t = time.perf_counter()
         lay = layout.layout(d)

@@ -284,11 +284,12 @@ def _check_declared(o: SimulateOptions, decl) -> None:
                        hint="a larger --step or a shorter --t-end")
 
 
-def _prepare(o: SimulateOptions, check) -> _Run:
+def _prepare(o: SimulateOptions, check, energy: bool = False) -> _Run:
     """The model's generated module, rebuilt only if stale; the Model only for what reads
     it (an excitation, --parasitic auto): else a fresh module is found from the model
     file's YAML, without sympy (``pipeline.ensure_module``). ``check`` refuses bad options
-    against what the model declares before any of it is compiled."""
+    against what the model declares before any of it is compiled. ``energy``: the
+    module's energy variant (``bgc energy``)."""
     from bgc.simulate import precompile_loop
 
     def loop_beside(settings):          # the native loop compiles beside the model's build
@@ -299,7 +300,7 @@ def _prepare(o: SimulateOptions, check) -> _Run:
         module, m, compiled = ensure_module(o.model, o.out_dir, o.method,
                                             open_loops=not o.keep_loops, on_load=loop_beside,
                                             need_model=need_model, check=check,
-                                            constants=o.constants)
+                                            constants=o.constants, energy=energy)
     st = Settings(**module.SETTINGS)        # the model's, as the module was written
     return _Run(module, m, compiled, stages, st)
 

@@ -237,7 +237,8 @@ def render(system: EquationSystem) -> str:
     system, progs, jt = programs(system)
     m = system.model
     dx = [st.dsym for st in system.states]
-    freqs = [s.frequency for s in m.signals.values() if s.frequency is not None]
+    freqs = [s.frequency.xreplace(system.folded) if system.folded else s.frequency
+             for s in m.signals.values() if s.frequency is not None]
     # every name the code assigns or reads is written as is: each must be an identifier
     for sym in ([sy for sy, _, _ in system.params] + [st.sym for st in system.states]
                 + dx + [v for it in system.assignments for v in _defines(it)]):
@@ -287,6 +288,8 @@ def render(system: EquationSystem) -> str:
         passes_singular=bool(methods.get(system.method).passes_singular),
         pose=[i for i, st in enumerate(system.states) if st.element in m.bodies],
         guard_names=[what for what, _ in system.guards],
+        energy=system.energy or [],
+        quadrature=system.quadrature,
         static_loads=bool(m.static_loads and methods.get(system.method).static_loads()),
     )
     return _ENV.get_template("module.py.j2").render(**ctx)

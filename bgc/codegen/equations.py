@@ -59,13 +59,15 @@ def build(b: Builder):
     blocks.build(b)
 
 
-def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP) -> EquationSystem:
+def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP,
+           energy: bool = False) -> EquationSystem:
     """Build, sort and solve the causal equations of a causal graph. Loops with more
     than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
     The method (what L became) was chosen by ``expand``; its hooks add its own
-    equations and solve its own loops (``methods.base``)."""
+    equations and solve its own loops (``methods.base``). ``energy``: the energy
+    variant, every element's work and activity as quadrature states (``codegen.energy``)."""
     with gc_paused():
-        return _derive(cg, max_symbolic_loop)
+        return _derive(cg, max_symbolic_loop, energy)
 
 
 @contextmanager
@@ -83,7 +85,7 @@ def gc_paused():
             gc.enable()
 
 
-def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
+def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False) -> EquationSystem:
     b = Builder(cg)
     method = methods.get(cg.graph.method)
     b.method_state = method.new_state(b)
@@ -118,7 +120,10 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int) -> EquationSystem:
                             projection=[(i, b.projection[st.sym].xreplace(aliases))
                                         for i, st in enumerate(b.states)
                                         if st.sym in b.projection],
-                            loops_closed=method.loops_closed(cg.graph))
+                            loops_closed=method.loops_closed(cg.graph), aliases=aliases)
+    if energy:
+        from bgc.codegen import energy as accounting
+        accounting.account(b, system, aliases)
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

@@ -54,13 +54,27 @@ class EquationSystem:
     projection: list[tuple[int, sp.Expr]] = field(default_factory=list)
     loops_closed: bool = False      # zcp: kinematic loops kept closed (--keep-loops)
     scene: str = ""                 # reduced for a scene (bgc/scene.py): its name
+    # the energy variant (``codegen.energy``): (name, kind, column, body, joint) per
+    # element whose energy and activity are quadrature states; None: the ordinary module
+    energy: list | None = None
+    # the states no equation reads (the energy variant's quadratures): left out where the
+    # run-time side solves for the rates (static loads)
+    quadrature: list[int] = field(default_factory=list)
+    # the variables inlined as copies of others or numbers (``_drop_aliases``): a pass
+    # that reads a bond's variable by name finds where it went
+    aliases: dict = field(default_factory=dict)
+    # parameters folded into constants (a scene's ``fold_parameters``): symbol -> value,
+    # for what reads the model's parameters outside the equations (a signal's frequency)
+    folded: dict = field(default_factory=dict)
 
     @property
     def variant(self) -> str:
         """What the generated module is named and hashed by: the method, for zcp whether
-        its loops were kept closed (``zcp_closed``), and the scene it was reduced for."""
+        its loops were kept closed (``zcp_closed``), the scene it was reduced for, and the
+        energy variant."""
         v = methods.variant(self.method, not self.loops_closed)
-        return f"{v}_{self.scene}" if self.scene else v
+        v = f"{v}_{self.scene}" if self.scene else v
+        return f"{v}_energy" if self.energy is not None else v
 
     @property
     def tables(self) -> list[Table]:

@@ -71,6 +71,8 @@ class Diagram:
     groups: dict[str, str]     # group -> its caption ('' for the network: no frame)
     outside: set[str] = field(default_factory=set)    # groups --only left out
     notes: list[str] = field(default_factory=list)
+    # bgc draw --energy: an element's share of a run's activity (draw/activity.py)
+    activity: dict[str, float] = field(default_factory=dict)
 
 
 def of_model(path: str, method: str, only: str | None = None,

@@ -151,6 +151,14 @@ def _bond(ax, lay: Layout, e) -> None:
         _line(ax, xs, ys, color=MARK[m], lw=6, alpha=0.35, solid_capstyle="round", zorder=2)
     outside = "outside" in lay.diagram.nodes[e.src].marks | lay.diagram.nodes[e.dst].marks
     color = OUTSIDE if outside else "black"
+    act = lay.diagram.activity
+    share = act.get(e.src, act.get(e.dst))
+    if share is not None:       # --energy: the element's share of the run's activity
+        from bgc.draw.activity import style
+        width, shade = style(share)
+        _line(ax, xs, ys, color=shade, lw=width + 2.6 * (e.dim > 1), solid_capstyle="butt",
+              zorder=2.5,
+              gid=f"activity-{e.name}")
     line = _line(ax, xs, ys, color=color, lw=0.8, zorder=3, gid=f"bond-{e.name}")
     if e.dim > 1:
         line.set_linewidth(2.6)
@@ -211,6 +219,8 @@ def _header(ax, lay: Layout) -> None:
     marks |= {m for e in d.edges for m in e.marks} | {"multibond" for e in d.edges
                                                        if e.dim > 1}
     x, y = MARGIN, top - 26 - NOTE * len(lay.notes)
+    if d.activity:
+        x = _activity_key(ax, x, y)
     for text, color, mark in KEY:
         if mark and mark not in marks:
             continue
@@ -222,3 +232,19 @@ def _header(ax, lay: Layout) -> None:
             x += 13
         ax.text(x, y, text, fontsize=FONT - 0.5, va="center", ha="left", color="#404040")
         x += size - 13 * bool(color)
+
+
+def _activity_key(ax, x: float, y: float) -> float:
+    """--energy's key: bonds at shares 1e-4 .. 1 of the activity; returns the x after."""
+    from bgc.draw.activity import style
+    ax.text(x, y, "activity share:", fontsize=FONT - 0.5, va="center", ha="left",
+            color="#404040")
+    x += 70
+    for share, label in ((1e-4, "1e-4"), (1e-3, "1e-3"), (1e-2, "1 %"), (1e-1, "10 %"),
+                         (1.0, "100 %")):
+        width, shade = style(share)
+        _line(ax, (x, x + 14), (y, y), color=shade, lw=width, solid_capstyle="butt")
+        ax.text(x + 16, y, label, fontsize=FONT - 1.5, va="center", ha="left",
+                color="#404040")
+        x += 46
+    return x + 10

@@ -19,13 +19,20 @@ change those outputs and reports what it did (``PassReport``), in this order:
 - ``idle_dofs``: the spin of a body about its own axis when no force can act on it (every
   joint of the body a spherical joint on that axis, the two other principal moments
   equal, at rest about it): its momentum stays zero, so it is no state (the MGB bars).
+- ``activity`` (only where a scene asks, ``activity: {keep: 0.999}``): the least active
+  elements over the scene's run (Louca et al.'s activity, int |P| dt, measured by the
+  full model's energy variant, ``bgc energy``) whose shares sum to at most 1 - keep
+  leave the model: a spring, mass or damper that only adds its effort to a 1-junction's
+  balance (or its flow to a 0-junction's) has that contribution set to zero, and its
+  state, read by nothing else then, goes. Not exact: the scene's report gives the
+  outputs' error against the full model.
 - ``prune``: outputs the scene does not ask for, and states that cannot reach the asked
   ones through the equations, are removed.
 
-The passes after ``merge_relays`` work on the EquationSystem and are exact: what they
-remove is identically zero or cannot influence the outputs (``idle_dofs`` drops the
-moments of joint forces whose lever arm across the axis is round-off of the model's
-coordinates, below 1e-9 m).
+The passes after ``merge_relays`` work on the EquationSystem and, but ``activity``, are
+exact: what they remove is identically zero or cannot influence the outputs
+(``idle_dofs`` drops the moments of joint forces whose lever arm across the axis is
+round-off of the model's coordinates, below 1e-9 m).
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ import numpy as np
 import sympy as sp
 
 from bgc import methods
-from bgc.codegen.emit import cone
+from bgc.codegen.emit import _free, cone
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.mechanics import exact
 from bgc.mechanics.joints import JOINT_KINDS
@@ -61,13 +68,20 @@ class PassReport:
     assignments_after: int
     removed: list[str] = field(default_factory=list)   # what the pass took out
     note: str = ""
+    # activity: the full model's run (a simulate.Result, not written) and the reduced
+    # module's outputs' largest difference from it, relative to each output's peak
+    reference: object = field(default=None, repr=False)
+    error: dict | None = None
 
     def to_dict(self) -> dict:
-        return {"pass": self.name, "states_before": self.states_before,
-                "states_after": self.states_after,
-                "assignments_before": self.assignments_before,
-                "assignments_after": self.assignments_after,
-                "removed": self.removed, "note": self.note}
+        out = {"pass": self.name, "states_before": self.states_before,
+               "states_after": self.states_after,
+               "assignments_before": self.assignments_before,
+               "assignments_after": self.assignments_after,
+               "removed": self.removed, "note": self.note}
+        if self.error is not None:
+            out["output_error"] = self.error
+        return out
 
 
 def _substitute(system: EquationSystem, mapping: dict) -> EquationSystem:
@@ -120,7 +134,8 @@ def fold_parameters(system: EquationSystem, values: dict, expose=()) -> tuple:
         else:
             v = float(values.get(name, default))
             mapping[sym] = exact.rational(v)
-    out = replace(_substitute(system, mapping), params=keep)
+    out = replace(_substitute(system, mapping), params=keep,
+                  folded={**system.folded, **mapping})
     folded = sorted(name for sym, name, _ in system.params if sym in mapping)
     return out, report("fold_parameters", system, out, folded,
                         f"{len(mapping)} of {len(system.params)} parameters folded, "
@@ -185,6 +200,123 @@ def _idle_axis(m, body) -> int | None:
     return None
 
 
+def removable(cg, name: str) -> tuple[str | None, str]:
+    """Whether an element can leave the model by activity (``activity``): ('effort' or
+    'flow', the variable it puts into its junction's sum, which becomes zero) or (None,
+    why not). A C, I or R on one scalar bond to a 1-junction that it gives its effort (a
+    force or voltage added in the junction's balance: the element becomes a short, a
+    spring or mass taken out) or to a 0-junction that it gives its flow (an open branch).
+    An element that sets its junction's common flow or effort (a mass carrying its
+    junction's velocity, a spring holding its junction's force) cannot go without
+    changing the others' causality and states, and stays; so does one acting on a body
+    of negligible mass (its balance may need it), and the constraint elements of a
+    method (parasitic's stiff springs and dampers are how it holds a joint: their
+    little activity is that of a joint that holds, not of a part the scene can spare)."""
+    g = cg.graph
+    el = g.elements[name]
+    if el.kind not in ("C", "I", "R") or len(g.ports[name]) != 1:
+        return None, f"a {el.kind}"
+    if any(d.blocked and name.startswith(f"{j}__{d.label}__L")
+           for j, dirs in g.joints.items() for d in dirs):
+        return None, "the method's constraint element"
+    b = g.ports[name][0]
+    if g.bonds[b].dim != 1:
+        return None, "on a multibond (a body's mass or inertia)"
+    j = g.other(b, name)
+    kind = g.elements[j].kind
+    light = _on_massless_body(g, j)
+    if light:
+        return None, f"it acts on {light}, of negligible mass, whose balance needs it"
+    if kind == "1" and cg.receives_effort(b, j):
+        return "effort", ""
+    if kind == "0" and not cg.receives_effort(b, j):
+        return "flow", ""
+    if kind in ("0", "1"):
+        return None, (f"it sets its {kind}-junction's common "
+                      f"{'flow' if kind == '1' else 'effort'}")
+    return None, f"bonded to a {kind}"
+
+
+def _on_massless_body(g, junction: str) -> str | None:
+    """The body of negligible mass a junction's element acts on (a free direction of one
+    of its joints, ``<joint>__<dir>__1`` or the direction's 0-junction, or a port at one
+    of its points), else None: such a body's velocity is fixed by the balance of what
+    acts on it, which taking an element out can leave singular."""
+    m = g.model
+    bodies = []
+    port = g.port_junctions.get(junction)
+    if port is not None and port in m.ports:
+        p = m.ports[port]
+        bodies = [p.body] if p.body else [m.joints[p.joint].body1, m.joints[p.joint].body2]
+    else:
+        for jn in sorted(g.joints, key=len, reverse=True):
+            if junction.startswith(f"{jn}__"):
+                bodies = [m.joints[jn].body1, m.joints[jn].body2]
+                break
+    return next((b for b in bodies if b is not None and m.bodies[b].mass == 0), None)
+
+
+def activity(system: EquationSystem, cg, shares: dict[str, float], keep: float) -> tuple:
+    """Model order reduction by element activity (MORA; Louca, Stein, Hulbert and
+    Sprague 1997): ``shares`` are the elements' shares of the total activity int |P| dt
+    over the scene's run (``analysis.energy``, by the names ``bgc energy`` gives them);
+    the least active removable elements (``removable``) whose shares add up to at most
+    ``1 - keep`` are taken out, their junction variable set to zero and propagated, and
+    the states nothing reads any more with them. The other states keep their names.
+    Not exact: the scene's report gives the outputs' error against the full model."""
+    g = cg.graph
+    defined = {item[0]: k for k, item in enumerate(system.assignments)
+               if not isinstance(item, LinearBlock)}
+    ranked = sorted((share, name) for name, share in shares.items())
+    by_name = {n.replace("__", "."): n for n in g.elements}
+    budget, spent = 1.0 - keep, 0.0
+    assignments, removed, kept_why = list(system.assignments), [], []
+    for share, shown in ranked:
+        name = by_name.get(shown)
+        if name is None:
+            continue
+        if spent + share > budget:
+            break
+        what, why = removable(cg, name)
+        if what is None:
+            kept_why.append(f"{shown} ({why})")
+            continue
+        bond = g.bonds[g.ports[name][0]].name
+        var = symbols.effort(bond) if what == "effort" else symbols.flow(bond)
+        if var not in defined:      # a copy of another variable (a law of 1), or in a loop
+            where = (f"a copy of {system.aliases[var]}" if var in system.aliases
+                     else "in an algebraic loop")
+            kept_why.append(f"{shown} (its {what} is {where})")
+            continue
+        assignments[defined[var]] = (var, sp.Integer(0))
+        spent += share
+        removed.append(shown)
+    if not removed:
+        return system, report("activity", system, system, [],
+                               f"nothing removable within {budget:.3g} of the activity" +
+                               (f"; kept: {', '.join(kept_why[:6])}" if kept_why else ""))
+    out = _substitute(replace(system, assignments=assignments), {})
+    read: set = set()
+    rate_of = {st.dsym: st.sym for st in out.states}
+    for item in out.assignments:
+        syms = _free(item) if isinstance(item, LinearBlock) else item[1].free_symbols
+        own = {rate_of[item[0]]} if not isinstance(item, LinearBlock) and \
+            item[0] in rate_of else set()
+        read |= syms - own
+    for e in [e for _, e in out.outputs] + [e for _, e in out.guards] + \
+            [e for _, g_, r in out.constraints for e in (g_, r) if e is not None] + \
+            [e for _, e in out.projection]:
+        read |= e.free_symbols
+    dead = [st for st in out.states if st.sym not in read and st.element in
+            {by_name[n] for n in removed}]
+    out = _keep_states(out, [st for st in out.states if st not in dead])
+    return out, report("activity", system, out, removed + [st.name for st in dead],
+                        f"{len(removed)} elements, {100 * spent:.3g} % of the activity "
+                        f"(keep {keep:g}), and their {len(dead)} states" +
+                        (f"; kept below the threshold: {', '.join(kept_why[:6])}"
+                         if kept_why else ""))
+
+
 def prune(system: EquationSystem, outputs) -> tuple:
     """Only the ``outputs`` asked for, and the states they depend on through the rates."""
     kept_outputs = [(n, e) for n, e in system.outputs if n in set(outputs)]
@@ -210,11 +342,16 @@ def prune(system: EquationSystem, outputs) -> tuple:
                         "the outputs asked for")
 
 
-def reduce(system: EquationSystem, outputs, values: dict, expose=()) -> tuple:
-    """All passes in order; returns the reduced system and one PassReport per pass."""
+def reduce(system: EquationSystem, outputs, values: dict, expose=(),
+           activity_of=None) -> tuple:
+    """All passes in order; returns the reduced system and one PassReport per pass.
+    ``activity_of``: (CausalGraph, shares, keep) for the ``activity`` pass, which runs
+    only where a scene asks for it."""
     reports = []
-    for step in (lambda s: fold_parameters(s, values, expose),
-                 lambda s: idle_dofs(s, outputs), lambda s: prune(s, outputs)):
+    steps = [lambda s: fold_parameters(s, values, expose), lambda s: idle_dofs(s, outputs)]
+    if activity_of is not None:
+        steps.append(lambda s: activity(s, *activity_of))
+    for step in steps + [lambda s: prune(s, outputs)]:
         system, rep = step(system)
         reports.append(rep)
     return system, reports

@@ -35,7 +35,7 @@ from bgc.pipeline import build
 from bgc.scene import reduce
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
-        "tolerances", "solver", "expose", "params", "merge_relays")
+        "tolerances", "solver", "expose", "params", "merge_relays", "activity")
 
 
 @dataclass
@@ -59,6 +59,9 @@ class Scene:
     merge_relays: bool | None = None
     # where each name of ``expose`` and ``params`` stands in the scene file
     name_locs: dict = field(default_factory=dict)
+    # activity: {keep: K}: the activity pass keeps the elements that carry K of the
+    # activity over the scene's run (``reduce.activity``); None: no such pass
+    activity_keep: float | None = None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -110,15 +113,36 @@ def load_scene(path: str | Path) -> Scene:
         fail(f"merge_relays is true or false, got {merge!r}", _at(doc, "merge_relays"),
              "merge_relays", "true: merge also under parasitic (changes the joints' "
              "parasitic compliance); false: never; absent: where exact")
+    keep = _activity(doc)
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name.isidentifier():
         fail(f"scene name {name!r} is not a valid module name", _at(doc, "name"), "name",
              "letters, digits and '_'")
     digest = hashlib.sha256(json.dumps(
-        [model.digest, method, exc, outputs, params, expose, merge], sort_keys=True,
-        default=str).encode()).hexdigest()[:16]
+        [model.digest, method, exc, outputs, params, expose, merge] +
+        ([keep, t_start, t_end, n_points, rtol, atol, solver] if keep is not None else []),
+        sort_keys=True, default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
-                 n_points, rtol, atol, solver, expose, params, digest, merge, name_locs)
+                 n_points, rtol, atol, solver, expose, params, digest, merge, name_locs,
+                 keep)
+
+
+def _activity(doc: YMap) -> float | None:
+    """``activity: {keep: K}``, 0 < K <= 1: the share of the run's activity the
+    ``activity`` pass keeps; None without it."""
+    if doc.get("activity") is None:
+        return None
+    a = mapping(doc["activity"], _at(doc, "activity"), "activity")
+    check_keys(a, ("keep",), "activity")
+    if "keep" not in a:
+        fail("missing key 'keep'", a.loc, "activity.keep",
+             "the share of the run's activity to keep, e.g. {keep: 0.999}")
+    keep = number(a["keep"], _at(a, "keep"), "activity.keep", positive=True)
+    if keep > 1:
+        fail(f"activity.keep is a share of the activity, 0 < keep <= 1, got {keep:g}",
+             _at(a, "keep"), "activity.keep", "e.g. 0.999: remove the least active "
+             "elements that carry 0.1 % of it")
+    return keep
 
 
 def _check_parameters(model, method: str, expose, params, locs) -> None:
@@ -241,9 +265,10 @@ def scene_values(scene: Scene, model) -> dict[str, float]:
     return values
 
 
-def reduced_system(scene: Scene):
+def reduced_system(scene: Scene, gen_dir: str | Path = "generated/scenes"):
     """(full Compiled, reduced EquationSystem, pass reports). ``merge_relays`` works on
-    the model, so its report compares the full model's build with the merged one's."""
+    the model, so its report compares the full model's build with the merged one's. A
+    scene with ``activity`` runs its model's energy variant (in ``gen_dir``) first."""
     c = build(scene.model, scene.method)
     known = {name for _, name, _ in c.system.params}
     for name in list(scene.expose) + list(scene.params):
@@ -267,10 +292,52 @@ def reduced_system(scene: Scene):
                "(merge_relays: true accepts the change)")
         removed, note = [], f"would merge {note}; left: {why}"
     first = reduce.report("merge_relays", c.system, merged_c.system, removed, note)
+    activity_of = None
+    if scene.activity_keep is not None:
+        shares, reference = activity_shares(scene, merged_c.model, gen_dir)
+        activity_of = (merged_c.causal, shares, scene.activity_keep)
     system, reports = reduce.reduce(merged_c.system, scene.outputs,
-                                    scene_values(scene, merged_c.model), scene.expose)
+                                    scene_values(scene, merged_c.model), scene.expose,
+                                    activity_of)
+    if activity_of is not None:
+        next(r for r in reports if r.name == "activity").reference = reference
     model = replace(merged_c.model, digest=scene.digest)
     return c, replace(system, model=model, scene=scene.name), [first] + reports
+
+
+def _values(module, scene: Scene, model) -> "np.ndarray":
+    """The module's parameters with the scene's values (its excitation's, ``params``)."""
+    import numpy as np
+    p = np.array(module.PARAMS, dtype=np.float64)
+    names = list(module.PARAM_NAMES)
+    for name, value in scene_values(scene, model).items():
+        if name in names:
+            p[names.index(name)] = value
+    return p
+
+
+def activity_shares(scene: Scene, model, gen_dir: str | Path = "generated/scenes"):
+    """Each element's share of the activity over the scene's run, from the energy
+    variant (``bgc energy``) of ``model`` (the scene's, its relays merged if they were)
+    run on the scene's settings, and that run's outputs (the reference the reduced
+    module's error is measured against). The variant is kept in ``gen_dir``/energy."""
+    from bgc import progress
+    from bgc.analysis import energy
+    from bgc.pipeline import compile_model
+    from bgc.simulate import simulate
+    kind = f"{methods.variant(scene.method)}_energy"
+    where = Path(gen_dir) / "energy"
+    path = emit.module_path(model.name, where, kind)
+    if emit.is_stale(path, model.digest, kind):
+        compile_model(model, where, scene.method, energy=True)
+    module = emit.import_module(path)
+    with progress.stage("activity") as st:
+        res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
+                       atol=scene.atol, solver=scene.solver, points=scene.points,
+                       params=_values(module, scene, model))
+        bal = energy.account(module, res)
+        st.done(f"{len(bal.elements)} elements' activity over the scene's run")
+    return {ln.name: ln.share for ln in bal.elements}, res
 
 
 def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
@@ -282,10 +349,31 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
     passes = path.with_suffix(".passes.json")
     if emit.is_stale(path, scene.digest, f"{variant(scene.method)}_{scene.name}") or \
             not passes.exists():
-        _, system, reports = reduced_system(scene)
+        _, system, reports = reduced_system(scene, out_dir)
         path = emit.write(system, out_dir)
+        for r in reports:
+            if getattr(r, "reference", None) is not None:
+                r.error = activity_error(scene, emit.import_module(path), r.reference)
         atomic_write(passes, json.dumps([r.to_dict() for r in reports], indent=2))
     return emit.import_module(path), json.loads(passes.read_text())
+
+
+def activity_error(scene: Scene, module, reference) -> dict[str, float]:
+    """The reduced module's outputs against the full model's over the scene's run: the
+    largest difference relative to each output's peak."""
+    import numpy as np
+
+    from bgc.simulate import simulate
+    model = load.load(scene.model)
+    res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
+                   atol=scene.atol, solver=scene.solver, points=scene.points,
+                   params=_values(module, scene, model))
+    out = {}
+    for name in scene.outputs:
+        ref = reference.column(name)
+        peak = float(np.abs(ref).max())
+        out[name] = float(np.abs(res.column(name) - ref).max() / peak) if peak > 0 else 0.0
+    return out
 
 
 def is_scene(path: str | Path) -> bool:
@@ -297,9 +385,9 @@ def is_scene(path: str | Path) -> bool:
     return isinstance(doc, dict) and "model" in doc
 
 
-def check_scene(scene: Scene) -> list[dict]:
+def check_scene(scene: Scene, gen_dir: str | Path = "generated/scenes") -> list[dict]:
     """The state count before and after each reduction pass."""
-    _, _, reports = reduced_system(scene)
+    _, _, reports = reduced_system(scene, gen_dir)
     return [r.to_dict() for r in reports]
 
 

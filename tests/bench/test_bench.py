@@ -120,6 +120,19 @@ def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp
     assert "## Scenes" in (tmp_path / "summary.md").read_text()
 
 
+@pytest.mark.slow       # ~15 s: make bench runs it in full
+def test_activity_part_sets_the_pass_beside_the_exact_ones(gen_dir, tmp_path):
+    """msd_forced at keep 0.999: every element carries more than 1e-3 of the activity
+    or cannot go (the mass, the source): nothing removed, the same steps, the error the
+    pass reports is the integration's."""
+    _bench(gen_dir, tmp_path, "activity")
+    (row,) = _rows(tmp_path / "activity.csv")
+    assert int(row["states_exact_passes"]) == int(row["states_activity"]) == 2
+    assert row["elements_removed"] == "0" and row["steps_exact"] == row["steps_activity"]
+    assert float(row["activity_error"]) < 1e-6
+    assert "## Scenes: what the activity pass gains" in (tmp_path / "summary.md").read_text()
+
+
 @pytest.mark.slow       # ~10 s: make bench runs it in full
 def test_startup_part_times_the_command_and_its_phases(gen_dir, tmp_path):
     rep = _bench(gen_dir, tmp_path, "startup")

@@ -135,7 +135,7 @@ def test_shipped_scenes_load():
     scenes = sorted((ROOT / "scenes").glob("*.yaml"))
     assert {p.stem for p in scenes} == {f"{d}_{k}" for d in ("pumping", "roll", "pitch")
                                         for k in ("constant", "sine", "chirp")} | \
-        {"pumping_chirp_one_leg", "pumping_chirp_merged"}
+        {"pumping_chirp_one_leg", "pumping_chirp_merged", "pumping_chirp_activity"}
     assert load_scene(ROOT / "scenes" / "pumping_chirp_one_leg.yaml").model.stem == \
         "sarib_one_leg"
     for p in scenes:

@@ -81,8 +81,8 @@ def test_rlc_energies_against_the_closed_form(energy_module):
 PENDULUM = MODELS / "pendulum.yaml"
 
 
-@pytest.mark.parametrize("method", ["parasitic", "lagrange", "zcp", pytest.param(
-    "augmented", marks=pytest.mark.slow)])     # its variant's machine code: ~10 s of CPU
+@pytest.mark.parametrize("method", ["parasitic", "zcp"] + [pytest.param(
+    m, marks=pytest.mark.slow) for m in ("lagrange", "augmented")])  # their variants' builds
 def test_pendulum_exchange_over_one_period(energy_module, method):
     """The rod (m = 2, d = 0.5, I_G = 0.2 about the hinge axis) released at 2 degrees:
     over one exact period T = 4 sqrt(I_O/(m g d)) K(sin^2(th0/2)) each of the kinetic and
@@ -185,7 +185,8 @@ def absorber_closed_form(f=1.5, m1=1.0, k1=100.0, c1=0.8, m2=0.2, k2=18.0, c2=0.
             "damper2": 0.5 * c2 * w ** 2 * abs(X1 - X2) ** 2}
 
 
-@pytest.mark.parametrize("f", [1.2, 1.5, 2.2])
+@pytest.mark.parametrize("f", [pytest.param(1.2, marks=pytest.mark.slow), 1.5,
+                               pytest.param(2.2, marks=pytest.mark.slow)])
 def test_absorber_steady_state_dissipation_against_the_closed_form(
         energy_module, tmp_path_factory, f):
     """Below, at and above the absorber's tuning (sqrt(k2/m2)/2pi = 1.51 Hz): the mean

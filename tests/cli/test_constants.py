@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
 from click.testing import CliRunner
 
 from bgc.cli import main
@@ -29,6 +30,7 @@ def test_a_constant_is_refused_as_a_swept_or_tuned_name_before_any_work(tmp_path
     assert not (tmp_path / "gen").exists()          # nothing built, nothing written
 
 
+@pytest.mark.slow       # an augmented build; constants are built in tests/model/test_components
 def test_modes_of_another_n_are_that_mechanisms(tmp_path):
     """A02 at rest with its cranks up (``-p v0=0``) for N = 1 under augmented: one
     inverted pendulum, ((N+1)/3 + N) theta'' = ((N+1)/2 + N) g theta, whose rate

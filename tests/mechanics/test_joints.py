@@ -49,6 +49,7 @@ def test_revolute_pendulum_period_energy_and_hinge_force(compiled):
     assert np.abs(np.gradient(v, r.t) - a)[late].max() < 5e-3 * np.abs(a[late]).max()
 
 
+@pytest.mark.slow       # the spherical pendulum stays in make test
 def test_heavy_top_precesses_at_the_closed_form_rate(compiled):
     mod = compiled("heavy_top")
     r = simulate(mod, t_end=3.0, rtol=1e-9, atol=1e-11, solver="radau")
@@ -63,6 +64,7 @@ def test_heavy_top_precesses_at_the_closed_form_rate(compiled):
     assert r.column("gap").max() < 1e-5
 
 
+@pytest.mark.slow       # the spherical pendulum and the revolute one stay in make test
 def test_3d_double_pendulum_conserves_energy(compiled):
     mod = compiled("double_pendulum")
     r = simulate(mod, t_end=2.0, rtol=1e-9, atol=1e-11, solver="radau")

@@ -48,6 +48,7 @@ def test_slider_crank_closes_exactly_and_names_its_redundant_constraints(compile
     assert np.abs(energy - energy[0]).max() < 1e-6 * abs(energy[0])  # measured 3e-9
 
 
+@pytest.mark.slow       # five runs; lagrange against parasitic stays in make test
 def test_parasitic_error_against_lagrange_falls_as_one_over_stiffness(compiled):
     """Native Radau (the errors are the models', the same to 1e-9 under scipy's Radau,
     which took 10 times longer)."""
@@ -99,6 +100,7 @@ def test_bricard_runs_with_its_redundant_constraint_reported(compiled):
     assert np.abs(par.column("P3_x") - lag.column("P3_x")).max() < 2e-3
 
 
+@pytest.mark.slow       # lagrange on a closed loop stays in make test (slider-crank, Bricard)
 def test_four_bar_agrees_with_parasitic_and_keeps_its_coupler_length(compiled):
     lag = simulate(compiled("four_bar", "lagrange"), t_end=2.0, rtol=1e-8, atol=1e-10,
                    solver="radau")

@@ -100,6 +100,7 @@ def test_scalar_zero_order_causal_paths_are_classified():
     assert z["class"] == 1 and "J_l" in z["what"] and z["bonds"]
 
 
+@pytest.mark.slow       # index-2 DAEs under native Radau stay in make test (test_native_closed_forms)
 def test_class4_loop_kept_closed_is_an_index2_dae_for_native_radau_only(compiled, tmp_path):
     """--keep-loops: the four-bar's loop-closing joint keeps its break variables as
     algebraic states (0 = dg/dt + alpha g), an index-2 DAE. Native Radau (index-2 error

@@ -46,7 +46,8 @@ def test_peers_precision_and_stiffness_at_small_scale(gen_dir, tmp_path):
     # work-precision: every method x integrator series; the error falls with the tolerance
     wp = _rows(tmp_path / "precision_slider_crank.csv")
     assert {(r["method"], r["integrator"]) for r in wp} == {
-        (m, i) for m in ("parasitic", "lagrange", "zcp") for i in ("native", "bdf", "rk4")}
+        (m, i) for m in ("parasitic", "lagrange", "zcp", "augmented")
+        for i in ("native", "bdf", "rk4")}
     for m in ("lagrange", "zcp"):
         errs = [float(r["error"]) for r in wp if r["method"] == m and r["integrator"] == "native"]
         assert errs[0] > 10 * errs[-1], (m, errs)

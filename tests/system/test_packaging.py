@@ -93,7 +93,7 @@ def test_an_installed_wheel_runs_the_main_job_from_an_empty_directory(tmp_path):
     assert files == {"csv": "results/sarib_pumping_chirp.csv",
                      "png": "results/sarib_pumping_chirp.png",
                      "report": "results/sarib_pumping_chirp.html"}   # its template shipped
-    assert (work / "generated" / "sarib.py").is_file()
+    assert (work / "generated" / "sarib_zcp.py").is_file()      # the main job: zcp
     where = subprocess.run([py, "-c", "from bgc import data; print(data.folder('models'))"],
                            cwd=work, capture_output=True, text=True, check=True,
                            env=dict(os.environ, PYTHONPATH=""))

@@ -129,6 +129,10 @@ def constraint_basis(module, x, p) -> tuple[np.ndarray | None, int]:
     from bgc.solvers.consistent import RANK_TOL, equilibration
     x = np.asarray(x, dtype=np.float64)
     J = central_differences(lambda y: module.constraints(0.0, y, p), x, rel=1e-7)
+    # differences' round-off below the rank's tolerance is zero: equilibration would
+    # scale a column of such noise up to the others (by 1e16 on the SARIB's legs, whose
+    # frames are rotated exactly: its own zeros come out as 1e-16) and the basis with it
+    J[np.abs(J) <= RANK_TOL * max(float(np.abs(J).max()), 1e-300)] = 0.0
     r, c = equilibration(J)
     _, s, vt = np.linalg.svd(J * r[:, None] * c[None, :])
     rank = int(np.sum(s > RANK_TOL * max(s[0] if len(s) else 0.0, 1e-300)))

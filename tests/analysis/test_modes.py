@@ -185,3 +185,25 @@ def test_sarib_modes_agree_across_methods_and_carry_its_resonances(compiled, gen
         assert pumping["frequency_hz"] == pytest.approx(rep["resonances_hz"][-1], abs=0.01)
         if out == "a_OF_z":
             assert 0.05 < pumping["frequency_hz"] - rep["peaks_hz"][-1] < 0.15
+
+
+def test_the_constraint_basis_ignores_the_differences_round_off():
+    """A state no constraint reads, whose column of the constraints' Jacobian holds only
+    round-off (1e-17, as exactly rotated frames give), stays in the subspace untouched:
+    equilibration scaled such a column by 1e16 and bent the basis off the constraints
+    (the SARIB as an assembly: spurious modes at 0 Hz, its modes 0.1 Hz off)."""
+    from bgc.analysis.modes import constraint_basis
+
+    class Module:
+        CONSTRAINT_NAMES = ("a", "b")
+
+        @staticmethod
+        def constraints(t, x, p):     # x0 - x1 and x1 + 2 x2; x3 read only by round-off
+            return np.array([x[0] - x[1], x[1] + 2.0 * x[2] + 1e-17 * np.sin(1e3 * x[3])])
+
+    x = np.array([0.1, 0.1, -0.05, 0.3])
+    Q, rank = constraint_basis(Module, x, np.zeros(0))
+    assert rank == 2 and Q.shape == (4, 2)
+    J = np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, 2.0, 0.0]])
+    assert np.abs(J @ Q).max() < 1e-12                      # on the constraints
+    assert abs(abs(Q[3]).max() - 1.0) < 1e-12               # x3 free: one of its directions

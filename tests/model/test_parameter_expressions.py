@@ -138,6 +138,7 @@ simulation: {{t_end: 0.5}}
 """
 
 
+@pytest.mark.slow       # parameters in masses and moments stay in make test
 def test_initial_velocities_by_parameters_and_a_spinning_body_of_parametric_inertia(tmp_path):
     """The free body's initial velocity and spin, its mass and a moment as expressions
     (the spin's momentum J w then is one too): the same run as the numbers written out,
@@ -179,6 +180,7 @@ simulation: {{t_end: 0.5}}
 """
 
 
+@pytest.mark.slow       # -p retuning without recompiling stays in make test
 def test_gravity_by_a_parameter_swings_the_pendulum_as_the_number_does(tmp_path):
     for form in ("g_acc", "[0, 0, -g_acc]", "[0, 0, -0.5 * g_acc]"):
         g = loads(PENDULUM.format(name="pend", g=form), "pend.yaml")

@@ -14,9 +14,11 @@ from bgc.simulate import simulate
 
 
 
-@pytest.fixture(params=["native", "radau"])
+@pytest.fixture(params=["native", pytest.param("radau", marks=pytest.mark.slow)])
 def tight(request):
-    """Tight tolerances under each Radau: bgc's numba loop and scipy's."""
+    """Tight tolerances under each Radau: bgc's numba loop and scipy's (at rtol 1e-11
+    scipy's Python loop is the slow one: make test-all; test_every_stiff_solver_agrees
+    keeps scipy's in make test)."""
     return dict(rtol=1e-11, atol=1e-13, solver=request.param)
 
 

@@ -99,6 +99,7 @@ def sarib():
     return build(MODELS / "sarib.yaml")
 
 
+@pytest.mark.slow       # drawing an instance and the other models stay in make test
 def test_sarib_leg_and_whole(sarib, tmp_path):
     """A leg (--only leg_1, the instance: the beater, the bar and their three joints, with
     the fuselage's and MGB's elements they bond to, marked outside), and the whole SARIB."""

@@ -287,6 +287,7 @@ def test_merged_relay_chain_moves_as_the_chain(tmp_path, joints):
         assert np.abs(a.column(out) - b.column(out)).max() < 1e-6 * swing, out
 
 
+@pytest.mark.slow       # the relay chain merge stays in make test on small models
 def test_sarib_relay_chains_merge_where_the_scene_allows():
     """The SARIB's attach and membrane chains: under parasitic the pass names what it
     would merge and leaves it (each joint's compliance is part of that model) unless the

@@ -50,17 +50,21 @@ def test_native_radau_agrees_with_scipy(compiled, name, method, t_end):
     assert st.lu_decompositions >= 2 and st.rejected_steps is not None
 
 
-# scipy's side takes 3-7 s on these (make test-all runs them; the others cover the kinds)
-SCIPY_SLOW = {"andrews", "bricard", "double_pendulum", "four_bar", "n_four_bar",
-              "flyball_governor"}
 # a model its default method cannot integrate (the IFToMM flyball governor under
 # parasitic: stiff joints on near-massless spins), checked under another
 METHOD = {"flyball_governor": "zcp"}
 
 
+# make test keeps one model of each kind (a smooth input, events, derivative causality,
+# an algebraic loop, control blocks, a table, a body, a motor); make test-all every one
+FAST = {"msd_forced", "rectifier", "geared_inertias", "rr_loop", "servo", "rc_table",
+        "pendulum", "dc_motor"}
+
+
 @pytest.mark.parametrize("name", model_params(
-    [n for n in sorted(p.stem for p in MODELS.glob("*.yaml")) if n not in SCIPY_SLOW])
-    + [pytest.param(n, marks=pytest.mark.slow) for n in sorted(SCIPY_SLOW)])
+    [n for n in sorted(p.stem for p in MODELS.glob("*.yaml")) if n in FAST])
+    + [pytest.param(n, marks=pytest.mark.slow)
+       for n in sorted(p.stem for p in MODELS.glob("*.yaml")) if n not in FAST])
 def test_every_shipped_model_agrees_with_scipy_at_the_tolerance_asked(compiled, name):
     """At rtol = 1e-7, atol = 1e-10 (over the model's run, at most 1 s), against a
     reference at tolerances 1000 times tighter,

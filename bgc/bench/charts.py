@@ -257,7 +257,7 @@ def _cold_by_stage(ax, rs, m, stage_cols, num) -> None:
 def startup(row: dict, phases, path: Path, title: str, target: float) -> Path:
     """A small model's warm start to its first result: the phases (wall seconds) as one
     stacked bar beside the command's own median, with the ``target`` [s]."""
-    fig, axes = panels(1, 2.6)
+    fig, axes = panels(1, 3.4)        # room below the bar for the legend's three rows
     ax = axes[0, 0]
     left = 0.0
     for k, p in enumerate(phases):
@@ -271,5 +271,5 @@ def startup(row: dict, phases, path: Path, title: str, target: float) -> Path:
     ax.set_yticks([0, 1], ["command", "phases"])
     ax.set_xlabel(f"wall time [s] (dashed: target {target} s)")
     ax.grid(True, axis="x", alpha=0.3)
-    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.35))
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.3))
     return save_figure(fig, path, title)

@@ -154,20 +154,22 @@ class IFToMM:
     def series(self, prob: Problem, methods, tols) -> list[dict]:
         rows = []
         for method in methods:
-            over = False
+            why = None          # why the series stopped: a run that failed, or too long
             for tol in tols:
-                if over:
+                if why is not None:
                     rows.append({"problem": prob.name, "method": method, "rtol": tol,
                                  "setting": tol, "integrator": "native", "error": np.nan,
-                                 "status": f"skipped: the previous run took over "
-                                           f"{self.budget:g} s"})
+                                 "status": f"skipped: {why}"})
                     continue
                 row = self.run(prob, method, tol)
                 rows.append(row)
                 self.log(f"    {prob.name} {method:9s} rtol {tol:8.2g}: error "
                          f"{row['error']:.3g} {prob.unit}, {row['wall_time']:.3g} s "
                          f"({row['status'][:60]})")
-                over = row["wall_time"] > self.budget or row["status"] != "ok"
+                if row["status"] != "ok":
+                    why = "the previous run failed"
+                elif row["wall_time"] > self.budget:
+                    why = f"the previous run took over {self.budget:g} s"
         return rows
 
 

@@ -159,8 +159,10 @@ def test_iftomm_part_at_small_scale(gen_dir, tmp_path):
     a02 = [r for r in rows if r["problem"] == "A02_N2"]
     aug = [float(r["error"]) for r in a02 if r["method"] == "augmented" and r["status"] == "ok"]
     assert min(aug) < 1e-3 and aug[0] > aug[-1]
-    for m in ("lagrange", "zcp"):
-        assert all("singular configuration" in r["status"] for r in a02 if r["method"] == m)
+    for m in ("lagrange", "zcp"):       # the first stops there; the series with it
+        runs = [r["status"] for r in a02 if r["method"] == m]
+        assert "singular configuration" in runs[0], runs
+        assert all(s == "skipped: the previous run failed" for s in runs[1:]), runs
     assert all(float(r["error"]) > 1e-2 for r in a02 if r["method"] == "parasitic")
     summary = (tmp_path / "summary.md").read_text()
     assert "## IFToMM benchmark problems" in summary and "| A02_N2 | augmented |" in summary

@@ -67,7 +67,7 @@ def frf(model, direction, output, f_min, f_max, out, params, out_dir, method, pa
         check_output(decl, output)
         check_direction(decl, direction, "--input")
         check_params(decl, params)
-        check_overrides(model, params, decl.model, constants=constants)
+        check_overrides(model, params, constants=constants)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,
                                  check=check, constants=constants)
     p, choice = run_parameters(module, m, method, params, parasitic_mode)

@@ -62,7 +62,7 @@ def modes(model, f_min, f_max, params, out_dir, method, parasitic_mode, keep_loo
 
     def check(decl):            # against the model, before any compile
         check_params(decl, params)
-        check_overrides(model, params, decl.model, constants=constants)
+        check_overrides(model, params, constants=constants)
     module, m, _ = ensure_module(model, out_dir, method, check=check, constants=constants)
     p, choice = run_parameters(module, m, method, params, parasitic_mode)
     with progress.stage("modes") as stage:

@@ -154,12 +154,11 @@ def split_constants(model, items) -> tuple[dict, tuple]:
             tuple((n, v) for n, v in items if n not in names))
 
 
-def check_overrides(model, items, loaded=None, *, constants: dict | None = None) -> None:
+def check_overrides(model, items, *, constants: dict | None = None) -> None:
     """Refuse ``-p`` values that the model's own checks refuse (a capacitance, inertance
     or mass not > 0, a constant that becomes infinite or complex): the model is read
     again with them (and the compile-time ``constants`` given), and its error is told as
-    the option's. ``loaded``: the Model if it is read already (nothing to do without
-    overrides either way)."""
+    the option's."""
     if not items:
         return
     from bgc.model import load

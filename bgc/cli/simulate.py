@@ -249,7 +249,7 @@ def _check_declared(o: SimulateOptions, decl) -> None:
     after it is read and before any compile: ``-p`` names and values, the excitation,
     the model's solver and what it needs, the output times."""
     check_params(decl, o.params)
-    check_overrides(decl.file, o.params, decl.model, constants=o.constants)
+    check_overrides(decl.file, o.params, constants=o.constants)
     if o.exc_kind is not None and decl.model is not None:
         exc = decl.model.excitation
         if exc is None:

@@ -184,7 +184,7 @@ def _job(o, axes, fixed, frfs, windows):
             decl.model.excitation.select(o.exc_kind, o.exc_dir, o.amplitude, o.frequency)
         for ends in ([a.start for a in axes], [a.stop for a in axes]):
             check_overrides(o.model, fixed + tuple(zip([a.name for a in axes], ends)),
-                            decl.model, constants=constants)
+                            constants=constants)
     module, model, _ = ensure_module(o.model, o.out_dir, o.method,
                                      open_loops=not o.keep_loops, on_load=loop_beside,
                                      check=check, constants=constants)

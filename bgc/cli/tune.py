@@ -117,7 +117,7 @@ def tune(model, target, name, direction, output, bracket, f_min, f_max, params, 
                                n for n in decl.params if "__" not in n) + " (and the "
                                 "joints' values bgc adds, <joint>__<value>)")
         check_params(decl, params)
-        check_overrides(model, params, decl.model, constants=constants)
+        check_overrides(model, params, constants=constants)
         if bracket is not None:
             _check_ends(model, params, name, bracket, constants)
     module, m, _ = ensure_module(model, out_dir, method, open_loops=not keep_loops,

@@ -212,7 +212,7 @@ def _build(model, method, open_loops, params, parasitic, separation, out_dir):
         inputs = add_inputs(m)
         st.done(f"{m.name}: {progress.count(len(inputs), 'input')}")
     check_params(pipeline.Declared.of_model(m, method), params)     # before the build
-    check_overrides(model, [(n, v) for n, v in params if n in m.parameters], m,
+    check_overrides(model, [(n, v) for n, v in params if n in m.parameters],
                     constants=constants)
     c = pipeline.build(m, method, open_loops)
     system = c.system

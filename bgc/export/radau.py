@@ -19,6 +19,7 @@ calls it (``numba_xxgetrf``: the dense Newton matrices) and ``numba_nextafter``.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import subprocess
@@ -169,10 +170,8 @@ def _compile(path: Path) -> bytes:
                            hint="this numba/llvmlite may be unsupported; see docs/fmu.md")
         obj = out.read_bytes()
     from bgc.fileio import atomic_write
-    try:
+    with contextlib.suppress(BgcError):     # no cache here: compiled again next time
         atomic_write(path, hashlib.sha256(obj).digest() + obj, "Radau object cache")
-    except BgcError:
-        pass                        # no cache here: compiled again next time
     return obj
 
 

@@ -4,6 +4,7 @@ gcc, cc or clang on PATH) or, without one, zig's (the ``ziglang`` package from P
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shlex
 import shutil
@@ -51,11 +52,8 @@ def find() -> Compiler:
         path = shutil.which(name)
         if path:
             return Compiler(name, (path,))
-    try:
-        import ziglang  # noqa: F401
+    if importlib.util.find_spec("ziglang") is not None:     # zig's wheel: pip install ziglang
         return Compiler("zig cc", (sys.executable, "-m", "ziglang", "cc"),
                         ("-target", "x86_64-linux-gnu.2.17"))
-    except ImportError:
-        pass
     raise BgcError("no C compiler found to link the FMU's library (gcc, cc, clang or $CC)",
                    hint="install one (apt-get install gcc) or zig's: pip install ziglang")

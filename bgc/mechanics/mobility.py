@@ -19,7 +19,7 @@ import sympy as sp
 
 from bgc.graph.expand import position, rotation_matrix
 from bgc.mechanics import exact
-from bgc.methods import consistent
+from bgc.solvers import consistent
 
 
 def constraint_rows(graph, system) -> tuple[np.ndarray, list[str], int]:

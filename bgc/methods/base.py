@@ -18,7 +18,7 @@ A method is an object with a ``name`` and these hooks, each called by one stage:
 - **initial conditions and run-time monitoring**: declared, not run, here. The generated
   module carries what the method made of each constraint (``CONSTRAINT_NAMES``,
   ``IMPOSED``, ``ALGEBRAIC``, the ``<method>__alpha`` and rank parameters) and
-  ``methods.consistent`` projects the start onto the constraints and watches drift and
+  ``solvers.consistent`` projects the start onto the constraints and watches drift and
   rank from that alone, so a run imports no method (nor sympy). ``ideal`` says whether
   there are such constraints at all;
 - **reports** (``bgc check``): ``report`` adds the method's own findings.

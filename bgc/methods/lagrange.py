@@ -27,7 +27,7 @@ DAE for an integrator that takes one.
 
 Why Baumgarte rather than projection or GGL: the result is one explicit ODE, so every
 integrator (scipy's BDF/Radau/LSODA, the native one) runs it unchanged with the analytic
-Jacobian; the initial state is projected onto the constraints (``bgc.methods.consistent``), so the
+Jacobian; the initial state is projected onto the constraints (``bgc.solvers.consistent``), so the
 stabilisation only has to damp integration error, and the drift it leaves is measured and
 reported after every run. ``alpha`` is the parameter ``lagrange__alpha`` (1/s).
 """

@@ -20,7 +20,7 @@ from bgc.errors import EquationError
 from bgc.graph.bondgraph import Constraint
 from bgc.graph.expand import AXES
 from bgc.methods.base import ConstraintMethod, Equations, LoopSolution, TornLoop
-from bgc.methods.consistent import RANK_PARAM
+from bgc.solvers.consistent import RANK_PARAM
 from bgc.model import symbols
 from bgc.symbolic.algorithms import is_cyclic, strongly_connected
 from bgc.symbolic.forward_mode import directional, propagate

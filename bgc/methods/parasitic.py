@@ -157,7 +157,7 @@ def _jacobian(module, x, p) -> np.ndarray:
     """The Jacobian at ``x`` with the joints' static loads where the model starts loaded
     (their geometric stiffness, a pendulum's restoring moment, is part of the modes)."""
     if getattr(module, "STATIC_LOADS", False):
-        from bgc.methods.consistent import static_loads
+        from bgc.solvers.consistent import static_loads
         p = static_loads(module, x, p)
     return module.jac(0.0, x, p)
 
@@ -198,7 +198,7 @@ def _sensitivity(module, x, p, stiff: list[int], damp: list[int]) -> np.ndarray:
     (``_PARASITIC``): an overdamped parasitic mode ``-c / m`` follows the dampers only."""
     import scipy.linalg
     if getattr(module, "STATIC_LOADS", False):     # the loads do not depend on k
-        from bgc.methods.consistent import static_loads
+        from bgc.solvers.consistent import static_loads
         p = static_loads(module, x, p)
     A = module.jac(0.0, x, p)
     lam, left, right = scipy.linalg.eig(A, left=True, right=True)

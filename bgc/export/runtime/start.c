@@ -1,5 +1,5 @@
 /* The start of a run, natively, as bgc.simulate.prepare makes it in Python
-   (bgc/methods/consistent.py): the initial state from the parameters; for a model that
+   (bgc/solvers/consistent.py): the initial state from the parameters; for a model that
    starts at rest under method parasitic, the joint loads (consistent.static_loads); under
    lagrange and zcp, the state projected onto the constraints (consistent.project:
    Gauss-Newton on the poses, least squares on the other states, central differences of

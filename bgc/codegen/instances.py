@@ -24,6 +24,7 @@ they were (the SARIB's four legs: written out).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -115,6 +116,11 @@ def schedule(steps: list, instances, where, assigned: dict | None = None,
         found = {o for o in map(by_symbol, _symbols(e, owner.memo)) if o is not None}
         return found.pop() if len(found) == 1 else None
     owner.step, owner.memo = own, memo if memo is not None else {}
+    owner.of = by_symbol
+    bases = sorted({m[1] for m in map(_INDEXED.match, instances) if m}, key=len, reverse=True)
+    owner.arrays = re.compile(  # a mention of an array's instance in an identifier
+        r"(?<![A-Za-z0-9])(" + "|".join(re.escape(symbols.ident(b)) for b in bases)
+        + r")_(\d+)(?=" + symbols.DOT + ")") if bases else None
     out, segment = [], []
     for step in steps:
         if isinstance(step, STRAIGHT):
@@ -177,55 +183,112 @@ def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]
             per.setdefault(o, []).append(step)
     groups: dict = {}
     for o, block in per.items():
-        key, canon = _canonical(block, o, where, owner.memo)
+        key, canon = _canonical(block, _View(o, owner), where, owner.memo)
         groups.setdefault(key, []).append((o, block, canon))
     loops = []
     for key, members in groups.items():
         if len(members) < min_copies:
             straight += [s for _, block, _ in members for s in block]
             continue
-        loops.append(_loop(members, where))
+        loops.append(_loop(members, where, _View(members[0][0], owner)))
     order = {id(s): i for i, s in enumerate(steps)}
     straight.sort(key=lambda s: order[id(s)])
     return straight, loops
 
 
-_MARKS: dict = {}
+_INDEXED = re.compile(r"^(.*)_(\d+)$")       # an array's instance: base_index
 
 
-def _local(s, o: str) -> str:
-    """A symbol's name relative to its instance ``o`` (its own) or '?' (another's)."""
-    mark = _MARKS.get(o)
-    if mark is None:
-        mark = _MARKS[o] = symbols.ident(o) + symbols.DOT
-    return s.name.replace(mark, "@", 1) if mark in s.name else "?"
+class _View:
+    """Symbols and expressions as seen from instance ``o``: in a symbol's name, ``o``
+    as '@' and every instance of ``o``'s array by its offset (``w[+1]``: what
+    ``w_{i+1}`` is to ``w_i`` for every i), any other name as it is. Sympy orders the
+    terms of a sum or product by the symbols' names, and names order ``w_9`` after
+    ``w_10``: the steps of a level and the commutative arguments are put in the order of
+    their relative form (``name``, ``key``) instead, so that every instance's steps have
+    one structure."""
+
+    def __init__(self, o: str, owner):
+        self.o, self.memo, self.arrays = o, owner.memo, owner.arrays
+        self.mark = symbols.ident(o) + symbols.DOT
+        mine = _INDEXED.match(o)
+        self.base, self.index = (symbols.ident(mine[1]), int(mine[2])) if mine else (None, 0)
+
+    def _offset(self, m) -> str:
+        if m[1] != self.base:
+            return m[0]
+        return f"{m[1]}[{int(m[2]) - self.index:+d}]"
+
+    def name(self, s) -> str:
+        """``s``'s name with ``o`` as '@' and its array's instances by offset."""
+        hit = self.memo.get(("name", s, self.o))
+        if hit is None:
+            hit = s.name.replace(self.mark, "@" + symbols.DOT)
+            if self.arrays is not None and self.base is not None:
+                hit = self.arrays.sub(self._offset, hit)
+            self.memo[("name", s, self.o)] = hit
+        return hit
+
+    def key(self, e) -> str:
+        """``e`` with relative names and its numbers as '#' (they may differ between
+        instances), commutative arguments sorted: the same for every instance's step."""
+        k = ("key", id(e), self.o)
+        hit = self.memo.get(k)
+        if hit is not None and hit[0] is e:
+            return hit[1]
+        if e.is_Symbol:
+            out = "t" if e is symbols.t else self.name(e)
+        elif e.is_Number:
+            out = "#"
+        elif e.is_Pow and e.exp.is_Number:
+            out = f"Pow({self.key(e.base)},{e.exp})"
+        elif isinstance(e, (table, table_slope)):
+            out = f"{type(e).__name__}({e.args[0]},{self.key(e.args[1])})"
+        elif not e.args:
+            out = f"{type(e).__name__}:{e}"
+        else:
+            keys = [self.key(a) for a in e.args]
+            if e.is_Add or e.is_Mul:
+                keys.sort()
+            out = f"{type(e).__name__}({','.join(keys)})"
+        self.memo[k] = (e, out)
+        return out
+
+    def args(self, e) -> tuple:
+        """``e``'s arguments, a sum's or product's in the order of their ``key``."""
+        if e.is_Add or e.is_Mul:
+            return tuple(sorted(e.args, key=self.key))
+        return e.args
 
 
-def _canonical(block: list, o: str, where, memo: dict):
+def _canonical(block: list, view: _View, where, memo: dict):
     """The structure of one instance's steps at one level: a hashable key (the steps in
     a canonical order, their expressions with numbered placeholders and the numbers left
-    out) and what the template and the table need (the ordered steps, the placeholders'
-    symbols and bases, the numbers in order)."""
+    out) and what the template and the table need (the ordered steps, a Jacobian step's
+    partials in the order of their placeholders, the placeholders' symbols and bases,
+    the numbers in order)."""
     def sort_key(step):
         if isinstance(step, Set):
-            return ("set", _local(step.v, o))
+            return ("set", view.name(step.v))
         if isinstance(step, Out):
-            return ("out", tuple(sorted(_local(w, o) for w in step.e.free_symbols)))
-        return ("grad", tuple(sorted(_local(w, o) for _, w in step.partials)),
-                str(len(step.e.args)))
+            return ("out", view.key(step.e))
+        return ("grad", view.key(step.e),
+                tuple(sorted(view.name(w) for _, w in step.partials)))
     ordered = sorted(block, key=sort_key)
     ph: dict = {}
     nums: list = []
     key = []
-    for step in ordered:
+    for i, step in enumerate(ordered):
         if isinstance(step, Set):
             lhs = _place(step.v, ph)
-            key.append(("set", lhs) + _shape(step.e, ph, nums, memo))
+            key.append(("set", lhs) + _shape(step.e, ph, nums, view))
         elif isinstance(step, Out):
-            key.append(("out",) + _shape(step.e, ph, nums, memo))
+            key.append(("out",) + _shape(step.e, ph, nums, view))
         else:
-            key.append(("grad",) + _shape(step.e, ph, nums, memo)
-                       + (tuple(_place(w, ph) for _, w in step.partials),))
+            shape = _shape(step.e, ph, nums, view)
+            partials = sorted(step.partials, key=lambda jw: (_place(jw[1], ph),))
+            ordered[i] = step = Grad(step.e, partials)
+            key.append(("grad",) + shape + (tuple(ph[w] for _, w in partials),))
     syms = list(ph)
     bases = tuple(_where(s, where, memo)[0] for s in syms)
     return (tuple(key), bases), (ordered, syms, nums)
@@ -239,15 +302,16 @@ def _where(s, where, memo: dict) -> tuple[str, int]:
     return hit
 
 
-def _shape(e, ph: dict, nums: list, memo: dict) -> tuple:
+def _shape(e, ph: dict, nums: list, view: _View) -> tuple:
     """``e``'s shape (``_walk``, its symbols numbered within it; memoized on the
-    expression, which a module's programs share) and its symbols as placeholders of the
+    expression and the instance it is seen from) and its symbols as placeholders of the
     block (``ph``); its numbers appended to ``nums``."""
-    hit = memo.get(("shape", id(e)))
+    k = ("shape", id(e), view.o)
+    hit = view.memo.get(k)
     if hit is None or hit[0] is not e:
         local: dict = {}
         found: list = []
-        hit = memo[("shape", id(e))] = (e, _walk(e, local, found), list(local), found)
+        hit = view.memo[k] = (e, _walk(e, local, found, view), list(local), found)
     _, shape, syms, found = hit
     nums.extend(found)
     return shape, tuple(_place(s, ph) for s in syms)
@@ -260,24 +324,25 @@ def _place(s, ph: dict) -> int:
     return i
 
 
-def _walk(e, ph: dict, nums: list):
+def _walk(e, ph: dict, nums: list, view: _View):
     """``e``'s shape: symbols by placeholder number, numbers out (into ``nums``), but
-    those that are structure (integer exponents, a table's index)."""
+    those that are structure (integer exponents, a table's index); a sum's or product's
+    arguments in ``view``'s order."""
     if e.is_Symbol:
         return _place(e, ph) if e is not symbols.t else "t"
     if e.is_Number:
         nums.append(e)
         return "#"
     if e.is_Pow and e.exp.is_Number:
-        return ("Pow", _walk(e.base, ph, nums), str(e.exp))
+        return ("Pow", _walk(e.base, ph, nums, view), str(e.exp))
     if isinstance(e, (table, table_slope)):
-        return (type(e).__name__, str(e.args[0]), _walk(e.args[1], ph, nums))
+        return (type(e).__name__, str(e.args[0]), _walk(e.args[1], ph, nums, view))
     if not e.args:
         return (type(e).__name__, str(e))        # pi, E, true, false, nan ...
-    return (type(e).__name__,) + tuple(_walk(a, ph, nums) for a in e.args)
+    return (type(e).__name__,) + tuple(_walk(a, ph, nums, view) for a in view.args(e))
 
 
-def _loop(members: list, where) -> Loop:
+def _loop(members: list, where, view: _View) -> Loop:
     """The loop of instances whose steps have one structure: the template from the
     first (numbers that all agree kept, the others placeholders), a row per instance: the
     index of each symbol placeholder in its base, then the output slot of each partial
@@ -291,7 +356,7 @@ def _loop(members: list, where) -> Loop:
     num_map = {k: C[i] for i, k in enumerate(differ)}
     counter = [0]
 
-    def rebuild(e):         # the same traversal as _walk: numbers met in one order
+    def rebuild(e):         # the same traversal as _walk (``view``'s): numbers in one order
         if e.is_Symbol:
             return sym_map.get(e, e)
         if e.is_Number:
@@ -304,10 +369,10 @@ def _loop(members: list, where) -> Loop:
             return type(e)(e.args[0], rebuild(e.args[1]))
         if not e.args:
             return e
-        args = [rebuild(a) for a in e.args]
-        if e.is_Add or e.is_Mul:
-            return type(e)(*args, evaluate=False)
-        return e.func(*args)
+        if e.is_Add or e.is_Mul:    # numbered in view's order, summed in sympy's (the
+            built = {id(a): rebuild(a) for a in view.args(e)}   # first instance's code
+            return type(e)(*[built[id(a)] for a in e.args], evaluate=False)   # bitwise)
+        return e.func(*[rebuild(a) for a in e.args])
 
     steps, n_out = [], 0
     for step in first_steps:

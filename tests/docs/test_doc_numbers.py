@@ -20,7 +20,7 @@ import re
 import numpy as np
 import pytest
 from doc_examples import agrees, stated
-from helpers import ROOT
+from helpers import PAPER_PUMPING_VERTICAL, ROOT, within_paper
 
 README, TUTORIAL, MAIN_JOB = "README.md", "docs/tutorial.md", "docs/main-job.md"
 ABSORBER = "docs/tutorial/absorber.yaml"
@@ -345,6 +345,8 @@ def test_the_main_jobs_figures(doc_run):
     minima = output_line(main, r"\s+envelope minima of a_OF_z over the chirp: (.*) Hz")[0]
     for name in ("README anti-resonance", "main-job anti-resonance", "tutorial rotor"):
         check(name, float(minima.split(",")[0]))
+    # and the paper's, on its pumping chirp (Fig. 11.27a): "observed at 18 Hz"
+    assert within_paper(float(minima.split(",")[0]), PAPER_PUMPING_VERTICAL), minima
     steps, rhs = run_stats(main)
     for name in ("steps", "README steps", "lagrange steps", "rtol 1e-3 steps"):
         check(name, steps)

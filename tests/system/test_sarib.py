@@ -177,6 +177,23 @@ def test_roll_and_pitch_hinge_forces_against_the_paper(sarib):
         assert anti["F_A2_z"] == [pytest.approx(anti["F_A1_z"][0], abs=1e-4)], direction
 
 
+@pytest.mark.xfail(strict=True, reason="the shared parameter set's fuselage (80 kg, 4 kg m^2) "
+                   "is not the paper's rig, which the paper does not give: see the two tests above")
+@pytest.mark.parametrize("direction, output, paper", [
+    ("pumping", "F_A1_x", PAPER_PUMPING_X),     # Fig. 11.29: "around 16.8 Hz"
+    ("roll", "F_A1_z", (18.2, 0.05))])          # Fig. 11.30: "at ... 18.2 Hz"
+def test_the_papers_figures_that_the_parameter_set_does_not_reach(sarib, direction, output,
+                                                                   paper):
+    """The paper's x-force anti-resonance under pumping and vertical one under roll, to
+    its stated accuracy: bgc's 17.10 and 19.63 Hz miss them because of the data set's
+    fuselage (with it blocked bgc gives the closed forms exactly). Strict: a parameter set
+    that reaches the paper's figures turns this into a failure, to be made a plain test."""
+    mod, model = sarib
+    anti = anti_resonances(frf.linearize(mod, model, direction), (output,), 15.0, 22.0,
+                           step=0.1)
+    assert len(anti[output]) == 1 and within_paper(anti[output][0], paper), anti
+
+
 def test_modes_are_table_11_1s_six_and_the_attach_is_below_2_hz(sarib):
     """Table 11.1's 10 DoF are "6 + 4": bgc modes' six functional modes (the rig's pumping,
     roll and pitch on the attach; the fuselage's against the MGB, on the membrane and the

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from bgc.codegen.lowering import Function
-from bgc.codegen.steps import STRAIGHT, Grad, LoopOver, Out, Set
+from bgc.codegen.steps import STRAIGHT, Grad, LoopOver, Out, Set, Store
 from bgc.model import symbols
 from bgc.model.signals import table, table_slope
 
@@ -39,8 +39,10 @@ MIN_COPIES = 5           # the fewest instances of one structure that make a loo
 
 @dataclass
 class Loop:
-    """One loop of a program: its template ``steps`` (``Set(T, e)``, ``Out(j, e)`` and
-    ``Grad(e, [(j, T)])`` in placeholders; ``j``: a row's entry, an output slot), where each placeholder lives (``bases``: "x", "p", "w" or "out"), and per
+    """One loop of a program: its template ``steps`` (``Set(T, e)``, ``Out(j, e)``,
+    ``Store(j, e)`` and ``Grad(e, [(j, T)])`` in placeholders; ``j``: a row's entry, an
+    output or a linear block's slot), where each placeholder and slot lives (``bases``:
+    "x", "p", "w" or "out"), and per
     instance its ``rows`` (the index of each placeholder in its base) and ``consts`` (the
     numbers that differ between instances)."""
     steps: list
@@ -197,6 +199,11 @@ def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]
 
 
 _INDEXED = re.compile(r"^(.*)_(\d+)$")       # an array's instance: base_index
+_DIGITS = re.compile(r"\d+")
+
+
+def _padded(m) -> str:
+    return m[0].zfill(12)
 
 
 class _View:
@@ -226,6 +233,7 @@ class _View:
             hit = s.name.replace(self.mark, "@" + symbols.DOT)
             if self.arrays is not None and self.base is not None:
                 hit = self.arrays.sub(self._offset, hit)
+            hit = _DIGITS.sub(_padded, hit)      # counters (x__99, x__100) in number order
             self.memo[("name", s, self.o)] = hit
         return hit
 
@@ -272,6 +280,8 @@ def _canonical(block: list, view: _View, where, memo: dict):
             return ("set", view.name(step.v))
         if isinstance(step, Out):
             return ("out", view.key(step.e))
+        if isinstance(step, Store):
+            return ("store", view.key(step.e))
         return ("grad", view.key(step.e),
                 tuple(sorted(view.name(w) for _, w in step.partials)))
     ordered = sorted(block, key=sort_key)
@@ -284,6 +294,8 @@ def _canonical(block: list, view: _View, where, memo: dict):
             key.append(("set", lhs) + _shape(step.e, ph, nums, view))
         elif isinstance(step, Out):
             key.append(("out",) + _shape(step.e, ph, nums, view))
+        elif isinstance(step, Store):
+            key.append(("store",) + _shape(step.e, ph, nums, view))
         else:
             shape = _shape(step.e, ph, nums, view)
             partials = sorted(step.partials, key=lambda jw: (_place(jw[1], ph),))
@@ -374,24 +386,24 @@ def _loop(members: list, where, view: _View) -> Loop:
             return type(e)(*[built[id(a)] for a in e.args], evaluate=False)   # bitwise)
         return e.func(*[rebuild(a) for a in e.args])
 
-    steps, n_out = [], 0
+    steps, slots = [], []               # slots: the base of each row entry after T's
     for step in first_steps:
         if isinstance(step, Set):
             steps.append(Set(sym_map[step.v], rebuild(step.e)))
-        elif isinstance(step, Out):
-            steps.append(Out(len(T) + n_out, rebuild(step.e)))
-            n_out += 1
+        elif isinstance(step, (Out, Store)):
+            steps.append(type(step)(len(T) + len(slots), rebuild(step.e)))
+            slots.append("out" if isinstance(step, Out) else "w")
         else:
             e = rebuild(step.e)
-            steps.append(Grad(e, [(len(T) + n_out + k, sym_map[w])
+            steps.append(Grad(e, [(len(T) + len(slots) + k, sym_map[w])
                                   for k, (_, w) in enumerate(step.partials)]))
-            n_out += len(step.partials)
-    bases = [where(s)[0] for s in first_syms] + ["out"] * n_out
+            slots += ["out"] * len(step.partials)
+    bases = [where(s)[0] for s in first_syms] + slots
     lp = Loop(steps, T, bases, C)
     for o, _, (ordered, syms, nums) in members:
         row = [where(s)[1] for s in syms]
         row += [slot for step in ordered if not isinstance(step, Set)
-                for slot in ([step.slot] if isinstance(step, Out)
+                for slot in ([step.slot] if isinstance(step, (Out, Store))
                              else [m for m, _ in step.partials])]
         lp.rows.append(row)
         lp.consts.append([float(nums[k]) for k in differ])
@@ -441,6 +453,8 @@ def template_ir(lp: Loop, name: str, layout, decls: set) -> str:
             fn.assign(step.v, step.e)
         elif isinstance(step, Out):
             fn.store("%out", fn.index(step.slot), fn.val(step.e))
+        elif isinstance(step, Store):       # an entry of a linear block's region
+            fn.store("%w", fn.index(step.slot), fn.val(step.e))
         else:
             d = fn.grad(step.e, [w for _, w in step.partials])
             for j, w in step.partials:

@@ -59,7 +59,7 @@ class LoopOver(NamedTuple):
 
 
 # the steps instances may share in a loop (the others stay where they are)
-STRAIGHT = (Set, Grad, Out)
+STRAIGHT = (Set, Grad, Out, Store)
 
 
 def program_steps(items, outputs, layout):

@@ -1,8 +1,8 @@
 """Helpers shared by test files in several folders: paths, the shipped models as pytest
-parameters, LLVM IR JIT-compiled, error measures, the parsed form of bgc's error line, a forked ``bgc`` run, and
-the few model-specific references more than one stage's tests check against. Test files
-import these from here, never from each other (pytest imports each folder's files by bare
-name, so a test file is not importable from another folder)."""
+parameters, LLVM IR JIT-compiled, error measures, the parsed form of bgc's error line, a
+forked ``bgc`` run, and the few model-specific references more than one stage's tests
+check against. Test files import these from here, never from each other (pytest imports
+each folder's files by bare name, so a test file is not importable from another folder)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """Helpers shared by test files in several folders: paths, the shipped models as pytest
-parameters, error measures, the parsed form of bgc's error line, a forked ``bgc`` run, and
-the few model-specific references more than one stage's tests check against. Test files
-import these from here, never from each other (pytest imports each folder's files by bare
-name, so a test file is not importable from another folder)."""
+parameters, LLVM IR JIT-compiled, error measures, the parsed form of bgc's error line, a
+forked ``bgc`` run, and the few model-specific references more than one stage's tests
+check against. Test files import these from here, never from each other (pytest imports
+each folder's files by bare name, so a test file is not importable from another folder)."""
 
 from __future__ import annotations
 
@@ -29,6 +29,21 @@ def model_params(names=None):
     """pytest parameters for the shipped models (all by default), slow ones marked."""
     names = names or sorted(p.stem for p in MODELS.glob("*.yaml"))
     return [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_MODELS else n for n in names]
+
+
+def jit(ir: str):
+    """An execution engine holding ``ir`` (parsed and verified by LLVM), compiled for this
+    machine: ``engine.get_function_address(name)`` for ctypes. Keep it alive while its
+    functions are called."""
+    import llvmlite.binding as llvm
+    llvm.initialize_native_target()
+    llvm.initialize_native_asmprinter()
+    module = llvm.parse_assembly(ir)
+    module.verify()
+    machine = llvm.Target.from_default_triple().create_target_machine()
+    engine = llvm.create_mcjit_compiler(module, machine)
+    engine.finalize_object()
+    return engine
 
 
 # ------------------------------------------------------------------ measures of error

@@ -13,9 +13,9 @@ The stage in parts, each a module:
   ``Grad``, ...), which ``instances`` may group into loops over a component's instances;
 - ``lowering``: sympy expressions to IR values, one method per node kind, and their
   partials by reverse mode (``Function``);
-- ``linalg``: the linear-algebra kernels (the Jacobian's tape and dense LU as Jinja
-  templates, ``templates/*.ll.j2``; sparse LU, least squares, a constraint block's
-  ``A = -K B``) and each linear block's function;
+- ``linalg``: the linear-algebra kernels (the Jacobian's tape, dense and sparse LU,
+  least squares, a constraint block's ``A = -K B``: IR templates rendered by Jinja,
+  ``templates/*.ll.j2``) and each linear block's functions;
 - here, the assembly (``Module``, ``lower``):
 
 - **Programs**: ``rhs``, ``jac`` (its run-time partials), ``out``, ``guard``, ``con``:

@@ -1,9 +1,8 @@
 """The kernels stage in its parts, each on its own: ``lowering`` (every node kind and its
 partials, JIT-compiled and compared with sympy's values), ``workspace`` (slots and
 regions that never overlap, each block's solve chosen), ``steps`` (a program's typed
-steps in the order a block needs them), ``linalg`` (the template routines rendered and
-run: dense LU against numpy, a singular block filled with NaN) and the assembly
-(``kernels.lower``: two IR modules LLVM accepts, the programs and entry points there)."""
+steps in the order a block needs them) and the assembly (``kernels.lower``: two IR
+modules LLVM accepts, the programs and entry points there). ``linalg``'s: test_linalg.py."""
 
 from __future__ import annotations
 
@@ -13,27 +12,15 @@ import llvmlite.binding as llvm
 import numpy as np
 import pytest
 import sympy as sp
-from helpers import MODELS
+from helpers import MODELS, jit
 
-from bgc.codegen import kernels, linalg, lowering, steps, workspace
+from bgc.codegen import kernels, lowering, steps, workspace
 from bgc.codegen.emit import programs
 from bgc.codegen.equations import LinearBlock
 from bgc.errors import BgcError
 from bgc.pipeline import build
 
 x, y = sp.symbols("x y", real=True)
-
-
-def _jit(ir: str):
-    """An execution engine holding ``ir`` (verified)."""
-    llvm.initialize_native_target()
-    llvm.initialize_native_asmprinter()
-    module = llvm.parse_assembly(ir)
-    module.verify()
-    machine = llvm.Target.from_default_triple().create_target_machine()
-    engine = llvm.create_mcjit_compiler(module, machine)
-    engine.finalize_object()
-    return engine
 
 
 class _Slots:
@@ -53,7 +40,7 @@ def _lowered(exprs, grads=()):
     for e, w in grads:
         fn.store("%out", k, fn.grad(e, [w])[w])
         k += 1
-    engine = _jit("\n".join(sorted(decls)) + "\n" + fn.text(linkage=""))
+    engine = jit("\n".join(sorted(decls)) + "\n" + fn.text(linkage=""))
     proto = ctypes.CFUNCTYPE(None, ctypes.c_double, *[ctypes.c_void_p] * 4)
     f = proto(engine.get_function_address("f"))
 
@@ -151,31 +138,6 @@ def test_program_steps_write_a_block_before_solving_it(loop_system):
     zero = [i for i, s in enumerate(before) if isinstance(s, steps.Zero)]
     assert zero and all(i < k for i in zero)
     assert out[-2] == steps.Out(0, x) and out[-1] == steps.Grad(x + y, [(1, x)])
-
-
-def test_dense_lu_template_solves_and_fills_nan_when_singular():
-    ir = "\n".join([linalg.MEMCPY, "declare double @llvm.fabs.f64(double)", linalg.lu_ir("t")])
-    assert "{{" not in ir and "@t_lu(" in ir
-    engine = _jit(ir)
-    proto = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, *[ctypes.c_void_p] * 3)
-    lu = proto(engine.get_function_address("t_lu"))
-    rng = np.random.default_rng(1)
-    a = rng.normal(size=(7, 7))
-    b = rng.normal(size=(7, 2))
-    xb, work = b.copy(), np.zeros(49)
-    lu(7, 2, a.ctypes.data, xb.ctypes.data, work.ctypes.data)
-    assert np.allclose(xb, np.linalg.solve(a, b), rtol=1e-10, atol=1e-12)
-    a[3] = 2 * a[1]                                   # singular
-    xb = b.copy()
-    lu(7, 2, a.ctypes.data, xb.ctypes.data, work.ctypes.data)
-    assert np.isnan(xb).all()
-
-
-def test_tape_template_renders_its_three_routines():
-    ir = linalg.tape_ir("q")
-    assert [ln.split("@")[1].split("(")[0] for ln in ir.splitlines()
-            if ln.startswith("define")] == ["q_tape", "q_scatter", "q_interp"]
-    _jit(ir)
 
 
 def test_assembly_gives_two_modules_llvm_accepts(loop_system):

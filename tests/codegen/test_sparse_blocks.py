@@ -7,10 +7,9 @@ from __future__ import annotations
 
 import ctypes
 
-import llvmlite.binding as llvm
 import numpy as np
 import pytest
-from helpers import MODELS
+from helpers import MODELS, jit
 
 from bgc.codegen import elimination, linalg, workspace
 from bgc.codegen.emit import import_module
@@ -35,14 +34,7 @@ def _saddle(rng, n_free: int = 6, n_mult: int = 30):
 
 def _splu():
     """The IR kernel, JIT-compiled alone: f(n, m, A, X, LU, *plan tables) -> bool."""
-    ir = "declare double @llvm.fabs.f64(double)\n" + linalg.splu_ir("t")
-    module = llvm.parse_assembly(ir)
-    module.verify()
-    llvm.initialize_native_target()
-    llvm.initialize_native_asmprinter()
-    machine = llvm.Target.from_default_triple().create_target_machine()
-    engine = llvm.create_mcjit_compiler(module, machine)
-    engine.finalize_object()
+    engine = jit("declare double @llvm.fabs.f64(double)\n" + linalg.splu_ir("t"))
     proto = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_int64, ctypes.c_int64,
                              *[ctypes.c_void_p] * 9)
     fn = proto(engine.get_function_address("t_splu"))

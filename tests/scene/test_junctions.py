@@ -8,89 +8,21 @@ and nothing is cut; bad ``activity.junctions`` values get one located line."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from click.testing import CliRunner
+from helpers import ROOT
 
 from bgc.cli import main
 from bgc.scene.scenes import check_scene, ensure_scene_module, load_scene
 
-# a 100 kg mass on its suspension (K, C) driven by a force; a 10 g mass hangs on it by
-# a spring and damper: the light mass's force on the heavy one is a few 1e-5 of the
-# heavy one's forces, its motion follows the heavy one's
-PAIR = """\
-name: pair
-parameters:
-  M: {value: 100.0, unit: kg}
-  m: {value: 0.01, unit: kg}
-  k: {value: 400.0, unit: N/m}
-  c: {value: 0.2, unit: N s/m}
-  K: {value: 4.0e4, unit: N/m}
-  C: {value: 400.0, unit: N s/m}
-  F0: {value: 100.0, unit: N}
-signals:
-  force: {type: sine, amplitude: F0, frequency: 2.0}
-elements:
-  drive: {type: Se, effort: force}
-  heavy: {type: I, I: M}
-  suspension: {type: C, C: 1/K}
-  suspension_damper: {type: R, R: C}
-  v_heavy: {type: "1"}
-  link: {type: C, C: 1/k}
-  link_damper: {type: R, R: c}
-  force_link: {type: "0"}
-  stretch: {type: "1"}
-  light: {type: I, I: m}
-  v_light: {type: "1"}
-bonds:
-  - [drive, v_heavy]
-  - [v_heavy, heavy]
-  - [v_heavy, suspension]
-  - [v_heavy, suspension_damper]
-  - {from: v_heavy, to: force_link, name: coupling}
-  - [force_link, stretch]
-  - [stretch, link]
-  - [stretch, link_damper]
-  - [force_link, v_light]
-  - [v_light, light]
-outputs:
-  x_heavy: {expr: suspension.q, unit: m}
-  light_speed: {expr: light.f, unit: m/s}
-simulation: {t_end: 2.0}
-"""
-
-# a sine source through R1 onto a node with C1; a second stage, R2 (100 kOhm) and C2,
-# draws 1e-4 of the node's current: a light load
-STAGES = """\
-name: stages
-parameters:
-  R1: {value: 10.0, unit: Ohm}
-  C1: {value: 1.0e-4, unit: F}
-  R2: {value: 1.0e5, unit: Ohm}
-  C2: {value: 1.0e-6, unit: F}
-signals:
-  supply: {type: sine, amplitude: 10.0, frequency: 50.0}
-elements:
-  source: {type: Se, effort: supply}
-  r1: {type: R, R: R1}
-  loop1: {type: "1"}
-  c1: {type: C, C: C1}
-  node: {type: "0"}
-  r2: {type: R, R: R2}
-  c2: {type: C, C: C2}
-  loop2: {type: "1"}
-bonds:
-  - [source, loop1]
-  - [loop1, r1]
-  - [loop1, node]
-  - [node, c1]
-  - {from: node, to: loop2, name: load}
-  - [loop2, r2]
-  - [loop2, c2]
-outputs:
-  v_node: {expr: c1.e, unit: V}
-  v_out: {expr: c2.e, unit: V}
-simulation: {t_end: 0.1}
-"""
+# docs/energy.md's worked examples: a heavy mass driving a light one (the light one's
+# force on the heavy one a few 1e-5 of the heavy one's forces), and two RC stages whose
+# second draws 1e-4 of the node's current
+PAIR = (ROOT / "docs" / "energy" / "pair.yaml").read_text()
+STAGES = (ROOT / "docs" / "energy" / "stages.yaml").read_text()
+NAME = re.compile(r"^name: (\w+)$", re.M)
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +33,7 @@ def gen(tmp_path_factory):
 
 
 def scene(tmp_path, model, outputs, junctions="0.99", extra="", t_end="2.0"):
-    name = model.split(":", 1)[1].split("\n", 1)[0].strip()
+    name = NAME.search(model).group(1)
     (tmp_path / f"{name}.yaml").write_text(model)
     path = tmp_path / f"{name}_scene.yaml"
     path.write_text(f"name: {name}_{'_'.join(outputs)}\nmodel: {name}.yaml\n"

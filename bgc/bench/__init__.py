@@ -391,8 +391,8 @@ class Run:
             "states, steps, run time against the exact passes' module, the error against "
             "the full model's run (the pass's report) and the difference from the exact "
             "passes' run. A cut never goes into a joint's constraint: not a junction sum "
-            "a constraint reads, not (lagrange, zcp) a force that carries a constraint "
-            "force.\n")
+            "a constraint reads, not (lagrange, zcp, augmented) a force that carries a "
+            "constraint force.\n")
         self.table(rows, ["scene", "method", "junctions", "states_exact_passes",
                           "junction_cuts", "junction_cuts_roundoff", "junction_parts",
                           "driven_states_removed", "states_junctions", "steps_junctions",

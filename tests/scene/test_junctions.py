@@ -118,3 +118,25 @@ def test_bad_junctions_is_one_located_line(tmp_path, activity, key, words):
     assert res.exit_code == 2, res.output
     line = res.output.strip()
     assert "\n" not in line and ":6:" in line and key in line and words in line, line
+
+
+@pytest.mark.slow      # the SARIB's junctions variant, its reduced module and two 28 s chirps
+def test_the_sarib_pumping_chirp_under_zcp_does_not_split(tmp_path):
+    """Every coupling between the SARIB's bodies passes through joints with blocked
+    directions: under zcp the bodies' balances carry the joints' constraint forces and
+    the points' velocities are read by the constraints, so nothing there is cut; what
+    is cut carries no power in this run (the bars' and beaters' gyroscopic torques about
+    their own axes, the fuselage's rotation in the hinges' rates: zero by the rig's
+    symmetry under pumping), no part splits off, and the outputs stay within the
+    integration's error of the full model's run."""
+    path = tmp_path / "pumping_junctions.yaml"
+    path.write_text((ROOT / "scenes" / "pumping_chirp_activity.yaml").read_text()
+                    .replace("../models/sarib.yaml", str(ROOT / "models" / "sarib.yaml"))
+                    .replace("activity: {keep: 0.99999}", "activity: {junctions: 0.99}"))
+    _, passes = ensure_scene_module(load_scene(path), tmp_path / "gen")
+    jn = junctions(passes)
+    assert jn["cuts"] and all(c["share"] < 1e-9 for c in jn["cuts"])
+    assert jn["parts"] == [] and jn["states_before"] == jn["states_after"]
+    assert "it carries an ideal joint's constraint force" in jn["note"]
+    assert "a joint's constraint reads the junction's flow" in jn["note"]
+    assert max(jn["output_error"].values()) < 1e-4

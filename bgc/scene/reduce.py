@@ -511,35 +511,16 @@ def _coupling(system: EquationSystem) -> dict:
         mask = 0
         for s in syms:
             mask |= dep.get(s, 0)
-        for v in ([item[0]] if not isinstance(item, LinearBlock)
-                  else list(item.unknowns) + [v for v, _ in item.pre]):
+        for v in _defines(item):
             dep[v] = dep.get(v, 0) | mask
     return dep
-
-
-def _needed(system: EquationSystem, dep: dict, outputs) -> int:
-    """The states (a bit mask) that ``outputs`` and the constraints read, closed under
-    what their rates read: what ``prune`` keeps."""
-    seeds = [e for n, e in system.outputs if outputs is None or n in set(outputs)]
-    seeds += [e for _, g, r in system.constraints for e in (r, g) if e is not None]
-    need = 0
-    for e in seeds:
-        for s in e.free_symbols:
-            need |= dep.get(s, 0)
-    while True:
-        more = need
-        for i, st in enumerate(system.states):
-            if need >> i & 1:
-                more |= dep.get(st.dsym, 0)
-        if more == need:
-            return need
-        need = more
 
 
 def _parts(before: EquationSystem, after: EquationSystem, outputs) -> list[dict]:
     """Where the cuts split a coupled part of the model (states that read each other
     before) into parts that no longer do: each part's states, the parts it reads (it is
-    driven by them; none: a driving part) and whether the scene's outputs need it."""
+    driven by them; none: a driving part) and whether the scene's outputs need it (what
+    ``prune`` would keep of it)."""
     from bgc.symbolic.algorithms import strongly_connected
     names = [st.name for st in after.states]
 
@@ -548,10 +529,11 @@ def _parts(before: EquationSystem, after: EquationSystem, outputs) -> list[dict]
         n = len(system.states)
         reads = {i: [j for j in range(n) if dep.get(system.states[i].dsym, 0) >> j & 1]
                  for i in range(n)}
-        return strongly_connected(range(n), reads), reads, dep
-    old, _, _ = sccs(before)
-    new, reads, dep = sccs(after)
-    need = _needed(after, dep, outputs)
+        return strongly_connected(range(n), reads), reads
+    old, _ = sccs(before)
+    new, reads = sccs(after)
+    kept = {st.name for st in (after.states if outputs is None
+                               else prune(after, outputs)[0].states)}
     index = {st.name: i for i, st in enumerate(after.states)}
     piece = {i: k for k, comp in enumerate(new) for i in comp}
     out = []
@@ -568,7 +550,7 @@ def _parts(before: EquationSystem, after: EquationSystem, outputs) -> list[dict]
             driven_by = sorted({number[piece[j]] for i in states for j in reads[i]
                                 if piece[j] != k and piece[j] in number})
             out.append({"states": [names[i] for i in states], "driven_by": driven_by,
-                        "needed": any(need >> i & 1 for i in states)})
+                        "needed": any(names[i] in kept for i in states)})
     return out
 
 

@@ -19,9 +19,10 @@ CSV + PNG per part and ``summary.md`` to its output directory (``bench/results``
   compile and run time, output difference (``scenes.py``);
 - ``components``: an assembly's cold time from its model file to the first result, the
   A02 N-four-bar at N = 10, 40, 160 (``components.py``);
-- ``activity``: the scenes' activity pass (model order reduction by element activity)
-  on the SARIB's pumping, roll and pitch chirps under parasitic and zcp, beside the
-  exact passes: states, elements removed, run time, output error (``activity.py``);
+- ``activity``: the scenes' activity passes (model order reduction by element activity,
+  and junction inactivity) on the SARIB's pumping, roll and pitch chirps under parasitic
+  and zcp, beside the exact passes: states, elements removed, junction terms cut and
+  parts split off, run time, output error (``activity.py``);
 - ``iftomm``: the IFToMM basic benchmark problems (A01 pendulum, A02 N-four-bar at N = 2,
   10, 40, A03 Andrews, A04 Bricard, A05 flyball governor) under every method against their
   exact or published references, work-precision per problem (``iftomm.py``).
@@ -356,9 +357,9 @@ class Run:
         self.log(f"activity: {len(files)} scenes x {len(methods)} methods")
         rows = activity.measure([load_scene(f) for f in files], methods, self.bench.build,
                                 self.log, keep=0.999 if self.quick else activity.KEEP,
-                                repeats=self.repeats)
+                                repeats=self.repeats, junctions=activity.JUNCTIONS)
         write_rows(self.out / "activity.csv", rows)
-        self.summary.append("## Scenes: what the activity pass gains\n")
+        self.summary.append("## Scenes: what the activity passes gain\n")
         self.summary.append(
             "The activity pass (`activity: {keep: K}` in a scene: the least active "
             "elements over the scene's run, whose shares of the total activity "
@@ -378,6 +379,27 @@ class Run:
                           "run_activity_s", "run_gain", "activity_error",
                           "difference_from_exact"], {"run_gain": lambda v: f"{v:.3g}x",
                                                      "keep": lambda v: f"{v:g}"})
+        self.summary.append(
+            "The junctions pass (`activity: {junctions: J}`: at each 0- or 1-junction, "
+            "each component of a body's, the least active bonds that bring the summed "
+            "effort or flow in, whose shares of the junction's activity sum to at most "
+            "1 - J, are cut there, the other side fed the junction's flow or effort as a "
+            "modulated source; Rideout, Stein and Louca 2007) on the same scenes, "
+            "instead of the element pass, after the exact ones: the terms cut (of them "
+            "below 1e-9 of their junction's activity: no power in the run), the coupled "
+            "parts the model split into and the driven states no output needs (removed), "
+            "states, steps, run time against the exact passes' module, the error against "
+            "the full model's run (the pass's report) and the difference from the exact "
+            "passes' run. A cut never goes into a joint's constraint: not a junction sum "
+            "a constraint reads, not (lagrange, zcp, augmented) a force that carries a "
+            "constraint force.\n")
+        self.table(rows, ["scene", "method", "junctions", "states_exact_passes",
+                          "junction_cuts", "junction_cuts_roundoff", "junction_parts",
+                          "driven_states_removed", "states_junctions", "steps_junctions",
+                          "run_exact_s", "run_junctions_s", "junctions_gain",
+                          "junctions_error", "junctions_difference_from_exact"],
+                   {"junctions_gain": lambda v: f"{v:.3g}x",
+                    "junctions": lambda v: f"{v:g}"})
         self.data["activity"] = rows
 
     def iftomm(self):

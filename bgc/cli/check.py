@@ -80,6 +80,9 @@ def _show_stage(stage: str, model: str, method: str, open_loops: bool, out_dir: 
         click.echo(line)
 
 
+SHOWN = 20      # the junctions pass's cuts listed one a line (all of them in --json)
+
+
 def _check_scene(bscene, path, as_json: bool, out_dir: str = "generated") -> None:
     """A scene's reduction passes, each with the states and assignments before and after
     (a scene with ``activity`` runs its model's energy variant, in OUT_DIR/scenes)."""
@@ -95,6 +98,11 @@ def _check_scene(bscene, path, as_json: bool, out_dir: str = "generated") -> Non
         click.echo(f"  {r['pass']:16s} states {r['states_before']:4d} -> "
                    f"{r['states_after']:4d}, assignments {r['assignments_before']} -> "
                    f"{r['assignments_after']}: {r['note']}")
+        if r["pass"] == "junctions":        # each cut: bond, junction, source, share
+            for line in r["removed"][:SHOWN]:
+                click.echo(f"    cut {line}")
+            if len(r["removed"]) > SHOWN:
+                click.echo(f"    ... {len(r['removed']) - SHOWN} more (--json: every cut)")
 
 
 def _report(c, model: str, method: str) -> tuple[dict, list[str]]:

@@ -79,6 +79,9 @@ class Builder:
         self.algebraic: list = []       # states of a DAE whose row of M is zero
         self.projection: dict = {}      # state -> its correction after a step
         self._columns: dict = {}        # (bond, effort | flow) -> its column of symbols
+        # (junction, bond, component or None): the terms a junction's sum leaves out
+        # (a scene's junction-activity pass, ``scene.reduce.junctions``)
+        self.cut: frozenset = frozenset()
 
     # --- helpers --------------------------------------------------------------------
     def define(self, var, expr, element: str, bond: int | None = None):

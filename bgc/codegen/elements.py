@@ -167,9 +167,21 @@ def _junction(bld: Builder, name, effort_common):
     for b in bonds:
         if b != strong:
             bld.define(common(b), common(strong), name, b)
-    rest = [sign[b] * summed(b) for b in bonds if b != strong]
+    rest = [_kept(bld, name, b, sign[b] * summed(b)) for b in bonds if b != strong]
     total = sum(rest[1:], rest[0]) if rest else 0 * summed(strong)
     bld.define(summed(strong), -sign[strong] * total, name, strong)
+
+
+def _kept(bld: Builder, name: str, b: int, term):
+    """A bond's term in a junction's sum, less what a scene's junction-activity pass cut
+    (``Builder.cut``: the junction no longer feels that effort or flow, while the bond
+    still carries the junction's common variable to the other side, a modulated
+    source there; ``scene.reduce.junctions``): zero, or zero in the components cut."""
+    if not bld.cut:
+        return term
+    if isinstance(term, sp.MatrixBase):
+        return sp.Matrix([0 if (name, b, k) in bld.cut else t for k, t in enumerate(term)])
+    return sp.S.Zero if (name, b, None) in bld.cut else term
 
 
 def _TF(bld: Builder, name, el):

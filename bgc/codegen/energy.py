@@ -23,6 +23,14 @@ conservation (Tellegen's theorem makes the sum of the powers zero at every insta
 The energy states exist only in the energy variant (``<name>_<method>_energy.py``): the
 ordinary module is not slowed by them. ``ENERGY`` in the module lists the entries (name,
 kind, column, body, joint) that ``bgc.analysis.energy`` reads after the run.
+
+The junctions' variant (``<name>_<method>_junctions.py``, what a scene's ``activity:
+{junctions: J}`` measures) adds the activity of every bond at a 0- or 1-junction, per
+component of a multibond (a body's 3-dimensional junctions are three scalar ones), as
+``activity[BOND]`` or ``activity[BOND.x]`` (``junction_terms``): the terms of each
+junction's balance whose shares Rideout, Stein and Louca's junction inactivity compares.
+A bond to a one-port element that supplies, stores or dissipates carries that element's
+power, whose activity ``activity[NAME]`` is already there.
 """
 
 from __future__ import annotations
@@ -31,7 +39,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from bgc.graph.expand import joint_param, position
+from bgc.graph.expand import AXES, joint_param, position
 from bgc.model import symbols
 
 # an element's kind -> the column of the balance its work goes in
@@ -150,9 +158,69 @@ def stored_function(b, e: Entry) -> sp.Expr | None:
     return sp.integrate(value, (u, 0, x))
 
 
-def account(b, system, aliases: dict) -> None:
+@dataclass(frozen=True)
+class Term:
+    """One bond's term (one component's, on a multibond) in a 0- or 1-junction's balance:
+    the junction, the bond's index, its component (None on a scalar bond) and the state
+    that integrates its activity, int |e f| dt (``junction_terms``)."""
+    junction: str
+    bond: int
+    component: int | None
+    state: str
+
+
+def junction_terms(graph) -> list[Term]:
+    """Every bond's term at every 0- and 1-junction, in graph order: a scalar bond to an
+    element of ``entries`` (one port) by that element's activity, any other by its own
+    (``activity[BOND]``, a multibond's components ``activity[BOND.x]`` ...)."""
+    one_port = {e.element: e.name for e in entries(graph)
+                if len(graph.ports[e.element]) == 1}
+    out = []
+    for name, el in graph.elements.items():
+        if el.kind not in ("0", "1"):
+            continue
+        for b in graph.ports[name]:
+            bond, far = graph.bonds[b], graph.other(b, name)
+            if bond.dim == 1:
+                state = (f"activity[{one_port[far]}]" if far in one_port
+                         else f"activity[{bond.name}]")
+                out.append(Term(name, b, None, state))
+                continue
+            out += [Term(name, b, k, f"activity[{bond.name}.{AXES[k]}]")
+                    for k in range(bond.dim)]
+    return out
+
+
+def _bond_activities(b, system, aliases: dict) -> None:
+    """The junctions' variant: a quadrature state for every bond term of
+    ``junction_terms`` that no element's activity gives, its rate |e f|; none where that
+    is zero by construction (the term's activity is then zero: ``junction_activity``)."""
+    from bgc.codegen.builder import State
+    have = {st.name for st in system.states}
+    for term in junction_terms(b.g):
+        if term.state in have:
+            continue
+        have.add(term.state)
+        bond = b.g.bonds[term.bond]
+        E, F = b.E(term.bond), b.F(term.bond)
+        tag = bond.name
+        if term.component is not None:
+            E, F, tag = E[term.component], F[term.component], \
+                f"{bond.name}__{AXES[term.component]}"
+        P = (E * F).xreplace(aliases)
+        if P == 0:          # no power by construction (a zero effort or flow): no state
+            continue
+        x, dx = symbols.state(tag, "activity"), symbols.dstate(tag, "activity")
+        system.assignments.append((dx, sp.Abs(P)))
+        system.quadrature.append(len(system.states))
+        system.states.append(State(term.state, x, dx, sp.S.Zero, bond.src))
+        system.display[x] = term.state
+
+
+def account(b, system, aliases: dict, junctions: bool = False) -> None:
     """Add the quadrature states (energy and activity of every entry), the stored
-    energies' outputs and the ``energy`` table to an equation system built by ``b``."""
+    energies' outputs and the ``energy`` table to an equation system built by ``b``;
+    ``junctions``: also every junction bond's activity (``junction_terms``)."""
     from bgc.codegen.builder import State
     table = []
     for e in entries(b.g):
@@ -168,3 +236,6 @@ def account(b, system, aliases: dict) -> None:
             system.outputs.append((f"stored[{e.name}]", H.xreplace(aliases)))
         table.append((e.name, e.kind, COLUMN[e.kind], e.body, e.joint))
     system.energy = table
+    if junctions:
+        _bond_activities(b, system, aliases)
+        system.junctions = True

@@ -60,14 +60,17 @@ def build(b: Builder):
 
 
 def derive(cg: CausalGraph, max_symbolic_loop: int = MAX_SYMBOLIC_LOOP,
-           energy: bool = False) -> EquationSystem:
+           energy: bool = False, junctions: bool = False, cut=()) -> EquationSystem:
     """Build, sort and solve the causal equations of a causal graph. Loops with more
     than ``max_symbolic_loop`` tearing variables are solved numerically at run time.
     The method (what L became) was chosen by ``expand``; its hooks add its own
     equations and solve its own loops (``methods.base``). ``energy``: the energy
-    variant, every element's work and activity as quadrature states (``codegen.energy``)."""
+    variant, every element's work and activity as quadrature states (``codegen.energy``);
+    ``junctions``: that and every junction bond's activity. ``cut``: (junction, bond,
+    component or None) terms the junctions' sums leave out (a scene's junction-activity
+    pass, ``scene.reduce.junctions``)."""
     with gc_paused():
-        return _derive(cg, max_symbolic_loop, energy)
+        return _derive(cg, max_symbolic_loop, energy or junctions, junctions, cut)
 
 
 @contextmanager
@@ -85,8 +88,10 @@ def gc_paused():
             gc.enable()
 
 
-def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False) -> EquationSystem:
+def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False,
+            junctions: bool = False, cut=()) -> EquationSystem:
     b = Builder(cg)
+    b.cut = frozenset(cut)
     method = methods.get(cg.graph.method)
     b.method_state = method.new_state(b)
     build(b)
@@ -123,7 +128,7 @@ def _derive(cg: CausalGraph, max_symbolic_loop: int, energy: bool = False) -> Eq
                             loops_closed=method.loops_closed(cg.graph), aliases=aliases)
     if energy:
         from bgc.codegen import energy as accounting
-        accounting.account(b, system, aliases)
+        accounting.account(b, system, aliases, junctions)
     for name in b.dependent:
         el = b.g.elements[name]
         if el.initial != 0:

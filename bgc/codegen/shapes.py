@@ -69,9 +69,12 @@ class RuleMemo:
         g, cg = self.bld.g, self.bld.cg
         ph: dict = {}
         ports = []
+        cut = self.bld.cut      # the terms a junction leaves out shape it too
         for b in g.ports[name]:
+            comps = [None] if g.bonds[b].dim == 1 else range(g.bonds[b].dim)
+            gone = tuple(k for k in comps if (name, b, k) in cut) if cut else ()
             ports.append((g.bonds[b].dim, g.points_into(b, name), cg.receives_effort(b, name),
-                          tuple(_place(s, ph) for s in self.symbols_of(b))))
+                          gone, tuple(_place(s, ph) for s in self.symbols_of(b))))
         fields = tuple((k, _shape(el.fields[k], ph)) for k in sorted(el.fields))
         return (el.kind, el.law, el.orthogonal, tuple(ports), fields), ph
 

@@ -57,6 +57,8 @@ class EquationSystem:
     # the energy variant (``codegen.energy``): (name, kind, column, body, joint) per
     # element whose energy and activity are quadrature states; None: the ordinary module
     energy: list | None = None
+    # the junctions' variant: every junction bond's activity too (``codegen.energy``)
+    junctions: bool = False
     # the states no equation reads (the energy variant's quadratures): left out where the
     # run-time side solves for the rates (static loads)
     quadrature: list[int] = field(default_factory=list)
@@ -71,10 +73,12 @@ class EquationSystem:
     def variant(self) -> str:
         """What the generated module is named and hashed by: the method, for zcp whether
         its loops were kept closed (``zcp_closed``), the scene it was reduced for, and the
-        energy variant."""
+        energy variant (``_energy``, or ``_junctions`` with the junction bonds' activities)."""
         v = methods.variant(self.method, not self.loops_closed)
         v = f"{v}_{self.scene}" if self.scene else v
-        return f"{v}_energy" if self.energy is not None else v
+        if self.energy is None:
+            return v
+        return f"{v}_junctions" if self.junctions else f"{v}_energy"
 
     @property
     def tables(self) -> list[Table]:

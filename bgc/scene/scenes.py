@@ -62,6 +62,9 @@ class Scene:
     # activity: {keep: K}: the activity pass keeps the elements that carry K of the
     # activity over the scene's run (``reduce.activity``); None: no such pass
     activity_keep: float | None = None
+    # activity: {junctions: J}: each junction keeps the bond terms that carry J of its
+    # activity, the others are cut (``reduce.junctions``); None: no such pass
+    activity_junctions: float | None = None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -113,36 +116,51 @@ def load_scene(path: str | Path) -> Scene:
         fail(f"merge_relays is true or false, got {merge!r}", _at(doc, "merge_relays"),
              "merge_relays", "true: merge also under parasitic (changes the joints' "
              "parasitic compliance); false: never; absent: where exact")
-    keep = _activity(doc)
+    keep, junctions = _activity(doc)
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name.isidentifier():
         fail(f"scene name {name!r} is not a valid module name", _at(doc, "name"), "name",
              "letters, digits and '_'")
     digest = hashlib.sha256(json.dumps(
         [model.digest, method, exc, outputs, params, expose, merge] +
-        ([keep, t_start, t_end, n_points, rtol, atol, solver] if keep is not None else []),
+        ([keep, t_start, t_end, n_points, rtol, atol, solver] if keep is not None else []) +
+        ([junctions, t_start, t_end, n_points, rtol, atol, solver]
+         if junctions is not None else []),
         sort_keys=True, default=str).encode()).hexdigest()[:16]
     return Scene(name, str(path), model_path, method, exc, list(outputs), t_start, t_end,
                  n_points, rtol, atol, solver, expose, params, digest, merge, name_locs,
-                 keep)
+                 keep, junctions)
 
 
-def _activity(doc: YMap) -> float | None:
-    """``activity: {keep: K}``, 0 < K <= 1: the share of the run's activity the
-    ``activity`` pass keeps; None without it."""
+_SHARES = {"keep": "remove the least active elements that carry 0.1 % of the model's "
+                   "activity",
+           "junctions": "at each junction, cut the bonds that carry 0.1 % of its activity"}
+
+
+def _activity(doc: YMap) -> tuple[float | None, float | None]:
+    """``activity: {keep: K, junctions: J}``, each 0 < share <= 1, at least one: the
+    share of the run's activity the element pass keeps, and of each junction's the
+    junctions pass keeps; None for a pass not asked for."""
     if doc.get("activity") is None:
-        return None
+        return None, None
     a = mapping(doc["activity"], _at(doc, "activity"), "activity")
-    check_keys(a, ("keep",), "activity")
-    if "keep" not in a:
-        fail("missing key 'keep'", a.loc, "activity.keep",
-             "the share of the run's activity to keep, e.g. {keep: 0.999}")
-    keep = number(a["keep"], _at(a, "keep"), "activity.keep", positive=True)
-    if keep > 1:
-        fail(f"activity.keep is a share of the activity, 0 < keep <= 1, got {keep:g}",
-             _at(a, "keep"), "activity.keep", "e.g. 0.999: remove the least active "
-             "elements that carry 0.1 % of it")
-    return keep
+    check_keys(a, tuple(_SHARES), "activity")
+    if not any(k in a for k in _SHARES):
+        fail("activity needs 'keep' or 'junctions'", a.loc, "activity",
+             "keep: the share of the run's activity the elements keep, e.g. {keep: "
+             "0.999}; junctions: the share of each junction's the bonds keep, e.g. "
+             "{junctions: 0.99}")
+    out = []
+    for key, example in _SHARES.items():
+        if key not in a:
+            out.append(None)
+            continue
+        v = number(a[key], _at(a, key), f"activity.{key}", positive=True)
+        if v > 1:
+            fail(f"activity.{key} is a share of the activity, 0 < {key} <= 1, got {v:g}",
+                 _at(a, key), f"activity.{key}", f"e.g. 0.999: {example}")
+        out.append(v)
+    return out[0], out[1]
 
 
 def _check_parameters(model, method: str, expose, params, locs) -> None:
@@ -292,15 +310,19 @@ def reduced_system(scene: Scene, gen_dir: str | Path = "generated/scenes"):
                "(merge_relays: true accepts the change)")
         removed, note = [], f"would merge {note}; left: {why}"
     first = reduce.report("merge_relays", c.system, merged_c.system, removed, note)
-    activity_of = None
-    if scene.activity_keep is not None:
-        shares, reference = activity_shares(scene, merged_c.model, gen_dir)
-        activity_of = (merged_c.causal, shares, scene.activity_keep)
+    activity_of = junctions_of = None
+    if scene.activity_keep is not None or scene.activity_junctions is not None:
+        shares, terms, reference = activity_shares(scene, merged_c.model, gen_dir)
+        if scene.activity_keep is not None:
+            activity_of = (merged_c.causal, shares, scene.activity_keep)
+        if scene.activity_junctions is not None:
+            junctions_of = (merged_c.causal, terms, scene.activity_junctions)
     system, reports = reduce.reduce(merged_c.system, scene.outputs,
                                     scene_values(scene, merged_c.model), scene.expose,
-                                    activity_of)
-    if activity_of is not None:
-        next(r for r in reports if r.name == "activity").reference = reference
+                                    activity_of, junctions_of)
+    for r in reports:
+        if r.name in ("activity", "junctions"):
+            r.reference = reference
     model = replace(merged_c.model, digest=scene.digest)
     return c, replace(system, model=model, scene=scene.name), [first] + reports
 
@@ -319,25 +341,36 @@ def _values(module, scene: Scene, model) -> "np.ndarray":
 def activity_shares(scene: Scene, model, gen_dir: str | Path = "generated/scenes"):
     """Each element's share of the activity over the scene's run, from the energy
     variant (``bgc energy``) of ``model`` (the scene's, its relays merged if they were)
-    run on the scene's settings, and that run's outputs (the reference the reduced
-    module's error is measured against). The variant is kept in ``gen_dir``/energy."""
+    run on the scene's settings; each junction term's activity (``activity[...]``, the
+    states of the junctions' variant, ``codegen.energy.junction_terms``; empty unless
+    the scene asks for the junctions pass, which then runs that variant instead); and
+    that run's outputs (the reference the reduced module's error is measured against).
+    The variant is kept in ``gen_dir``/energy."""
     from bgc import progress
     from bgc.analysis import energy
     from bgc.pipeline import compile_model
     from bgc.simulate import simulate
-    kind = f"{methods.variant(scene.method)}_energy"
+    junctions = scene.activity_junctions is not None
+    kind = f"{methods.variant(scene.method)}_{'junctions' if junctions else 'energy'}"
     where = Path(gen_dir) / "energy"
     path = emit.module_path(model.name, where, kind)
     if emit.is_stale(path, model.digest, kind):
-        compile_model(model, where, scene.method, energy=True)
+        compile_model(model, where, scene.method, **{"junctions" if junctions else
+                                                      "energy": True})
     module = emit.import_module(path)
     with progress.stage("activity") as st:
         res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
                        atol=scene.atol, solver=scene.solver, points=scene.points,
                        params=_values(module, scene, model))
         bal = energy.account(module, res)
-        st.done(f"{len(bal.elements)} elements' activity over the scene's run")
-    return {ln.name: ln.share for ln in bal.elements}, res
+        terms = {}
+        if junctions:
+            names = list(res.state_names)
+            terms = {n: float(res.x[-1, k] - res.x[0, k]) for k, n in enumerate(names)
+                     if n.startswith("activity[")}
+        st.done(f"{len(bal.elements)} elements' activity over the scene's run" +
+                (f", {len(terms)} junction terms'" if junctions else ""))
+    return {ln.name: ln.share for ln in bal.elements}, terms, res
 
 
 def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
@@ -351,29 +384,44 @@ def ensure_scene_module(scene: Scene, out_dir: str | Path = "generated/scenes"):
             not passes.exists():
         _, system, reports = reduced_system(scene, out_dir)
         path = emit.write(system, out_dir)
-        for r in reports:
+        measured = None
+        for r in reports:       # the reduced module against the full model's run, once
             if getattr(r, "reference", None) is not None:
-                r.error = activity_error(scene, emit.import_module(path), r.reference)
+                measured = measured or activity_error(scene, emit.import_module(path),
+                                                      r.reference)
+                r.error, failed = measured
+                if failed:
+                    r.note += f"; the reduced module's run failed: {failed}"
         atomic_write(passes, json.dumps([r.to_dict() for r in reports], indent=2))
     return emit.import_module(path), json.loads(passes.read_text())
 
 
-def activity_error(scene: Scene, module, reference) -> dict[str, float]:
+def activity_error(scene: Scene, module, reference) -> tuple[dict[str, float], str]:
     """The reduced module's outputs against the full model's over the scene's run: the
-    largest difference relative to each output's peak."""
+    largest difference relative to each output's peak; and '' or, where the reduced
+    module's run failed, why (the difference is then over the run up to there)."""
     import numpy as np
 
+    from bgc.errors import SimulationError
     from bgc.simulate import simulate
     model = load.load(scene.model)
-    res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
-                   atol=scene.atol, solver=scene.solver, points=scene.points,
-                   params=_values(module, scene, model))
+    failed = ""
+    try:
+        res = simulate(module, t_start=scene.t_start, t_end=scene.t_end, rtol=scene.rtol,
+                       atol=scene.atol, solver=scene.solver, points=scene.points,
+                       params=_values(module, scene, model))
+    except SimulationError as exc:
+        if exc.result is None:
+            raise
+        res, failed = exc.result, str(exc)
     out = {}
+    n = len(res.t)
     for name in scene.outputs:
-        ref = reference.column(name)
-        peak = float(np.abs(ref).max())
-        out[name] = float(np.abs(res.column(name) - ref).max() / peak) if peak > 0 else 0.0
-    return out
+        ref = reference.column(name)[:n]
+        peak = float(np.abs(reference.column(name)).max())
+        out[name] = (float(np.abs(res.column(name)[:n] - ref).max() / peak)
+                     if peak > 0 and n else 0.0)
+    return out, failed
 
 
 def is_scene(path: str | Path) -> bool:

@@ -125,13 +125,18 @@ def test_scenes_part_measures_each_reduction_against_its_full_model(gen_dir, tmp
 def test_activity_part_sets_the_pass_beside_the_exact_ones(gen_dir, tmp_path):
     """msd_forced at keep 0.999: every element carries more than 1e-3 of the activity
     or cannot go (the mass, the source): nothing removed, the same steps, the error the
-    pass reports is the integration's."""
+    pass reports is the integration's. Its one junction holds elements only: the
+    junctions pass (0.99) has nothing to cut."""
     _bench(gen_dir, tmp_path, "activity")
     (row,) = _rows(tmp_path / "activity.csv")
     assert int(row["states_exact_passes"]) == int(row["states_activity"]) == 2
     assert row["elements_removed"] == "0" and row["steps_exact"] == row["steps_activity"]
     assert float(row["activity_error"]) < 1e-6
-    assert "## Scenes: what the activity pass gains" in (tmp_path / "summary.md").read_text()
+    assert (row["junctions"], row["junction_cuts"], row["junction_parts"]) == ("0.99", "0", "0")
+    assert int(row["states_junctions"]) == 2 and float(row["junctions_error"]) < 1e-6
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## Scenes: what the activity passes gain" in summary
+    assert "| junction_cuts |" in summary
 
 
 @pytest.mark.slow       # ~10 s: make bench runs it in full

@@ -130,3 +130,14 @@ def test_no_function_over_120_lines_outside_codegen():
                 if lines > LONGEST:
                     long.append(f"{name}.{node.name}: {lines} lines")
     assert long == []
+
+
+LONGEST_MODULE = 800     # lines of a module under bgc/ (issue 41, item 2)
+
+
+def test_no_module_over_800_lines():
+    """A long module is several parts under one name (radau5's Newton matrices are
+    radau5_lu; kernels' lowering, linear algebra and assembly are modules of their own)."""
+    long = {name: n for name, path in MODULES.items()
+            if (n := len(path.read_text().splitlines())) > LONGEST_MODULE}
+    assert long == {}

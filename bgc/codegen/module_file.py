@@ -33,8 +33,8 @@ _HASH_RE = re.compile(r'^MODEL_HASH = "([0-9a-f]+)"$', re.M)
 # (solvers/consistent.py: the constrained runs' numerics, whose names the methods declare
 # with, RANK_PARAM among them: read by a compile, so digested)
 CODEGEN_SOURCES = ("model", "mechanics", "graph", "methods", "codegen", "symbolic",
-                   "pipeline.py", "scene/reduce.py", "solvers/__init__.py",
-                   "solvers/consistent.py")
+                   "pipeline.py", "scene/reduce.py", "scene/merge_relays.py",
+                   "solvers/__init__.py", "solvers/consistent.py")
 
 
 def codegen_files(root: Path | None = None) -> list[Path]:

@@ -1,4 +1,4 @@
-"""The model's excitation as FMU inputs: a Model pass (as ``scene.reduce.merge_relays``
+"""The model's excitation as FMU inputs: a Model pass (as ``scene.merge_relays``
 is one) that adds to each excitation direction's actuator a parameter of its own,
 ``excitation__<direction>_input``, the force (N) or moment (N m) a tool applies along that
 direction on top of the model's own g(t). The FMU lists these as inputs; at 0 the model

@@ -34,8 +34,9 @@ EXTERNALS = frozenset({
     "NRT_MemInfo_alloc_aligned", "NRT_MemInfo_call_dtor", "numba_xxgetrf", "numba_nextafter",
     "sqrt", "pow", "fabs", "memcpy", "memset", "memmove", "exp", "log", "sin", "cos"})
 # the sources the object is compiled from (with numba's and llvmlite's versions: its key)
-_SOURCES = ("solvers/radau5.py", "solvers/native.py", "solvers/rank.py",
-            "solvers/sparse_lu.py", "codegen/elimination.py", "export/radau.py")
+_SOURCES = ("solvers/radau5.py", "solvers/radau5_lu.py", "solvers/native.py",
+            "solvers/rank.py", "solvers/sparse_lu.py", "codegen/elimination.py",
+            "export/radau.py")
 
 
 def _step_function():

@@ -33,6 +33,7 @@ from bgc.model.document import YMap
 from bgc.model.values import check_keys, fail, mapping, number, points, string, strings
 from bgc.pipeline import build
 from bgc.scene import reduce
+from bgc.scene.merge_relays import merge_relays
 
 KEYS = ("name", "description", "model", "method", "excitation", "outputs", "time",
         "tolerances", "solver", "expose", "params", "merge_relays", "activity")
@@ -297,7 +298,7 @@ def reduced_system(scene: Scene, gen_dir: str | Path = "generated/scenes"):
                              loc=scene.name_locs.get(name, Loc(scene.file, 1)),
                              hint="its parameters under this method: " + ", ".join(
                                  n for n in sorted(known) if "__" not in n))
-    merged, removed, note = reduce.merge_relays(
+    merged, removed, note = merge_relays(
         c.model, scene.outputs, list(scene.expose) + list(scene.params))
     merged_c = c
     wanted = methods.get(scene.method).ideal if scene.merge_relays is None \

@@ -216,7 +216,7 @@ def test_relay_chain_becomes_the_prismatic_universal_it_is():
     exposed parameters that read the chain, or axes that do not meet, leave it alone."""
     from dataclasses import replace
 
-    from bgc.scene.reduce import merge_relays
+    from bgc.scene.merge_relays import merge_relays
     m = load.loads(RELAY_CHAIN.format(joints=FORWARD), "chain.yaml")
     out, removed, note = merge_relays(m)
     assert removed == ["s1", "s2", "slide", "r1", "r2"] and "-> relay_chain" not in note
@@ -265,7 +265,7 @@ def test_merged_relay_chain_moves_as_the_chain(tmp_path, joints):
 
     from bgc.codegen.emit import import_module
     from bgc.pipeline import compile_model
-    from bgc.scene.reduce import merge_relays
+    from bgc.scene.merge_relays import merge_relays
     m = load.loads(RELAY_CHAIN.format(joints=joints), "chain.yaml")
     merged, removed, _ = merge_relays(m)
     assert len(removed) == 5

@@ -7,7 +7,8 @@ Fixed routines, the same for every model but for the module's prefix ``P``:
 - built by ``Asm``, a small IR builder with counted loops, where the routine's loops nest
   over tables (``splu_ir``: sparse LU on an ``elimination.Plan``; ``lstsq_ir``: least
   squares through LAPACK's SVD for a block whose rank is below its size; ``assemble_ir``
-  and ``packed_ir``: a constraint block's ``A = -K B`` from its non-zeros).
+  and ``packed_ir``: a constraint block's ``A = -K B`` from its non-zeros; ``ldl_ir``:
+  L D L^T of a symmetric one, packed).
 
 And per linear block (``LinearBlocks``, what the module assembly ``kernels.Module`` does
 for each ``workspace.Block``): its function ``@<P>_block<index>``, which forms A where
@@ -264,27 +265,24 @@ def negate_ir(P: str) -> str:
 
 
 def packed_ir(P: str) -> str:
-    """What packed blocks share: ``@<P>_assemble_packed(A, K, F, ne, kq, bptr, bidx,
-    tgt)``, A[tgt[t]] -= K[e] F[bidx[r]] over K's entries e and B's row kq[e] (t counts
-    the products); ``@<P>_raise(A, R, k, diag)``, A[diag[e]] += R[e]; ``@<P>_nanfill(X, n,
-    m)``."""
+    """What packed blocks share: ``@<P>_assemble_packed(A, K, F, ne, kptr, kb, tgt)``,
+    A[tgt[t]] -= K[e] F[kb[t]] over K's entries e and their products t in
+    ``kptr[e]:kptr[e+1]`` (those onto the lower triangle); ``@<P>_raise(A, R, k,
+    diag)``, A[diag[e]] += R[e]; ``@<P>_nanfill(X, n, m)``; and the factorization
+    (``ldl_ir``)."""
     a = Asm(f"define internal void @{P}_assemble_packed(double* noalias %A, double* "
-            f"noalias %K, double* noalias %F, i64 %ne, i64* %kq, i64* %bptr, i64* %bidx, "
-            f"i64* %tgt) nounwind {{", ["e", "r", "t"])
-    a("store i64 0, i64* %t")
+            f"noalias %K, double* noalias %F, i64 %ne, i64* %kptr, i64* %kb, "
+            f"i64* %tgt) nounwind {{", ["e", "t"])
 
     def entry(e):
         c = a.load("%K", e)
-        q = table_entry(a, "%kq", e)
 
-        def product(r):
-            t = a.op("load i64, i64* %t")
+        def product(t):
             at = table_entry(a, "%tgt", t)
-            f = a.load("%F", table_entry(a, "%bidx", r))
+            f = a.load("%F", table_entry(a, "%kb", t))
             a.store(a.op(f"fsub double {a.load('%A', at)}, {a.op(f'fmul double {c}, {f}')}"),
                     "%A", at)
-            a(f"store i64 {a.op(f'add i64 {t}, 1')}, i64* %t")
-        a.loop("r", table_entry(a, "%bptr", q), table_entry(a, "%bptr", a.op(f"add i64 {q}, 1")),
+        a.loop("t", table_entry(a, "%kptr", e), table_entry(a, "%kptr", a.op(f"add i64 {e}, 1")),
                product)
     a.loop("e", "0", "%ne", entry)
     a("ret void")
@@ -300,10 +298,111 @@ def packed_ir(P: str) -> str:
             f"nounwind {{", ["e"])
     c.loop("e", "0", c.op("mul i64 %n, %m"), lambda e: c.store(double(float("nan")), "%X", e))
     c("ret void")
-    return "\n\n".join((a.text(), b.text(), c.text()))
+    return "\n\n".join((a.text(), b.text(), c.text(), ldl_ir(P)))
 
 
-def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
+def ldl_ir(P: str) -> str:
+    """``i1 @<P>_ldl(n, m, nl, A, X, LU, perm, lptr, lidx, rptr, rk, rq)``: solve A X = B
+    (X holds B, n x m row-major; overwritten) for a symmetric definite A held as its
+    lower triangle in the plan's order (a packed block: the diagonal, then L's lists
+    ``lidx[lptr[k]:lptr[k+1]]``, rows ascending), by L D L^T on that structure. Left-
+    looking: column j gathered into a dense row of n (``LU`` after the factors), updated
+    by the columns k whose L has row j (``rk[rptr[j]:rptr[j+1]]``, that entry at
+    ``rq``), then scaled: half the multiply-adds of LU, every factor read in order, and
+    ``LU`` holds n + nl + 2n doubles (the factors, the row, a column of X). False, X
+    untouched, where a pivot is zero, not finite or of the other sign than its diagonal
+    entry (A not definite)."""
+    a = Asm(f"define i1 @{P}_ldl(i64 %n, i64 %m, i64 %nl, double* noalias %A, double* "
+            f"noalias %X, double* noalias %LU, i64* %perm, i64* %lptr, i64* %lidx, "
+            f"i64* %rptr, i64* %rk, i64* %rq) nounwind {{", ["k", "q", "s", "c"])
+    a("%big = alloca double")
+    a("%acc = alloca double")
+    a("store double 0.0, double* %big")
+    fabs = "call double @llvm.fabs.f64(double {})"
+    size = a.op("add i64 %n, %nl")
+    lv = a.at("%LU", "%n")                      # L's entries
+    w = a.at("%LU", size)                       # the dense row
+    x = a.at(w, "%n")                           # a column of X
+
+    def copy(k):                                # the factors start as A; its largest
+        v = a.load("%A", k)
+        a.store(v, "%LU", k)
+        mag, big = a.op(fabs.format(v)), a.op("load double, double* %big")
+        more = a.op(f"fcmp ogt double {mag}, {big}")
+        a(f"store double {a.op(f'select i1 {more}, double {mag}, double {big}')}, "
+          "double* %big")
+    a.loop("k", "0", size, copy)
+    tiny = a.op(f"fmul double {double(1e-300)}, {a.op('load double, double* %big')}")
+
+    def span(ptr, k):
+        return table_entry(a, ptr, k), table_entry(a, ptr, a.op(f"add i64 {k}, 1"))
+
+    def column(j):
+        a.store(a.load("%LU", j), w, j)
+        a.loop("q", *span("%lptr", j), lambda q: a.store(
+            a.load(lv, q), w, table_entry(a, "%lidx", q)))
+
+        def update(s):                          # w -= L[:, k] D[k] L[j, k], rows >= j
+            k = table_entry(a, "%rk", s)
+            q0 = table_entry(a, "%rq", s)
+            t = a.op(f"fmul double {a.load(lv, q0)}, {a.load('%LU', k)}")
+
+            def sub(q):
+                i = table_entry(a, "%lidx", q)
+                a.store(a.op(f"fsub double {a.load(w, i)}, "
+                             f"{a.op(f'fmul double {a.load(lv, q)}, {t}')}"), w, i)
+            a.loop("q", q0, table_entry(a, "%lptr", a.op(f"add i64 {k}, 1")), sub)
+        a.loop("s", *span("%rptr", j), update)
+        d = a.load(w, j)
+        same = a.op(f"fmul double {d}, {a.load('%A', j)}")       # the diagonal's sign
+        ok = a.op(f"and i1 {a.op(f'fcmp ogt double {a.op(fabs.format(d))}, {tiny}')}, "
+                  f"{a.op(f'fcmp ogt double {same}, 0.0')}")
+        go = a.tmp()[1:]
+        a(f"br i1 {ok}, label %{go}, label %fail")
+        a.label(go)
+        a.store(d, "%LU", j)
+        a.loop("q", *span("%lptr", j), lambda q: a.store(
+            a.op(f"fdiv double {a.load(w, table_entry(a, '%lidx', q))}, {d}"), lv, q))
+    a.loop("k", "0", "%n", column)
+
+    def solve(c):
+        def at(i):
+            row = table_entry(a, "%perm", i)
+            return a.op(f"add i64 {a.op(f'mul i64 {row}, %m')}, {c}")
+        a.loop("k", "0", "%n", lambda i: a.store(a.load("%X", at(i)), x, i))
+
+        def forward(k):
+            xk = a.load(x, k)
+
+            def sub(q):
+                i = table_entry(a, "%lidx", q)
+                a.store(a.op(f"fsub double {a.load(x, i)}, "
+                             f"{a.op(f'fmul double {a.load(lv, q)}, {xk}')}"), x, i)
+            a.loop("q", *span("%lptr", k), sub)
+        a.loop("k", "0", "%n", forward)
+        a.loop("k", "0", "%n", lambda k: a.store(
+            a.op(f"fdiv double {a.load(x, k)}, {a.load('%LU', k)}"), x, k))
+
+        def backward(kk):
+            k = a.op(f"sub i64 {a.op('add i64 %n, -1')}, {kk}")
+            a(f"store double {a.load(x, k)}, double* %acc")
+
+            def sub(q):
+                i = table_entry(a, "%lidx", q)
+                a.accumulate(a.op(f"fneg double "
+                                  f"{a.op(f'fmul double {a.load(lv, q)}, {a.load(x, i)}')}"))
+            a.loop("q", *span("%lptr", k), sub)
+            a.store(a.op("load double, double* %acc"), x, k)
+        a.loop("k", "0", "%n", backward)
+        a.loop("k", "0", "%n", lambda i: a.store(a.load(x, i), "%X", at(i)))
+    a.loop("c", "0", "%m", solve)
+    a("ret i1 true")
+    a.label("fail")
+    a("ret i1 false")
+    return a.text()
+
+
+def splu_ir(P: str, spd: bool = False) -> str:
     """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: solve A X = B
     (X holds B, n x m row-major; overwritten) by LU of ``A[rows][:, cols]`` on its
     diagonal along an ``elimination.Plan``, touching only the filled structure. False,
@@ -313,11 +412,10 @@ def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
     ``spd`` (``@<P>_splu_spd``, a regularized constraint block, symmetric positive
     definite): the multipliers of L are not bounded (they reach 1/sqrt(eps) there while
     the reduced matrices do not grow: elimination is as stable as Cholesky), U is."""
-    name = "_packed" if packed else "_spd" if spd else ""
-    extra = ", i64* %sd, i64* %sl, i64* %su" if packed else ""
+    name = "_spd" if spd else ""
     a = Asm(f"define i1 @{P}_splu{name}(i64 %n, i64 %m, double* noalias %A, double* "
             f"noalias %X, double* noalias %LU, i64* %rows, i64* %cols, i64* %lptr, "
-            f"i64* %lidx, i64* %uptr, i64* %uidx{extra}) nounwind {{",
+            f"i64* %lidx, i64* %uptr, i64* %uidx) nounwind {{",
             ["k", "q", "r", "c"])
     a("%big = alloca double")
     a("%acc = alloca double")
@@ -337,8 +435,7 @@ def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
         a.label(go)
 
     def take(i, j, ri, cj):             # LU[i, j] = A[ri, cj]; track the largest
-        # (packed: A's entry from its slot, ``ri`` the slot and ``cj`` None)
-        v = a.load("%A", ri if cj is None else at(ri, cj))
+        v = a.load("%A", at(ri, cj))
         a.store(v, "%LU", at(i, j))
         mag, big = a.op(fabs.format(v)), a.op("load double, double* %big")
         more = a.op(f"fcmp ogt double {mag}, {big}")
@@ -346,13 +443,6 @@ def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
           "double* %big")
 
     def copy(k):
-        if packed:
-            take(k, k, table_entry(a, "%sd", k), None)
-            a.loop("q", *span("%lptr", k), lambda q: take(
-                table_entry(a, "%lidx", q), k, table_entry(a, "%sl", q), None))
-            a.loop("r", *span("%uptr", k), lambda r: take(
-                k, table_entry(a, "%uidx", r), table_entry(a, "%su", r), None))
-            return
         rk, ck = table_entry(a, "%rows", k), table_entry(a, "%cols", k)
         take(k, k, rk, ck)
         a.loop("q", *span("%lptr", k), lambda q: (
@@ -365,7 +455,6 @@ def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
     # (spd: a regularized block is regular by construction, its smallest pivots the
     # weights on its redundant directions, which may lie 12 decades below its largest
     # entry: only a zero or non-finite pivot fails)
-    spd = spd or packed
     tiny = a.op(f"fmul double {double(1e-300 if spd else 1e-13)}, {big}")
 
     def pivot(k):
@@ -491,49 +580,50 @@ class LinearBlocks:
 
     def _packed_block(self, blk: Block):
         """A packed block's function (same arguments as ``block``'s): A = -K F into its
-        slots where ``assemble``, its diagonal raised by the weights, then sparse LU (SPD,
-        pivots on the diagonal) on its plan; a zero or non-finite pivot gives NaN."""
+        lower triangle where ``assemble`` (the products onto it only: A is symmetric,
+        J M^-1 J^T), its diagonal raised by the weights, then L D L^T on its plan
+        (``ldl_ir``); a zero, non-finite or sign-changing pivot gives NaN."""
         P, n, i, pl = self.prefix, blk.n, blk.index, blk.plan
         slot = blk.a_slot
-        # the products K[e] F[b]: B's entries by row, each product's target slot in order
-        by_row: dict = {}
+        order = np.empty(n, dtype=np.int64)
+        order[pl.rows] = np.arange(n)
+        by_row: dict = {}                   # B's entries by row: (column, entry)
         for e, (q, j) in enumerate(blk.b_at):
             by_row.setdefault(q, []).append((j, e))
-        bptr, bidx = [0], []
-        for q in range(blk.d):
-            bidx += [e for _, e in by_row.get(q, [])]
-            bptr.append(len(bidx))
-        kq, tgt = [], []
+        kptr, kb, tgt = [0], [], []         # each K entry's products onto the lower part
         for r, q in blk.k_at:
-            kq.append(q)
-            tgt += [slot[(r, j)] for j, _ in by_row.get(q, [])]
-        rows, cols = pl.rows, pl.cols
-        src = {"sd": [slot[(int(rows[k]), int(cols[k]))] for k in range(n)],
-               "sl": [slot[(int(rows[pl.lidx[q]]), int(cols[k]))] for k in range(n)
-                      for q in range(pl.lptr[k], pl.lptr[k + 1])],
-               "su": [slot[(int(rows[k]), int(cols[pl.uidx[r]]))] for k in range(n)
-                      for r in range(pl.uptr[k], pl.uptr[k + 1])]}
+            for j, e in by_row.get(q, []):
+                if order[j] <= order[r]:
+                    kb.append(e)
+                    tgt.append(slot[(r, j)])
+            kptr.append(len(kb))
+        rows: list = [[] for _ in range(n)]  # each pivot j's columns k with L[j, k]
+        for k in range(n):
+            for q in range(pl.lptr[k], pl.lptr[k + 1]):
+                rows[pl.lidx[q]].append((k, q))
         t = {k: self.array(f"block{i}_{k}", "i64", v) for k, v in (
-            ("kq", kq), ("bptr", bptr), ("bidx", bidx), ("tgt", tgt),
-            ("diag", [slot[(r, r)] for r in blk.reg_rows]),
-            *[(k, v) for k, v in src.items()],
-            *[(k, getattr(pl, k)) for k in elimination.Plan._fields])}
-        plan_args = ", ".join(t[k] for k in elimination.Plan._fields)
+            ("kptr", kptr), ("kb", kb), ("tgt", tgt),
+            ("diag", [slot[(r, r)] for r in blk.reg_rows]), ("perm", pl.rows),
+            ("lptr", pl.lptr), ("lidx", pl.lidx),
+            ("rptr", np.cumsum([0] + [len(r) for r in rows])),
+            ("rk", [k for r in rows for k, _ in r]), ("rq", [q for r in rows for _, q in r]))}
+        nl = len(pl.lidx)
         self.decls.add(MEMSET)
         body = [f"define void @{P}_block{i}(i64 %m, double* noalias %A, double* noalias %K, "
                 f"double* noalias %F, double* noalias %X, double* noalias %LU, "
                 f"i1 %assemble, double* noalias %R) nounwind {{", "entry:",
                 "  br i1 %assemble, label %form, label %solve", "form:",
-                f"  %a8 = bitcast double* %A to i8*",
-                f"  call void @llvm.memset.p0i8.i64(i8* %a8, i8 0, i64 {8 * len(slot)}, "
+                "  %a8 = bitcast double* %A to i8*",
+                f"  call void @llvm.memset.p0i8.i64(i8* %a8, i8 0, i64 {8 * (n + nl)}, "
                 "i1 false)",
                 f"  call void @{P}_assemble_packed(double* %A, double* %K, double* %F, "
-                f"i64 {len(kq)}, {t['kq']}, {t['bptr']}, {t['bidx']}, {t['tgt']})",
+                f"i64 {len(blk.k_at)}, {t['kptr']}, {t['kb']}, {t['tgt']})",
                 f"  call void @{P}_raise(double* %A, double* %R, i64 {len(blk.reg_rows)}, "
                 f"{t['diag']})",
                 "  br label %solve", "solve:",
-                f"  %ok = call i1 @{P}_splu_packed(i64 {n}, i64 %m, double* %A, double* %X, "
-                f"double* %LU, {plan_args}, {t['sd']}, {t['sl']}, {t['su']})",
+                f"  %ok = call i1 @{P}_ldl(i64 {n}, i64 %m, i64 {nl}, double* %A, "
+                f"double* %X, double* %LU, {t['perm']}, {t['lptr']}, {t['lidx']}, "
+                f"{t['rptr']}, {t['rk']}, {t['rq']})",
                 "  br i1 %ok, label %done, label %nan", "nan:",
                 f"  call void @{P}_nanfill(double* %X, i64 {n}, i64 %m)",
                 "  br label %done", "done:", "  ret void", "}"]

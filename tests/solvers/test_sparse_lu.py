@@ -53,6 +53,16 @@ def test_sparse_factors_solve_like_dense_lapack(mu):
     x = sparse_lu.solve(a, plan, b)
     ref = np.linalg.solve(A, b)
     assert np.abs(x - ref).max() <= 1e-9 * np.abs(ref).max()
+    # packed: the factors are the first n + nl + nu entries of the array they are given
+    # (the integrator's n x n, which LAPACK takes where the plan does not), and a plan
+    # without its update table (an FMU's) finds each target in the lists, to the bit
+    used = n + len(plan[2]) + len(plan[4])
+    assert not a.reshape(-1)[used:].any()
+    plain = plan[:8] + (np.empty(0, dtype=np.int32),)
+    a2 = np.zeros(used, dtype=dtype)
+    sparse_lu.newton_matrix(J, np.empty((0, 0)), c, plain, a2)
+    assert sparse_lu.factor(a2, plain)
+    assert np.array_equal(sparse_lu.solve(a2, plain, b), x)
     # a mass matrix (singular: an algebraic state) enters the pattern and the values
     M = np.eye(n)
     M[3, 3] = 0.0

@@ -41,11 +41,11 @@ MIN_SIZE = 24
 MAX_WORK = 0.1
 
 _EMPTY = np.empty(0, dtype=np.int64)
-DENSE = (_EMPTY,) * 8 + (np.empty(0, dtype=np.int32),)
+DENSE = (_EMPTY,) * 8 + (np.empty(0, dtype=np.int32), np.empty(0))
 
 
 def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
-    """The elimination plan ``(perm, lptr, lidx, uptr, uidx, dpos, lpos, upos, upd)``
+    """The elimination plan ``(perm, lptr, lidx, uptr, uidx, dpos, lpos, upos, upd, mv)``
     for Newton matrices with the structure of the Jacobian entries (rows, cols), the mass
     matrix's nonzeros and the diagonal; ``DENSE`` (empty arrays) where sparse elimination
     would not pay. ``dpos``, ``lpos``, ``upos``: where each entry the elimination reads
@@ -53,7 +53,9 @@ def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
     cols) lists them (-1: not one, a fill-in or a mass term), so that the Newton matrices
     are formed from the Jacobian's values alone (``newton_matrix_values``). ``upd``
     (int32): each update's target in the packed factors, pivot by pivot, L's row by U's
-    column (empty: ``factor`` searches the lists)."""
+    column (empty: ``factor`` searches the lists). ``mv``: the mass matrix's values
+    packed as the factors are (empty: none given, M = I; the Newton matrices then read
+    M itself, as a plan made without them does)."""
     if n < MIN_SIZE:
         return DENSE
     pattern = np.zeros((n, n), dtype=bool)
@@ -88,8 +90,14 @@ def analyse(n: int, rows, cols, mass: np.ndarray | None = None):
             lpos[q] = at.get((int(perm[lidx[q]]), int(perm[k])), -1)
         for r in range(uptr[k], uptr[k + 1]):
             upos[r] = at.get((int(perm[k]), int(perm[uidx[r]])), -1)
+    mv = np.empty(0)
+    if mass is not None and mass.size:      # (a dense n x n read at random per entry)
+        ks = np.repeat(np.arange(n), np.diff(lptr))
+        kr = np.repeat(np.arange(n), np.diff(uptr))
+        mv = np.concatenate((mass[perm, perm], mass[perm[lidx], perm[ks]],
+                             mass[perm[kr], perm[uidx]])).astype(np.float64)
     return (perm.astype(np.int64), lptr, lidx, uptr, uidx, dpos, lpos, upos,
-            _updates(n, lptr, lidx, uptr, uidx))
+            _updates(n, lptr, lidx, uptr, uidx), mv)
 
 
 def _updates(n, lptr, lidx, uptr, uidx) -> np.ndarray:
@@ -124,10 +132,20 @@ def _entry(v, k):
 @njit(cache=True)
 def newton_matrix_values(V, M, c, plan, a):
     """``newton_matrix`` from the Jacobian's values ``V`` (in the order of its pattern,
-    the plan's ``dpos``, ``lpos``, ``upos``) instead of a dense J."""
+    the plan's ``dpos``, ``lpos``, ``upos``) instead of a dense J; M's values from the
+    plan's ``mv`` where it has them."""
     perm, lptr, lidx, uptr, uidx, dpos, lpos, upos = plan[:8]
+    mv = plan[9]
     v = _packed(a)
     n, nl = perm.shape[0], lidx.shape[0]
+    if M.shape[0] != 0 and mv.shape[0] == n + nl + uidx.shape[0]:
+        for e in range(n):
+            v[e] = c * mv[e] - _entry(V, dpos[e])
+        for q in range(nl):
+            v[n + q] = c * mv[n + q] - _entry(V, lpos[q])
+        for r in range(uidx.shape[0]):
+            v[n + nl + r] = c * mv[n + nl + r] - _entry(V, upos[r])
+        return
     for k in range(n):
         pk = perm[k]
         v[k] = (c if M.shape[0] == 0 else c * M[pk, pk]) - _entry(V, dpos[k])

@@ -310,8 +310,8 @@ def ldl_ir(P: str) -> str:
     by the columns k whose L has row j (``rk[rptr[j]:rptr[j+1]]``, that entry at
     ``rq``), then scaled: half the multiply-adds of LU, every factor read in order, and
     ``LU`` holds n + nl + 2n doubles (the factors, the row, a column of X). False, X
-    untouched, where a pivot is zero, not finite or of the other sign than its diagonal
-    entry (A not definite)."""
+    untouched, where a pivot is zero, not finite or of the other sign than the first (A
+    not definite)."""
     a = Asm(f"define i1 @{P}_ldl(i64 %n, i64 %m, i64 %nl, double* noalias %A, double* "
             f"noalias %X, double* noalias %LU, i64* %perm, i64* %lptr, i64* %lidx, "
             f"i64* %rptr, i64* %rk, i64* %rq) nounwind {{", ["k", "q", "s", "c"])
@@ -354,7 +354,7 @@ def ldl_ir(P: str) -> str:
             a.loop("q", q0, table_entry(a, "%lptr", a.op(f"add i64 {k}, 1")), sub)
         a.loop("s", *span("%rptr", j), update)
         d = a.load(w, j)
-        same = a.op(f"fmul double {d}, {a.load('%A', j)}")       # the diagonal's sign
+        same = a.op(f"fmul double {d}, {a.load('%LU', '0')}")    # the first pivot's sign
         ok = a.op(f"and i1 {a.op(f'fcmp ogt double {a.op(fabs.format(d))}, {tiny}')}, "
                   f"{a.op(f'fcmp ogt double {same}, 0.0')}")
         go = a.tmp()[1:]

@@ -27,7 +27,10 @@ False, and the integrator factors that matrix dense with partial pivoting (LAPAC
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.core.imputils import impl_ret_borrowed
+from numba.extending import intrinsic
 
 from bgc.codegen import elimination
 
@@ -117,11 +120,32 @@ def _updates(n, lptr, lidx, uptr, uidx) -> np.ndarray:
     return upd.astype(np.int32)
 
 
+@intrinsic
+def _flat(typingctx, a):
+    """A contiguous array's flat view (numba's reshape calls a helper of its run time
+    that the FMU's Radau object does not have: ``bgc.export.radau``)."""
+    if not isinstance(a, types.Array) or a.layout != "C":
+        return None
+    flat = types.Array(a.dtype, 1, "C")
+
+    def codegen(context, builder, sig, args):
+        src = context.make_array(sig.args[0])(context, builder, args[0])
+        out = context.make_array(flat)(context, builder)
+        size = context.get_constant(types.intp, 1)
+        for extent in cgutils.unpack_tuple(builder, src.shape):
+            size = builder.mul(size, extent)
+        context.populate_array(out, data=src.data, shape=[size], strides=[src.itemsize],
+                               itemsize=src.itemsize, meminfo=src.meminfo,
+                               parent=src.parent)
+        return impl_ret_borrowed(context, builder, flat, out._getvalue())
+    return flat(a), codegen
+
+
 @njit(cache=True)
 def _packed(a):
     """The packed factors' array: ``a`` as a flat view (a dense n x n the integrator
     also factors with LAPACK, or a vector)."""
-    return a.reshape(a.size)
+    return _flat(a)
 
 
 @njit(cache=True)

@@ -262,6 +262,7 @@ def render(system: EquationSystem) -> str:
         n_work=kern.n_work, n_eval=kern.n_eval,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
+        loops_codegen_opt=kernels.LOOPS_CODEGEN_OPT,
         straight_passes=kernels.STRAIGHT_PASSES,
         tables=[{"index": tb.index, "t": [_float(v) for v in tb.t],
                  "y": [_float(v) for v in tb.y]} for tb in system.tables],

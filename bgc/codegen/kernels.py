@@ -63,8 +63,11 @@ CHUNK = 300          # assignments (or stores) per IR function
 CHUNK_OPS = 2000
 # LLVM's IR passes at -O1 and instruction selection at -O0 (fast, local register
 # allocation): on the SARIB's lagrange module 1 s instead of 11 s at -O2/-O2, and the
-# rhs and Jacobian run as fast as numba's -O3 build of the same code did
-IR_OPT, CODEGEN_OPT = 1, 0
+# rhs and Jacobian run as fast as numba's -O3 build of the same code did. The loops'
+# module (tape, solves, drivers: 1 % of IFToMM A02's IR at N = 40) at -O2: its code
+# generation 0.05 -> 0.3 s there (the straight-line chunks' would take 18 s), and the
+# rhs under method augmented, whose block's L D L^T is most of it, 1.6x faster
+IR_OPT, CODEGEN_OPT, LOOPS_CODEGEN_OPT = 1, 0, 2
 # The straight-line chunks (most of the IR) take only local passes: -O1's loop passes
 # find nothing in them and cost half the IR passes' time (loop vectorization alone 14 %
 # on a 40-link zcp chain), while the rhs runs within a few per cent of -O1's. The loops
@@ -374,7 +377,6 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     if any(b.plan is not None and b.reg >= 0 and not b.packed for b in blocks):
         mod.functions.append(linalg.splu_ir(prefix, spd=True))
     if any(b.packed for b in blocks):
-        mod.functions.append(linalg.splu_ir(prefix, packed=True))
         mod.functions.append(linalg.packed_ir(prefix))
     for blk in blocks:
         mod.block(blk)

@@ -5,11 +5,11 @@ text in template files rendered by Jinja (as the module itself is), one per rout
 family, their loops counted in named values (``templates/macros.ll.j2``):
 ``tape.ll.j2`` (the Jacobian's compressed forward-mode tape, its scatter into J, the
 tables' interpolation), ``lu.ll.j2`` (dense LU with partial pivoting), ``splu.ll.j2``
-(sparse LU on an ``elimination.Plan``, its variants for a regularized block and a packed
-one), ``lstsq.ll.j2`` (least squares through LAPACK's SVD for a block whose rank is below
+(sparse LU on an ``elimination.Plan``, its variant for a regularized block), ``ldl.ll.j2``
+(L D L^T of a packed, symmetric definite block on its plan), ``lstsq.ll.j2`` (least squares through LAPACK's SVD for a block whose rank is below
 its size), ``assemble.ll.j2`` (a constraint block's ``A = -K B`` from its non-zeros),
-``packed.ll.j2`` (the same into a packed block's slots, its weights on the diagonal, NaN
-for a singular one) and ``negate.ll.j2`` (an open block's ``-A`` into the Jacobian).
+``packed.ll.j2`` (the same onto a packed block's lower triangle, its weights on the
+diagonal, NaN for a singular one) and ``negate.ll.j2`` (an open block's ``-A`` into the Jacobian).
 
 And per linear block (``LinearBlocks``, what the module assembly ``kernels.Module`` does
 for each ``workspace.Block``): its function ``@<P>_block<index>`` (``blocks.ll.j2``), which
@@ -74,22 +74,30 @@ def negate_ir(P: str) -> str:
 
 def packed_ir(P: str) -> str:
     """What packed blocks share (``templates/packed.ll.j2``): ``@<P>_assemble_packed(A,
-    K, F, ne, kq, bptr, bidx, tgt)`` (A = -K F into A's slots), ``@<P>_raise(A, R, k,
-    diag)`` (A[diag[e]] += R[e]) and ``@<P>_nanfill(X, n, m)``."""
-    return _ENV.get_template("packed.ll.j2").render(P=P)
+    K, F, ne, kptr, kb, tgt)`` (A[tgt[t]] -= K[e] F[kb[t]] over K's entries e and their
+    products t in ``kptr[e]:kptr[e+1]``, those onto the lower triangle), ``@<P>_raise(A,
+    R, k, diag)`` (A[diag[e]] += R[e]), ``@<P>_nanfill(X, n, m)``; and the factorization,
+    ``@<P>_ldl`` (``templates/ldl.ll.j2``: L D L^T on the block's plan, left-looking;
+    false where a pivot is zero, not finite or of the other sign than the first)."""
+    return "\n\n".join((_ENV.get_template("packed.ll.j2").render(P=P).rstrip("\n"),
+                         ldl_ir(P)))
 
 
-def splu_ir(P: str, spd: bool = False, packed: bool = False) -> str:
+def ldl_ir(P: str) -> str:
+    """``i1 @<P>_ldl(n, m, nl, A, X, LU, perm, lptr, lidx, rptr, rk, rq)``: A X = B in
+    place for a symmetric definite A held as its lower triangle in its plan's order (a
+    packed block), by L D L^T on that structure (``templates/ldl.ll.j2``)."""
+    return _ENV.get_template("ldl.ll.j2").render(P=P)
+
+
+def splu_ir(P: str, spd: bool = False) -> str:
     """``i1 @<P>_splu(n, m, A, X, LU, rows, cols, lptr, lidx, uptr, uidx)``: A X = B in
     place by LU on an ``elimination.Plan``'s structure; false, X untouched, where a pivot
     is too small or the factors grow past ``GROWTH_LIMIT`` (the caller then pivots).
     ``spd`` (``@<P>_splu_spd``): a regularized block, symmetric positive definite: only a
-    zero or non-finite pivot fails, L unbounded; ``packed`` (``@<P>_splu_packed``, spd,
-    three tables more: ``sd``, ``sl``, ``su``): A holds only its entries, in slots
-    (``templates/splu.ll.j2``)."""
-    spd = spd or packed
+    zero or non-finite pivot fails, L unbounded (``templates/splu.ll.j2``)."""
     return _ENV.get_template("splu.ll.j2").render(
-        P=P, name="_packed" if packed else "_spd" if spd else "", spd=spd,
+        P=P, name="_spd" if spd else "", spd=spd, packed=False,
         limit=double(elimination.GROWTH_LIMIT), tiny=double(SPD_TINY if spd else SPLU_TINY))
 
 
@@ -123,38 +131,37 @@ class LinearBlocks:
         self.functions.append(str(ir.block(P, i, n, bool(blk.d), plan, blk.reg >= 0)))
 
     def _packed_block(self, blk: Block):
-        """A packed block's function (same arguments as ``block``'s): A = -K F into its
-        slots where ``assemble``, its diagonal raised by the weights, then sparse LU (SPD,
-        pivots on the diagonal) on its plan; a zero or non-finite pivot gives NaN."""
+        """A packed block's function (same arguments as ``block``'s): A = -K F onto its
+        lower triangle where ``assemble`` (the products onto it only: A is symmetric,
+        J M^-1 J^T), its diagonal raised by the weights, then L D L^T on its plan
+        (``ldl.ll.j2``); a zero, non-finite or sign-changing pivot gives NaN."""
         P, n, i, pl = self.prefix, blk.n, blk.index, blk.plan
         slot = blk.a_slot
-        # the products K[e] F[b]: B's entries by row, each product's target slot in order
-        by_row: dict = {}
+        order = np.empty(n, dtype=np.int64)
+        order[pl.rows] = np.arange(n)
+        by_row: dict = {}                   # B's entries by row: (column, entry)
         for e, (q, j) in enumerate(blk.b_at):
             by_row.setdefault(q, []).append((j, e))
-        bptr, bidx = [0], []
-        for q in range(blk.d):
-            bidx += [e for _, e in by_row.get(q, [])]
-            bptr.append(len(bidx))
-        kq, tgt = [], []
+        kptr, kb, tgt = [0], [], []         # each K entry's products onto the lower part
         for r, q in blk.k_at:
-            kq.append(q)
-            tgt += [slot[(r, j)] for j, _ in by_row.get(q, [])]
-        rows, cols = pl.rows, pl.cols
-        src = {"sd": [slot[(int(rows[k]), int(cols[k]))] for k in range(n)],
-               "sl": [slot[(int(rows[pl.lidx[q]]), int(cols[k]))] for k in range(n)
-                      for q in range(pl.lptr[k], pl.lptr[k + 1])],
-               "su": [slot[(int(rows[k]), int(cols[pl.uidx[r]]))] for k in range(n)
-                      for r in range(pl.uptr[k], pl.uptr[k + 1])]}
+            for j, e in by_row.get(q, []):
+                if order[j] <= order[r]:
+                    kb.append(e)
+                    tgt.append(slot[(r, j)])
+            kptr.append(len(kb))
+        rows: list = [[] for _ in range(n)]  # each pivot j's columns k with L[j, k]
+        for k in range(n):
+            for q in range(pl.lptr[k], pl.lptr[k + 1]):
+                rows[pl.lidx[q]].append((k, q))
         t = {k: self.array(f"block{i}_{k}", "i64", v) for k, v in (
-            ("kq", kq), ("bptr", bptr), ("bidx", bidx), ("tgt", tgt),
-            ("diag", [slot[(r, r)] for r in blk.reg_rows]),
-            *[(k, v) for k, v in src.items()],
-            *[(k, getattr(pl, k)) for k in elimination.Plan._fields])}
-        plan = ", ".join(t[k] for k in (*elimination.Plan._fields, "sd", "sl", "su"))
+            ("kptr", kptr), ("kb", kb), ("tgt", tgt),
+            ("diag", [slot[(r, r)] for r in blk.reg_rows]), ("perm", pl.rows),
+            ("lptr", pl.lptr), ("lidx", pl.lidx),
+            ("rptr", np.cumsum([0] + [len(r) for r in rows])),
+            ("rk", [k for r in rows for k, _ in r]), ("rq", [q for r in rows for _, q in r]))}
         self.decls.add(MEMSET)
         self.functions.append(str(_ENV.get_template("blocks.ll.j2").module.packed_block(
-            P, i, n, len(slot), len(kq), len(blk.reg_rows), t, plan)))
+            P, i, n, len(pl.lidx), len(blk.k_at), len(blk.reg_rows), t)))
 
     def _form(self, blk: Block):
         """``@<prefix>_block<index>_form(A, K, F, full)``: a constraint block's A = -K F

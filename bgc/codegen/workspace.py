@@ -5,7 +5,8 @@ assigned symbol (a linear block's unknowns side by side), then a region per line
 (``Block``: its matrix, right-hand sides, factors and the rest of its solve), then each
 table's value and slope at the current t. ``Layout`` places them, and chooses a block's
 solve: sparse LU on an ``elimination.Plan`` from ``SPARSE_MIN`` unknowns where it pays,
-packed (only the entries sparse LU reads) for a regularized constraint block on a plan.
+packed for a regularized constraint block on a symmetric plan (its lower triangle and its
+fill only, factored as L D L^T: ``linalg.ldl_ir``).
 """
 
 from __future__ import annotations
@@ -43,10 +44,12 @@ class Block:
     reg: int = -1       # regularized (``equations.Regularized``): eps's slot (-1: none)
     reg_rows: tuple = ()
     columns: int = 1    # right-hand sides (b: n x columns, row-major)
-    # packed (a regularized constraint block with a plan): K, B and A hold only their
-    # entries, K's and B's in their lists' order, A's in ``a_slot``'s (the entries sparse
-    # LU reads): a few hundred kB where n x n and n x d regions spread over megabytes,
-    # and each rhs touched them at random (IFToMM A02, N = 40: 2.9 MB for A, 4.7 MB for K)
+    # packed (a regularized constraint block on a symmetric plan, ``symmetric``): K, B
+    # and A hold only their entries, K's and B's in their lists' order, A's lower triangle
+    # in the factors' order (``a_slot``: an entry and its mirror -> its slot: the diagonal
+    # first, then L's lists), and so do its factors: a few hundred kB where n x n regions
+    # spread over megabytes that each rhs touched at random and allocated (IFToMM A02,
+    # N = 40: 2.9 MB for A, 4.7 MB for K, 2.9 MB for the factors)
     packed: bool = False
     a_slot: dict | None = None
     ls: int = 0         # rank < n: room for the least-squares solve (``lstsq_work``)
@@ -65,6 +68,25 @@ class Block:
                 out |= {(pl.rows[i], pl.cols[k]) for i in pl.lidx[pl.lptr[k]:pl.lptr[k + 1]]}
                 out |= {(pl.rows[k], pl.cols[j]) for j in pl.uidx[pl.uptr[k]:pl.uptr[k + 1]]}
         return {(int(r), int(c)) for r, c in out}
+
+    def symmetric(self) -> bool:
+        """Whether the plan eliminates a symmetric structure symmetrically (the rows'
+        order the columns', L's lists U's): L D L^T then holds the factors."""
+        pl = self.plan
+        return (pl is not None and np.array_equal(pl.rows, pl.cols)
+                and np.array_equal(pl.lptr, pl.uptr) and np.array_equal(pl.lidx, pl.uidx))
+
+    def lower_slots(self) -> dict:
+        """A packed block's slots: (row, column) -> its place in the lower triangle of
+        the ordered matrix, the diagonal first (pivot k at k), then L's lists (n + q), an
+        entry above the diagonal at its mirror's."""
+        pl, n = self.plan, self.n
+        out = {(int(pl.rows[k]), int(pl.rows[k])): k for k in range(n)}
+        for k in range(n):
+            for q in range(pl.lptr[k], pl.lptr[k + 1]):
+                i, j = int(pl.rows[pl.lidx[q]]), int(pl.rows[k])
+                out[(i, j)] = out[(j, i)] = n + q
+        return out
 
     def pattern(self) -> np.ndarray:
         """A's structure: K B's, or the entries the block stores."""
@@ -147,17 +169,18 @@ class Layout:
             blk.plan = elimination.analyse(blk.pattern(), SPARSE_WORK,
                                            start.get(item.index))
         blk.packed = bool(item.regularize is not None and item.factors is not None
-                          and blk.plan is not None)
+                          and blk.symmetric())
         if blk.packed:
-            blk.a_slot = {rc: k for k, rc in enumerate(sorted(blk.touched()))}
-            blk.a = self.region(len(blk.a_slot))
+            blk.a_slot = blk.lower_slots()
+            blk.a = self.region(n + len(blk.plan.lidx))
             blk.k, blk.kb = self.region(len(blk.k_at)), self.region(len(blk.b_at))
+            blk.lu = self.region(n + len(blk.plan.lidx) + 2 * n)   # + a column, a row
         else:
             blk.a = self.region(n * n)
             if item.factors is not None:
                 blk.k, blk.kb = (self.region(n * blk.d),
                                  self.region(blk.d * n))
-        blk.lu = self.region(n * n + (n if blk.plan is not None else 0))
+            blk.lu = self.region(n * n + (n if blk.plan is not None else 0))
         if item.rank is not None:
             blk.ls = self.region(lstsq_work(n, columns))
         self.blocks[item.index] = blk

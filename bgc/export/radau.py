@@ -71,14 +71,17 @@ def _step_function():
             index2 = np.empty(0)
         if sparse:
             # dpos, lpos, upos (where the Jacobian's values go) are read only where the
-            # loop takes the values (System.jacv), never here: the FMU passes a dense J
+            # loop takes the values (System.jacv), never here: the FMU passes a dense J;
+            # no update table either (``sparse_lu.factor`` finds the targets in the lists)
             none = np.empty(0, dtype=np.int64)
             plan = (carray(perm_ptr, (n,)), carray(lptr_ptr, (n + 1,)),
                     carray(lidx_ptr, (n_l,)), carray(uptr_ptr, (n + 1,)),
-                    carray(uidx_ptr, (n_u,)), none, none, none)
+                    carray(uidx_ptr, (n_u,)), none, none, none,
+                    np.empty(0, dtype=np.int32), np.empty(0))
         else:
             none = np.empty(0, dtype=np.int64)
-            plan = (none, none, none, none, none, none, none, none)
+            plan = (none, none, none, none, none, none, none, none,
+                    np.empty(0, dtype=np.int32), np.empty(0))
         ints, floats = np.empty(0, dtype=np.int64), np.empty(0)
         monitor = rank.Monitor(0, 0, 0, ints, ints, floats, floats, 0, 0.0,
                                np.empty((2, 0), dtype=np.int64), np.zeros(1, dtype=np.int64))

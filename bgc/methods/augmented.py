@@ -12,7 +12,8 @@ regularized, in each row's own scale::
     (J M^-1 J^T + eps diag(J M^-1 J^T)) lambda = c
 
 the augmented Lagrangian's penalty 1/eps in the dual. That matrix is regular whatever the
-constraints' rank, so it is factored by sparse LU on its structure (no SVD, no rank):
+constraints' rank, and symmetric definite, so it is factored as L D L^T of its lower
+triangle on its structure (no SVD, no rank, no pivoting: ``codegen.linalg.ldl_ir``):
 redundant constraints share their load by the minimum norm (the multipliers' part in the
 null space of J^T moves no body), and at a singular configuration (the N-four-bar's
 cranks passing horizontal, where the mobility jumps) the directions that lose rank are
@@ -156,5 +157,5 @@ class Augmented(Lagrange):
             return {}, []
         return {}, [f"constraints (method {self.name}): {len(s.constraints)} multipliers, "
                     "solved at the acceleration level with Baumgarte stabilisation, "
-                    "regularized by augmented__eps (sparse LU, any rank); positions and "
+                    "regularized by augmented__eps (sparse L D L^T, any rank); positions and "
                     "velocities projected after every step"]

@@ -382,7 +382,8 @@ class Work(NamedTuple):
     """The loop's work arrays for n states: the stages ``Z``, their predictor ``Z0``, the
     transformed variables ``W`` and Newton increments ``dW``, the stages' rhs ``F``, a
     scratch row ``work``, ``M`` times the error estimate's stage combination ``ZE``, the
-    right-hand sides of the real and complex systems, the error ``scale``."""
+    right-hand sides of the real and complex systems, the error ``scale``, and the
+    projection's correction of the last step's end (``shift``)."""
     Z: np.ndarray
     Z0: np.ndarray
     W: np.ndarray
@@ -393,13 +394,14 @@ class Work(NamedTuple):
     f_real: np.ndarray
     f_cplx: np.ndarray
     scale: np.ndarray
+    shift: np.ndarray
 
 
 @part
 def _work(n):
     return Work(np.zeros((3, n)), np.empty((3, n)), np.empty((3, n)), np.empty((3, n)),
                 np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n),
-                np.empty(n, dtype=np.complex128), np.empty(n))
+                np.empty(n, dtype=np.complex128), np.empty(n), np.zeros(n))
 
 
 @part
@@ -626,6 +628,16 @@ def _watch_minor(mon, msc, t, y, p, watch):
 
 
 @part
+def _shift(y_old, shift):
+    """The last step's polynomial moved by its end's projection (``y_old``, its start,
+    by ``shift``), once its outputs are recorded: the next stages are predicted from the
+    projected state onwards, not from the drifted one (the drift, of the order of the
+    tolerance, was each first Newton iteration's to remove)."""
+    for k in range(shift.shape[0]):
+        y_old[k] += shift[k]
+
+
+@part
 def _first_rows(out, t_eval, t0, x0):
     """The output rows at or before t0: the initial state. Returns how many."""
     k_out = 0
@@ -703,10 +715,13 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         if recompute_jac or h_next != h_abs:
             newton = (False, newton[1], newton[2], newton[3])
         if system.project != 0:         # back onto the constraints (Newton steps)
+            for k in range(n):
+                wk.shift[k] = 0.0
             for _ in range(PROJECTIONS):
                 call_entry(system.project, t_new, y_new, p, wk.work)
                 for k in range(n):
                     y_new[k] += wk.work[k]
+                    wk.shift[k] += wk.work[k]
         f_new = evaluate(rhs, t_new, y_new, p, n)
         stats[ST_RHS] += 1
         if not _finite(y_new):
@@ -734,6 +749,8 @@ def radau5(system, settings, t0, t1, x0, t_eval, stats, diag, keep):
         if lost:
             return Outcome(out, k_out, poly[0], poly[2].copy(), MINOR, -1, poly[1])
         k_out = _record(out, k_out, t_eval, t, poly[0], poly[1], poly[2], Q)
+        if system.project != 0:         # the polynomial through the projected end
+            _shift(poly[2], wk.shift)
         taken += 1
         if max_steps > 0 and taken >= max_steps and t < t1:
             _pause(keep, t, control, newton, have_sol, poly)

@@ -26,10 +26,10 @@ ROUTINES = {
     "lstsq": (lambda: linalg.lstsq_ir("t"), ["t_lstsq"]),
     "assemble": (lambda: linalg.assemble_ir("t"), ["t_assemble"]),
     "negate": (lambda: linalg.negate_ir("t"), ["t_negate"]),
-    "packed": (lambda: linalg.packed_ir("t"), ["t_assemble_packed", "t_raise", "t_nanfill"]),
+    "packed": (lambda: linalg.packed_ir("t"),
+               ["t_assemble_packed", "t_raise", "t_nanfill", "t_ldl"]),
     "splu": (lambda: linalg.splu_ir("t"), ["t_splu"]),
     "splu_spd": (lambda: linalg.splu_ir("t", spd=True), ["t_splu_spd"]),
-    "splu_packed": (lambda: linalg.splu_ir("t", packed=True), ["t_splu_packed"]),
 }
 P = ctypes.c_void_p
 I64 = ctypes.c_int64
@@ -47,11 +47,10 @@ def test_each_template_renders_ir_llvm_verifies(name):
 
 
 def test_splu_variants_differ_only_where_they_should():
-    plain, spd, packed = (linalg.splu_ir("t"), linalg.splu_ir("t", spd=True),
-                          linalg.splu_ir("t", packed=True))
+    plain, spd = linalg.splu_ir("t"), linalg.splu_ir("t", spd=True)
     assert linalg.double(linalg.SPLU_TINY) in plain and linalg.double(linalg.SPD_TINY) in spd
     assert "%g.l.bounded" in plain and "%g.l.bounded" not in spd     # L unbounded: spd
-    assert "%sd" in packed and "%sd" not in spd and "%rows, i64 %c.k" in spd
+    assert "define i1 @t_splu(" in plain and "define i1 @t_splu_spd(" in spd
 
 
 def test_dense_lu_template_solves_and_fills_nan_when_singular():
@@ -127,8 +126,7 @@ class _Module(linalg.LinearBlocks):
 
     def text(self) -> str:
         routines = [linalg.lu_ir("t"), linalg.assemble_ir("t"), linalg.splu_ir("t"),
-                    linalg.splu_ir("t", spd=True), linalg.splu_ir("t", packed=True),
-                    linalg.packed_ir("t")]
+                    linalg.splu_ir("t", spd=True), linalg.packed_ir("t")]
         return "\n\n".join(sorted(self.decls | set(DECLS[:3])) + self.globals
                            + self.functions + routines)
 
@@ -179,8 +177,8 @@ def _block(kind: str, n: int = 30, d: int = 36, m: int = 2, singular: bool = Fal
     a_buf, k_buf, f_buf = A.ravel().copy(), K.ravel().copy(), F.ravel().copy()
     if packed:
         blk.packed = True
-        blk.a_slot = {rc: k for k, rc in enumerate(sorted(blk.touched()))}
-        a_buf = np.zeros(len(blk.a_slot))
+        blk.a_slot = blk.lower_slots()
+        a_buf = np.zeros(n + len(blk.plan.lidx))
         k_buf = np.array([K[i, j] for i, j in blk.k_at])
         f_buf = np.array([F[i, j] for i, j in blk.b_at])
     mod = _Module()
@@ -189,10 +187,12 @@ def _block(kind: str, n: int = 30, d: int = 36, m: int = 2, singular: bool = Fal
     args = [I64, P, P, P, P, P, ctypes.c_bool] + [P] * reg
     fn = ctypes.CFUNCTYPE(None, *args)(engine.get_function_address("t_block0"))
     b = rng.normal(size=(n, m))
-    x, lu = b.copy(), np.zeros(n * n + n)
+    x, lu = b.copy(), np.zeros(n * n + 3 * n)       # (L D L^T: n + nl + 2n of it)
     fn(m, a_buf.ctypes.data, k_buf.ctypes.data, f_buf.ctypes.data, x.ctypes.data,
        lu.ctypes.data, True, *[weights.ctypes.data] * reg)
-    return x, want, b, bool(np.any(lu[n * n:]))
+    on_plan = bool(np.any(lu[len(blk.plan.lidx) + 2 * n:len(blk.plan.lidx) + 3 * n])) \
+        if packed else bool(np.any(lu[n * n:n * n + n]))
+    return x, want, b, on_plan
 
 
 @pytest.mark.parametrize("kind", sorted(BLOCKS))

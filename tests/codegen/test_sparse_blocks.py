@@ -100,6 +100,62 @@ def test_splu_kernel_hands_a_zero_pivot_to_partial_pivoting():
     assert not ok and np.array_equal(x, b)
 
 
+def _ldl():
+    """The packed block's L D L^T kernel, JIT-compiled alone: f(a, plan, b) -> (ok, x)
+    with a (n x n) packed as a packed block holds it (``Block.lower_slots``)."""
+    engine = jit("declare double @llvm.fabs.f64(double)\n" + linalg.ldl_ir("t"))
+    proto = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_int64, ctypes.c_int64,
+                             ctypes.c_int64, *[ctypes.c_void_p] * 9)
+    fn = proto(engine.get_function_address("t_ldl"))
+
+    def solve(a, plan, b):
+        n, nl = a.shape[0], len(plan.lidx)
+        blk = workspace.Block(0, n, 0, 0, 0, plan=plan)
+        packed = np.zeros(n + nl)
+        for (i, j), k in blk.lower_slots().items():
+            packed[k] = a[i, j]
+        rows = [[] for _ in range(n)]
+        for k in range(n):
+            for q in range(plan.lptr[k], plan.lptr[k + 1]):
+                rows[plan.lidx[q]].append((k, q))
+        tables = [np.ascontiguousarray(v, dtype=np.int64) for v in (
+            plan.rows, plan.lptr, plan.lidx, np.cumsum([0] + [len(r) for r in rows]),
+            [k for r in rows for k, _ in r], [q for r in rows for _, q in r])]
+        x = np.array(b, dtype=np.float64, order="C")
+        lu = np.zeros(n + nl + 2 * n)
+        ok = fn(n, x.shape[1], nl, packed.ctypes.data, x.ctypes.data, lu.ctypes.data,
+                *[t.ctypes.data for t in tables])
+        return ok, x
+    solve.engine = engine                     # keep it alive
+    return solve
+
+
+def test_ldl_kernel_solves_a_regularized_block_with_redundant_rows():
+    """A regularized constraint block J M^-1 J^T + eps diag whose rows are redundant (J of
+    rank below its rows) on its symmetric plan: the solution of numpy's solve to the
+    round-off of its condition (12 decades); a matrix that is not definite is refused."""
+    rng = np.random.default_rng(3)
+    m, d = 24, 30
+    J = np.zeros((m, d))
+    for i in range(m):                        # a chain: each row on 4 coordinates
+        J[i, rng.choice(np.arange(max(0, i - 2), min(d, i + 6)), 4, replace=False)] = \
+            rng.normal(size=4)
+    J[5] = J[3] - 2 * J[4]                    # redundant rows
+    J[17] = J[12]
+    a = J @ np.diag(rng.uniform(0.5, 2.0, d)) @ J.T
+    a += 1e-8 * np.diag(np.diag(a))
+    plan = elimination.analyse(a != 0, 1.0, diagonal=True)
+    assert workspace.Block(0, m, 0, 0, 0, plan=plan).symmetric()
+    b = rng.normal(size=(m, 2))
+    ok, x = _ldl()(a, plan, b)
+    assert ok
+    ref = np.linalg.solve(a, b)
+    assert np.abs(a @ x - b).max() <= 1e-6 * np.abs(b).max()
+    assert np.abs(x - ref).max() <= 1e-4 * np.abs(ref).max()
+    ok, x = _ldl()(a - 2 * np.diag(np.diag(a)) * (np.arange(m) == 7)[:, None], plan, b)
+    assert not ok and np.array_equal(x, b)    # a pivot of the other sign: X untouched
+
+
 @pytest.mark.parametrize("method", ["lagrange", pytest.param("zcp", marks=pytest.mark.slow)])
 def test_module_solving_blocks_sparse_matches_dense(tmp_path, monkeypatch, compiled, method):
     """The four-bar's blocks, solved on their plans (the size threshold lowered), give the

@@ -53,6 +53,16 @@ def test_sparse_factors_solve_like_dense_lapack(mu):
     x = sparse_lu.solve(a, plan, b)
     ref = np.linalg.solve(A, b)
     assert np.abs(x - ref).max() <= 1e-9 * np.abs(ref).max()
+    # packed: the factors are the first n + nl + nu entries of the array they are given
+    # (the integrator's n x n, which LAPACK takes where the plan does not), and a plan
+    # without its update table (an FMU's) finds each target in the lists, to the bit
+    used = n + len(plan[2]) + len(plan[4])
+    assert not a.reshape(-1)[used:].any()
+    plain = plan[:8] + (np.empty(0, dtype=np.int32), np.empty(0))
+    a2 = np.zeros(used, dtype=dtype)
+    sparse_lu.newton_matrix(J, np.empty((0, 0)), c, plain, a2)
+    assert sparse_lu.factor(a2, plain)
+    assert np.array_equal(sparse_lu.solve(a2, plain, b), x)
     # a mass matrix (singular: an algebraic state) enters the pattern and the values
     M = np.eye(n)
     M[3, 3] = 0.0
@@ -64,6 +74,14 @@ def test_sparse_factors_solve_like_dense_lapack(mu):
     x = sparse_lu.solve(a, plan, b)
     ref = np.linalg.solve(c * M - J, b)
     assert np.abs(x - ref).max() <= 1e-9 * np.abs(ref).max()
+    # from the Jacobian's values, M from the plan (``mv``) or read in M itself
+    rows, cols = np.nonzero(J)
+    plan = sparse_lu.analyse(n, rows, cols, M)
+    for pl in (plan, plan[:9] + (np.empty(0),)):
+        a = np.zeros((n, n), dtype=dtype)
+        sparse_lu.newton_matrix_values(J[rows, cols], M, c, pl, a)
+        assert sparse_lu.factor(a, pl)
+        assert np.abs(sparse_lu.solve(a, pl, b) - x).max() <= 1e-12 * np.abs(x).max()
 
 
 def test_a_matrix_that_needs_pivoting_goes_back_to_lapack():

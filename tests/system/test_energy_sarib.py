@@ -54,10 +54,11 @@ def test_sarib_balance_closes_under_each_method(balances, method):
         work = sum(abs(e["supplied"]) for e in data["elements"] if e["kind"] == "constraint")
         assert work <= 1e-4 * supplied
     groups = {(g["kind"], g["name"]) for g in data["groups"]}
-    for body in ("mgb", "fuselage", "beater_1", "bar_4"):
+    for body in ("mgb", "fuselage", "leg_1.beater", "leg_4.bar"):   # (the legs: instances)
         assert ("body", body) in groups
-    for joint in ("hinge_1", "attach_pumping", "membrane_pumping"):
+    for joint in ("leg_1.hinge", "attach_pumping", "membrane_pumping"):
         assert ("joint", joint) in groups
+    assert ("component", "leg_2") in groups
 
 
 @pytest.mark.slow
@@ -67,7 +68,7 @@ def test_sarib_methods_agree_on_where_the_power_goes(balances):
     dampers' shares (the pumping damper's by 5 % at 10 Hz, the membrane's small one by
     8 %; the actuator's supply by 1 %)."""
     ref = {e["name"]: e for e in balances("zcp")["elements"]}
-    large = ["attach_pumping.tx.actuator", "attach_pumping.tx.damper", "hinge_1.rx.damper"]
+    large = ["attach_pumping.tx.actuator", "attach_pumping.tx.damper", "leg_1.hinge.rx.damper"]
     for method, tol, names in (("lagrange", 1e-3, large + ["membrane_pumping.tx.damper"]),
                                ("parasitic", 6e-2, large)):
         els = {e["name"]: e for e in balances(method)["elements"]}

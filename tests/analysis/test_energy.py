@@ -105,7 +105,9 @@ def test_pendulum_exchange_over_one_period(energy_module, method):
     # the stiff spring along it rings, and that fast small motion of G adds its |P| to
     # the activities (activity counts every swing, however fast): 0.8 % here; the
     # energies at the period's end are unaffected
-    tol = 1e-2 if method == "parasitic" else 1e-5
+    # (augmented: its regularized multipliers leave the constraints a force of eps times
+    # theirs, ~2e-5 of the swing's energy at the default eps: docs/methods.md)
+    tol = 1e-2 if method == "parasitic" else 5e-5 if method == "augmented" else 1e-5
     assert pot.activity == pytest.approx(4 * swing, rel=tol)
     assert kin_t.activity + kin_r.activity == pytest.approx(4 * swing, rel=tol)
     assert kin_t.activity / (kin_t.activity + kin_r.activity) == pytest.approx(

@@ -7,8 +7,6 @@ the module by the digest and imports it, and pays for none of them (``ensure_mod
 
 from __future__ import annotations
 
-import contextlib
-import gc
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,22 +26,6 @@ if TYPE_CHECKING:
     from bgc.codegen.equations import EquationSystem
     from bgc.graph.causality import CausalGraph
 
-
-
-@contextlib.contextmanager
-def cycles_unchecked():
-    """Python's cyclic garbage collector paused for the compiler's stages. They allocate
-    millions of long-lived sympy nodes, IR lines and steps and make almost no reference
-    cycles; the collector, triggered by allocation counts, rescans them again and again:
-    half of the emit stage of A02 with 160 windows (11 s -> 5.8 s of CPU without it; peak
-    memory +4 %). Nests; the collector's state is restored after."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
 
 
 @dataclass(frozen=True)
@@ -99,7 +81,7 @@ def build(model: str | Path | Model, method: str = "parasitic", open_loops: bool
     ``equations.derive`` (e.g. ``max_symbolic_loop``)."""
     from bgc.codegen import equations
     from bgc.graph import causality, expand
-    with progress.record() as timings, cycles_unchecked():
+    with progress.record() as timings, equations.gc_paused():
         if not isinstance(model, Model):
             model = _load(model, constants)
         with progress.stage("causality") as st:
@@ -165,8 +147,9 @@ def compile_model(model: str | Path | Model, out_dir: str | Path = "generated",
     command's options against the module's exact parameters) or if the model's own values
     make its start non-finite (``codegen.start.check``)."""
     from bgc.codegen import emit
+    from bgc.codegen.equations import gc_paused
     check_writable(out_dir, "output directory", directory=True)   # before the work
-    with progress.record() as timings, cycles_unchecked():
+    with progress.record() as timings, gc_paused():     # (emit: half its CPU at N = 160)
         c = build(model, method, constants=constants, **derive_options)
         if check is not None:
             check(Declared.of_system(c.system))
@@ -208,7 +191,7 @@ def ensure_module(model_path: str | Path, out_dir: str | Path = "generated",
     energy variant (``codegen.energy``, ``<name>_<method>_energy.py``), every element's
     work and activity integrated."""
     kind = methods.variant(method, open_loops) + ("_energy" if energy else "")
-    with progress.record() as timings, cycles_unchecked():
+    with progress.record() as timings:
         with progress.stage("load") as st:
             doc = document.read(model_path)
             fresh = None if need_model else _fresh(doc, str(model_path), out_dir, kind,

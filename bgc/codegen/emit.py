@@ -259,7 +259,7 @@ def render(system: EquationSystem) -> str:
         model_hash=model_hash(m.digest, system.variant),
         canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight,
         n_functions=ir.count("\ndefine ") + ir_straight.count("\ndefine "),
-        n_work=kern.n_work, n_eval=kern.n_eval,
+        n_work=kern.n_work, n_eval=kern.n_eval, n_schur=kern.n_schur,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
         ir_opt=kernels.IR_OPT, codegen_opt=kernels.CODEGEN_OPT,
         loops_codegen_opt=kernels.LOOPS_CODEGEN_OPT,

@@ -86,6 +86,7 @@ class Kernels:
     ir_straight: str
     n_work: int         # the Jacobian's workspace
     n_eval: int         # the other programs' (its first n_eval slots)
+    n_schur: int        # ``jac_schur``'s (the Jacobian's and its scratch; 0: none)
     blocks: list[Block]
 
 
@@ -309,6 +310,8 @@ class Module(linalg.LinearBlocks):
                     f"{self.array(f'{name}_a_dst', 'i64', dst)})")
             self.functions.append(fn.text(linkage="")
                                   .replace("double* noalias %out", "double* noalias %J", 1))
+        if jt.n_aug:            # the model's own Jacobian, from the open one
+            self.functions.append(linalg.schur_ir(P, n, jt.n_aug, lay.size))
 
     def entry(self, name: str, program: str, n_work: int):
         """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
@@ -393,7 +396,9 @@ def lower(system, prefix: str, programs: dict, jt) -> Kernels:
     for name, program in ENTRIES:
         if program in programs or program.startswith("jac_"):
             mod.entry(name, program, layout.size if program.startswith("jac_") else n_eval)
-    return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval,
+    n = len(system.states)
+    n_schur = layout.size + linalg.schur_work(n, jt.n_aug) if jt.n_aug else 0
+    return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval, n_schur,
                    [layout.blocks[k] for k in sorted(layout.blocks)])
 
 

@@ -9,7 +9,8 @@ tables' interpolation), ``lu.ll.j2`` (dense LU with partial pivoting), ``splu.ll
 (L D L^T of a packed, symmetric definite block on its plan), ``lstsq.ll.j2`` (least squares through LAPACK's SVD for a block whose rank is below
 its size), ``assemble.ll.j2`` (a constraint block's ``A = -K B`` from its non-zeros),
 ``packed.ll.j2`` (the same onto a packed block's lower triangle, its weights on the
-diagonal, NaN for a singular one) and ``negate.ll.j2`` (an open block's ``-A`` into the Jacobian).
+diagonal, NaN for a singular one) and ``negate.ll.j2`` (an open block's ``-A`` into the Jacobian) and ``schur.ll.j2`` (the
+model's Jacobian from the open one, where blocks stay open).
 
 And per linear block (``LinearBlocks``, what the module assembly ``kernels.Module`` does
 for each ``workspace.Block``): its function ``@<P>_block<index>`` (``blocks.ll.j2``), which
@@ -51,6 +52,18 @@ def lu_ir(P: str) -> str:
     """``@<P>_lu(n, m, A, B, LU)``: A X = B by LU with partial pivoting
     (``templates/lu.ll.j2``)."""
     return _ENV.get_template("lu.ll.j2").render(P=P, tiny=double(LU_TINY))
+
+
+def schur_ir(P: str, n: int, k: int, at: int) -> str:
+    """``@<P>_jac_schur(t, x, p, w, J)``: the model's Jacobian (n x n) as the Schur
+    complement of the open one (k unknowns of open blocks), its scratch in w from
+    ``at`` (``schur_work``) (``templates/schur.ll.j2``)."""
+    return _ENV.get_template("schur.ll.j2").render(P=P, n=n, k=k, at=at)
+
+
+def schur_work(n: int, k: int) -> int:
+    """The scratch ``schur_ir`` needs: the open Jacobian, A_uu, A_uu^-1 A_ux, A_uu's LU."""
+    return (n + k) ** 2 + 2 * k * k + k * n
 
 
 def lstsq_ir(P: str) -> str:

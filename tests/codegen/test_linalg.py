@@ -2,7 +2,7 @@
 each routine's template rendered, in each of its variants, to IR that LLVM parses and
 verifies; then run against numpy: dense LU (and NaN for a singular
 block), least squares through LAPACK's SVD on a rank-deficient block, the open blocks'
--A, and each kind of linear block's function (A stored or formed from its factors; dense
+-A, the model's Jacobian as the Schur complement of the open one, and each kind of linear block's function (A stored or formed from its factors; dense
 or sparse on a plan; regularized; packed), through the routines it calls."""
 
 from __future__ import annotations
@@ -26,6 +26,9 @@ ROUTINES = {
     "lstsq": (lambda: linalg.lstsq_ir("t"), ["t_lstsq"]),
     "assemble": (lambda: linalg.assemble_ir("t"), ["t_assemble"]),
     "negate": (lambda: linalg.negate_ir("t"), ["t_negate"]),
+    "schur": (lambda: "declare void @t_lu(i64, i64, double*, double*, double*)\n"
+              "declare void @t_jac_full(double, double*, double*, double*, double*)\n"
+              + linalg.schur_ir("t", 5, 3, 7), ["t_jac_schur"]),
     "packed": (lambda: linalg.packed_ir("t"),
                ["t_assemble_packed", "t_raise", "t_nanfill", "t_ldl"]),
     "splu": (lambda: linalg.splu_ir("t"), ["t_splu"]),
@@ -114,6 +117,42 @@ def test_negate_template_writes_minus_the_entries_it_is_given():
     J = np.zeros(6)
     negate(J.ctypes.data, w.ctypes.data, 3, src.ctypes.data, dst.ctypes.data)
     assert J.tolist() == [0.0, -5.0, 0.0, -3.0, 0.0, -1.0]
+
+
+# a stand-in for the open Jacobian: J (na x na) is x, as given
+_JAC_FULL = """define void @t_jac_full(double %t, double* %x, double* %p, double* %w, double* %J) {
+entry:
+  %j8 = bitcast double* %J to i8*
+  %x8 = bitcast double* %x to i8*
+  call void @llvm.memcpy.p0i8.p0i8.i64(i8* %j8, i8* %x8, i64 NBYTES, i1 false)
+  ret void
+}"""
+
+
+@pytest.mark.parametrize("n, k", [(6, 4), (1, 1), (3, 7)])
+def test_schur_template_is_the_jacobian_of_the_states_and_nan_when_singular(n, k):
+    na, at = n + k, 5
+    stub = _JAC_FULL.replace("NBYTES", str(8 * na * na))
+    engine = jit("\n".join(DECLS[:3] + [stub, linalg.lu_ir("t"),
+                                        linalg.schur_ir("t", n, k, at)]))
+    schur = ctypes.CFUNCTYPE(None, ctypes.c_double, P, P, P, P)(
+        engine.get_function_address("t_jac_schur"))
+    rng = np.random.default_rng(n + 10 * k)
+    a = rng.normal(size=(na, na))
+    a[:n, n:][rng.random((n, k)) < 0.5] = 0.0          # A_xu sparse: its zeros skipped
+    w = np.full(at + linalg.schur_work(n, k), np.nan)   # the scratch is written first
+
+    def run(a):
+        J = np.full((n, n), 7.0)
+        schur(0.0, np.ascontiguousarray(a).ctypes.data, None, w.ctypes.data, J.ctypes.data)
+        return J
+    ref = a[:n, :n] - a[:n, n:] @ np.linalg.solve(a[n:, n:], a[n:, :n])
+    assert np.allclose(run(a), ref, rtol=1e-10, atol=1e-12)
+    a[n:, n:][0] = 0.0                                  # A_uu singular
+    J = run(a)
+    assert np.isnan(J[np.abs(a[:n, n:]).sum(axis=1) > 0]).all()
+    assert np.array_equal(J[np.abs(a[:n, n:]).sum(axis=1) == 0],
+                          a[:n, :n][np.abs(a[:n, n:]).sum(axis=1) == 0])
 
 
 class _Module(linalg.LinearBlocks):

@@ -211,7 +211,7 @@ def _block(f: _Doubles, item: LinearBlock, put) -> None:
     try:
         for v, e in item.pre:
             put(v, e)
-        n = len(item.unknowns)
+        n = len(item.unknowns) // item.columns      # (columns: right-hand sides)
         if item.factors is not None:
             d, K, B = item.factors
             k, b = np.zeros((n, d)), np.zeros((d, n))
@@ -232,12 +232,13 @@ def _block(f: _Doubles, item: LinearBlock, put) -> None:
             rhs = np.array([f(e) for e in item.tear_eqs])
         else:
             rhs = np.array([f(e) for e in item.b])
+        rhs = rhs.reshape(n, item.columns)
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(rhs))):
-            u = np.full(n, np.nan)
+            u = np.full(rhs.shape, np.nan)
         else:
             u = np.linalg.lstsq(a, rhs, rcond=None)[0]
         f.memo.clear()                  # the chain's values were those at u = 0
-        f.env.update(zip(item.unknowns, (_F64(x) for x in u)))
+        f.env.update(zip(item.unknowns, (_F64(x) for x in u.ravel())))
         if item.b is None:
             for v, e in item.chain:
                 f.env[v] = f(e)
@@ -261,7 +262,11 @@ def check(system) -> None:
     derivatives are not finite because of a value of the model (a mass, gravity or
     preload of 1e308): a ModelError at that value's file:line. What cannot be traced to
     such a value is left to the run's own start check (``simulate.check_start``), which
-    sees the start after the projection and the static loads."""
+    sees the start after the projection and the static loads. A model with no such value
+    (none of its parameters or numbers is ``EXTREME``) is not evaluated: nothing could
+    be blamed (A02 at N = 40 under method augmented: 1.5 s saved)."""
+    if not _suspects(system):
+        return
     start = evaluate(system)
     v = start.values
     bad = None
@@ -294,6 +299,15 @@ def _origin(start: Start):
                 s in v and np.isfinite(v[s]) for s in expr.free_symbols):
             return expr
     return None
+
+
+def _suspects(system) -> bool:
+    """Whether the model has a value ``_culprits`` could blame: an extreme parameter or
+    an extreme number in its file."""
+    m = system.model
+    if any(_extreme(val) and n in m.parameters for _, n, val in system.params):
+        return True
+    return bool(_culprits(system, None))
 
 
 def _culprits(system, origin) -> list[tuple[str, Loc, str]]:

@@ -109,18 +109,17 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     # positions: the momenta whose pose rates move the poses onto the constraints)
     impulse = {"V": {}, "G": {}}
     for j, k, e in B:
-        for tag in impulse:
-            impulse[tag][dynamic[j]] = impulse[tag].get(dynamic[j], sp.S.Zero) \
-                + e * mu[tag][k]
+        for tag in impulse:         # (each sum's terms added at once, not one by one)
+            impulse[tag].setdefault(dynamic[j], []).append(e * mu[tag][k])
     push = {}
-    for x, e in sorted(impulse["G"].items(), key=lambda kv: kv[0].name):
+    for x, terms in sorted(impulse["G"].items(), key=lambda kv: kv[0].name):
         v = sp.Symbol(f"PG_{x.name}", real=True)
-        after.append((v, e))
+        after.append((v, sp.Add(*terms)))
         push[x] = v
-    for x, e in impulse["V"].items():
-        b.projection[x] = e
+    for x, terms in impulse["V"].items():
+        b.projection[x] = sp.Add(*terms)
     for q, prow in st.pose_rows.items():
-        e = sum((c * push[x] for x, c in prow.items() if x in push), sp.S.Zero)
+        e = sp.Add(*[c * push[x] for x, c in prow.items() if x in push])
         if e != 0:
             b.projection[q] = e
     return before, block, after

@@ -120,8 +120,8 @@ def acceleration_constraints(b: Equations, pose_rows: bool = False
             continue
         rows = {dynamic[j][0]: d for j, d in directional(r, ksens).items()}
         st.rows[lam] = rows
-        rdot = directional(r, pose).get(0, sp.S.Zero) + sum(
-            (d * dx for x, dx in dynamic if (d := rows.get(x)) is not None), sp.S.Zero)
+        rdot = sp.Add(directional(r, pose).get(0, sp.S.Zero),
+                      *[d * dx for x, dx in dynamic if (d := rows.get(x)) is not None])
         g = c.g if c.g is not None else sp.S.Zero
         residual = (rdot + alpha * r if c.imposed
                     else rdot + 2 * alpha * r + alpha ** 2 * g)
@@ -131,18 +131,6 @@ def acceleration_constraints(b: Equations, pose_rows: bool = False
         b.display[lam] = f"{c.name}.{method.role(c)}"
         out.append((c.name, c.g, r))
     return out
-
-
-def _cone(b, exprs, leaves=frozenset()) -> set:
-    """The assigned variables ``exprs`` depend on (not looking past ``leaves``)."""
-    seen, stack = set(), [s for e in exprs for s in e.free_symbols]
-    while stack:
-        v = stack.pop()
-        if v in seen or v not in b.eqs or v in leaves:
-            continue
-        seen.add(v)
-        stack.extend(b.eqs[v].free_symbols)
-    return seen
 
 
 def _cone(b, exprs, leaves=frozenset()) -> set:

@@ -65,18 +65,24 @@ def _sum(terms):
 
 def directional(e, sens: dict) -> dict[int, sp.Expr]:
     """{seed: d e / d seed} through the symbols of ``e`` that have sensitivities."""
-    acc: dict[int, sp.Expr] = {}
+    acc: dict[int, list] = {}
     free = {e: e.free_symbols}
     one = sp.S.One
     for s in sorted((s for s in free[e] if s in sens), key=lambda s: s.name):
         partial = derivative(e, s, free)
-        if partial == 0:
+        if partial is sp.S.Zero:        # (sympy's zero is one object: no == 0 to ask)
             continue
         for j, ds in sens[s].items():
-            # as acc.get(j, 0) + partial * ds, without sympy's work for 0 + x, 1 * x
-            term = ds if partial is one else partial if ds is one else partial * ds
-            acc[j] = acc[j] + term if j in acc else term
-    return {j: d for j, d in sorted(acc.items()) if d != 0}
+            # partial * ds, without sympy's work for 1 * x; each seed's terms added at
+            # once (one after the other rebuilds the sum each time: quadratic)
+            acc.setdefault(j, []).append(ds if partial is one else partial if ds is one
+                                         else sp.Mul(partial, ds, _sympify=False))
+    out = {}
+    for j in sorted(acc):
+        d = _sum(acc[j])
+        if d is not sp.S.Zero:
+            out[j] = d
+    return out
 
 
 def propagate(assignments, sens: dict, name: Callable[[sp.Symbol, int], str]) -> list:

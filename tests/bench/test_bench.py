@@ -179,18 +179,25 @@ def test_iftomm_part_at_small_scale(gen_dir, tmp_path):
 def test_components_part_writes_its_rows_chart_and_target(tmp_path, monkeypatch):
     """The components part's report from its rows (the measurement stubbed: a failed
     N = 40 among them): the CSV as measured, the chart, its summary section and the target
-    at N = 160 judged from the row's wall time."""
+    at N = 160 judged from the row's wall time, augmented's at N = 40 from its build."""
     from bgc.bench import Run, components
-    rows = [{"N": 10, "bodies": 21, "loops": True, "wall_s": 12.5, "cpu_s": 9.0,
-             "load_s": 1.5, "equations_s": 2.0, "machine_code_s": 6.0, "status": "ok"},
-            {"N": 40, "bodies": 81, "loops": True, "status": "timeout after 3600 s"},
-            {"N": 160, "bodies": 321, "loops": True, "wall_s": 31.0, "cpu_s": 25.0,
-             "load_s": 3.0, "equations_s": 8.0, "machine_code_s": 15.0, "status": "ok"}]
-    monkeypatch.setattr(components, "measure", lambda ns, log=print: rows)
+    rows = [{"N": 10, "bodies": 21, "method": "parasitic", "loops": True, "wall_s": 12.5,
+             "cpu_s": 9.0, "load_s": 1.5, "equations_s": 2.0, "machine_code_s": 6.0,
+             "build_s": 9.5, "status": "ok"},
+            {"N": 40, "bodies": 81, "method": "parasitic", "loops": True,
+             "status": "timeout after 3600 s"},
+            {"N": 160, "bodies": 321, "method": "parasitic", "loops": True, "wall_s": 31.0,
+             "cpu_s": 25.0, "load_s": 3.0, "equations_s": 8.0, "machine_code_s": 15.0,
+             "build_s": 26.0, "status": "ok"},
+            {"N": 40, "bodies": 81, "method": "augmented", "loops": True, "wall_s": 14.0,
+             "cpu_s": 13.0, "load_s": 0.5, "equations_s": 4.0, "machine_code_s": 3.0,
+             "build_s": 9.5, "status": "ok"}]
+    monkeypatch.setattr(components, "measure", lambda ns, log=print, augmented=(): rows)
     run = Run(tmp_path, False, 1, 1.0, lambda m: None)
     run.run_part("components")
     got = _rows(tmp_path / "components.csv")
-    assert [r["N"] for r in got] == ["10", "40", "160"]
+    assert [(r["N"], r["method"]) for r in got] == [
+        ("10", "parasitic"), ("40", "parasitic"), ("160", "parasitic"), ("40", "augmented")]
     assert got[1]["status"] == "timeout after 3600 s" and got[1]["wall_s"] == ""
     assert (tmp_path / "components.png").stat().st_size > 10000
     fragment = json.loads((tmp_path / "parts" / "components.json").read_text())
@@ -198,16 +205,20 @@ def test_components_part_writes_its_rows_chart_and_target(tmp_path, monkeypatch)
     assert fragment["targets"] == [
         "A02 with N = 160 from the model file to its first result, step loop cached "
         "(target <= 30 s): 31.0 s **FAIL** (25.0 s of CPU: the wall time on a machine "
-        "with a core to itself)"]
+        "with a core to itself)",
+        "A02 with N = 40 under method augmented, the model build (the report's stages, "
+        "target <= 10 s): 9.5 s **pass** (from the model file to the first result: 14.0 s "
+        "wall, 13.0 s of CPU)"]
 
 
 @pytest.mark.slow       # two cold compiles of A02 (N = 2, 4) in fresh interpreters
 def test_components_part_at_small_scale(gen_dir, tmp_path):
     _bench(gen_dir, tmp_path, "components")
     rows = _rows(tmp_path / "components.csv")
-    assert [(r["N"], r["bodies"], r["status"]) for r in rows] == [("2", "5", "ok"),
-                                                                   ("4", "9", "ok")]
+    assert [(r["N"], r["bodies"], r["method"], r["status"]) for r in rows] == [
+        ("2", "5", "parasitic", "ok"), ("4", "9", "parasitic", "ok"),
+        ("2", "5", "augmented", "ok")]
     for r in rows:
         stages = sum(float(r[k]) for k in ("load_s", "equations_s", "machine_code_s"))
-        assert 0 < stages < float(r["wall_s"]) and float(r["cpu_s"]) > 0
+        assert 0 < stages <= float(r["build_s"]) < float(r["wall_s"]) and float(r["cpu_s"]) > 0
     assert "## Components" in (tmp_path / "summary.md").read_text()

@@ -217,6 +217,10 @@ class _View:
 
     def __init__(self, o: str, owner):
         self.o, self.memo, self.arrays = o, owner.memo, owner.arrays
+        # what is seen from o, memoized per instance (the programs of a module share it)
+        self.names = owner.memo.setdefault(("name", o), {})
+        self.keys = owner.memo.setdefault(("key", o), {})
+        self.shapes = owner.memo.setdefault(("shape", o), {})
         self.mark = symbols.ident(o) + symbols.DOT
         mine = _INDEXED.match(o)
         self.base, self.index = (symbols.ident(mine[1]), int(mine[2])) if mine else (None, 0)
@@ -228,20 +232,20 @@ class _View:
 
     def name(self, s) -> str:
         """``s``'s name with ``o`` as '@' and its array's instances by offset."""
-        hit = self.memo.get(("name", s, self.o))
+        hit = self.names.get(s)
         if hit is None:
             hit = s.name.replace(self.mark, "@" + symbols.DOT)
             if self.arrays is not None and self.base is not None:
                 hit = self.arrays.sub(self._offset, hit)
             hit = _DIGITS.sub(_padded, hit)      # counters (x__99, x__100) in number order
-            self.memo[("name", s, self.o)] = hit
+            self.names[s] = hit
         return hit
 
     def key(self, e) -> str:
         """``e`` with relative names and its numbers as '#' (they may differ between
         instances), commutative arguments sorted: the same for every instance's step."""
-        k = ("key", id(e), self.o)
-        hit = self.memo.get(k)
+        k = id(e)
+        hit = self.keys.get(k)
         if hit is not None and hit[0] is e:
             return hit[1]
         if e.is_Symbol:
@@ -259,7 +263,7 @@ class _View:
             if e.is_Add or e.is_Mul:
                 keys.sort()
             out = f"{type(e).__name__}({','.join(keys)})"
-        self.memo[k] = (e, out)
+        self.keys[k] = (e, out)
         return out
 
     def args(self, e) -> tuple:
@@ -318,12 +322,12 @@ def _shape(e, ph: dict, nums: list, view: _View) -> tuple:
     """``e``'s shape (``_walk``, its symbols numbered within it; memoized on the
     expression and the instance it is seen from) and its symbols as placeholders of the
     block (``ph``); its numbers appended to ``nums``."""
-    k = ("shape", id(e), view.o)
-    hit = view.memo.get(k)
+    k = id(e)
+    hit = view.shapes.get(k)
     if hit is None or hit[0] is not e:
         local: dict = {}
         found: list = []
-        hit = view.memo[k] = (e, _walk(e, local, found, view), list(local), found)
+        hit = view.shapes[k] = (e, _walk(e, local, found, view), list(local), found)
     _, shape, syms, found = hit
     nums.extend(found)
     return shape, tuple(_place(s, ph) for s in syms)

@@ -233,7 +233,8 @@ class Module(linalg.LinearBlocks):
         """A constant global array; returns a pointer to its first element."""
         values = list(values) or [0]
         n = len(values)
-        items = ", ".join(f"{kind} {double(v) if kind == DBL else int(v)}" for v in values)
+        text = map(double, values) if kind == DBL else map(str, map(int, values))
+        items = f"{kind} " + f", {kind} ".join(text)
         self.globals.append(f"@{self.prefix}_{name} = internal constant [{n} x {kind}] "
                             f"[{items}]")
         return (f"{kind}* getelementptr inbounds ([{n} x {kind}], [{n} x {kind}]* "

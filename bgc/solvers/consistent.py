@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bgc.errors import SimulationError
+from bgc.solvers.base import names_where
 
 RANK_TOL = 1e-9          # singular values below this fraction of the largest are zero
 # the generated module's parameter holding the rank its constraint block keeps
@@ -339,7 +340,8 @@ class RankMonitor:
         """The minor's determinant as (sign, log|det|): a determinant of hundreds of rows
         over- or underflows doubles where its logarithm does not."""
         K = self._rows(x)[0]
-        sign, logdet = np.linalg.slogdet(K[np.ix_(self.rows, self.cols)])
+        with np.errstate(invalid="ignore"):     # NaN at a state gone non-finite (lsoda)
+            sign, logdet = np.linalg.slogdet(K[np.ix_(self.rows, self.cols)])
         return float(sign), float(logdet)
 
     def repick(self, x) -> None:
@@ -372,11 +374,19 @@ class RankMonitor:
         """If the constraints at ``x`` have lost (or nearly lost: conditioning ``drop``
         times worse than at the start) the rank they had, the joint directions of the new
         dependency (left out: the redundancy there was at the start)."""
-        K, names, _ = self._scaled(x)
+        K = self._scaled(x)[0]
         if _conditioning(K, self.rank) > max(RANK_TOL, self.projection.conditioning / drop):
             return None
+        return self.dependent(x)
+
+    def dependent(self, x) -> str:
+        """The joint directions of the dependency the constraints at ``x`` come nearest
+        (their smallest kept singular value's and beyond), the start's redundancy left
+        out: those of a singular configuration at or near ``x``."""
+        K, names, _ = self._scaled(x)
         near = np.linalg.svd(K)[0][:, self.rank - 1:]
         # the combination of the near-null rows farthest from the start's redundancy
         off = near - self.start_null @ (self.start_null.T @ near)
         u = np.abs(near @ np.linalg.svd(off)[2][0])
-        return ", ".join(n for n, w in zip(names, u) if w > 0.05 * u.max())
+        # a mechanism of N repeated loops loses N ranks at once (A02: 3N directions)
+        return names_where(names, u > 0.05 * u.max(), most=12)

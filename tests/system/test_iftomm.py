@@ -132,6 +132,86 @@ def test_a02_lagrange_and_zcp_stop_at_the_first_crossings_and_say_why(compiled, 
     assert b0_error(r, 2).max() < 1e-5
 
 
+# A02's first crossing of the horizontal (the exact solution's), by N
+CROSSING = {2: 0.71436, 10: 0.72031, 40: 0.72158}
+
+
+def assert_stopped_at_the_crossing(err, n: int, solver: str = "native"):
+    """A run of lagrange or zcp that stopped where the constraints lose rank: named a
+    singular configuration whose joint directions are the mechanism's (x translations of
+    its pins), the method that passes it named, short of the crossing, the results up to
+    there kept (within a tenth of the benchmark's limit at rtol 1e-4 .. 1e-6, CVODE's and
+    IDA's BDF within the limit) and the statistics counted."""
+    msg = str(err.value)
+    assert msg.startswith("singular configuration at t = "), msg
+    assert ".tx" in msg.split("joint directions ")[1].split(" became dependent")[0], msg
+    assert "--method augmented" in err.value.hint
+    t_stop = float(msg.split("at t = ")[1].split(":")[0])
+    r = err.value.result
+    assert 0.55 < t_stop < CROSSING[n] + 0.01, t_stop
+    assert 0.5 < r.t[-1] <= t_stop + 1e-6, (t_stop, r.t[-1])
+    sundials = solver in ("cvode", "ida")
+    assert b0_error(r, n).max() < (LIMIT if sundials else LIMIT / 10)
+    if not sundials:                            # SUNDIALS does not report its steps
+        assert r.stats.steps > 0
+    assert r.stats.rhs_calls > 0
+
+
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_a02_stop_where_the_constraint_block_refuses_is_a_singular_configuration(
+        compiled, monkeypatch, method):
+    """The generated constraint block, J M^-1 J^T kept at the start's rank, refuses (NaN)
+    where its last kept singular value falls below 1e-10 of its largest: with A02's axial
+    moments of 1e-6 it does so short of the crossing, and at N = 10 and 40 the
+    constraints' own conditioning has then fallen only 9 and 2.4-fold, less than
+    ``LOST_RANK``: the run said "the step size collapsed" and named nothing. The block's
+    refusal there, where it solves at a lower rank, is the rank loss itself. N = 2 (a
+    47-fold fall) with ``LOST_RANK`` out of reach takes that path."""
+    from bgc.solvers import consistent
+    monkeypatch.setattr(consistent, "LOST_RANK", 1e12)
+    mod = compiled("n_four_bar", method)
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=1.0, rtol=1e-6, atol=1e-8, points=101)
+    assert_stopped_at_the_crossing(err, 2)
+
+
+@pytest.mark.parametrize("solver", ["bdf", "lsoda", "cvode"])
+def test_a02_lagrange_stops_at_the_crossing_under_the_other_solvers(compiled, solver):
+    """Each integrator fails its own way at the block's refusal: BDF's LU raised on a NaN
+    Jacobian (the run kept no results and no statistics), LSODA went on through NaN to
+    the end (reported as "the solution became non-finite"), CVODE took steps of 1e-18 s
+    with t + h = t for ever. Each now stops and names the singular configuration."""
+    mod = compiled("n_four_bar", "lagrange")
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=1.0, rtol=1e-5, atol=1e-7, points=101, solver=solver)
+    assert_stopped_at_the_crossing(err, 2, solver)
+    assert np.isfinite(err.value.result.x).all()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_a02_lagrange_and_zcp_stop_at_the_crossing_at_n_10_and_40(tmp_path, method):
+    """N = 10 and 40 under native Radau at rtol 1e-4 .. 1e-6 (the block refuses at
+    t = 0.6956 and 0.6144: their crossings are at 0.7203 and 0.7216), and N = 10 under
+    every other solver: a singular configuration, named, the results kept."""
+    from bgc.pipeline import ensure_module
+    from bgc.simulate import SOLVERS
+    for n in (10, 40):
+        mod = ensure_module(MODELS / "n_four_bar.yaml", tmp_path / "gen", method,
+                            constants={"N": n})[0]
+        for rtol in (1e-4, 1e-5, 1e-6):
+            with pytest.raises(SimulationError) as err:
+                simulate(mod, t_end=20.0, rtol=rtol, atol=rtol / 100, points=201)
+            assert_stopped_at_the_crossing(err, n)
+        if n == 10:
+            for solver in SOLVERS:
+                if solver != "native":
+                    with pytest.raises(SimulationError) as err:
+                        simulate(mod, t_end=2.0, rtol=1e-5, atol=1e-7, points=101,
+                                 solver=solver, step=1e-3 if solver == "rk4" else None)
+                    assert_stopped_at_the_crossing(err, n, solver)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("n", [10, 40])
 def test_a02_augmented_at_n(tmp_path, n):

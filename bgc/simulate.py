@@ -88,6 +88,20 @@ _FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model f
               "singularity at that time")
 
 
+_UNSTABLE_HINT = ("the model's own solution grows that fast: check the signs of its laws "
+                  "(dampers' c > 0) and, under --method parasitic, a joint actuator whose "
+                  "law reads body velocities: it measures the joints' stiff directions too "
+                  "but acts along their free ones only, which can feed energy into them "
+                  "(an ideal-joint method, zcp, lagrange or augmented, has no such "
+                  "directions)")
+
+# a failed run is said to start unstable where its linearisation at the start grows by
+# more than this many e-folds over the time the run reached
+UNSTABLE_EFOLDS = 10.0
+# ... for a model of at most so many states (a dense eigenvalue problem, on failure only)
+UNSTABLE_MAX_STATES = 2000
+
+
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
                   "use --method augmented, whose ideal joints pass singular configurations "
                   "(redundant constraints too), or --method parasitic (compliant joints), or "
@@ -131,6 +145,28 @@ def _stopped_singular(problem: Problem, monitor, run: _Run, t_all, x_all) -> str
         if at is not None and _block_rank(module, at[1], problem.p, at[0]) > 0:
             lost = monitor.dependent(at[1])
     return _singular_message(t, lost)
+
+
+def _unstable(module, p, t0: float, x0, t: float) -> str | None:
+    """Why a run that failed at ``t`` could not go on, where its model is unstable at the
+    start (t0, x0): the eigenvalue of the Jacobian with the largest real part, where it
+    grows by more than ``UNSTABLE_EFOLDS`` e-folds by ``t``, and the states it moves most;
+    else None. (A05 under parasitic: +4.3e4 1/s, its spring-dampers' law reads body
+    velocities across the parasitic joints: it spent a million steps by t = 1 ms.)"""
+    if len(x0) > UNSTABLE_MAX_STATES or not t > t0:
+        return None
+    J = np.asarray(module.jac(t0, x0, p))
+    if not np.all(np.isfinite(J)):
+        return None
+    w, V = np.linalg.eig(J)
+    k = int(np.argmax(w.real))
+    if not w[k].real * (t - t0) > UNSTABLE_EFOLDS:
+        return None
+    top = np.argsort(-np.abs(V[:, k]))[:3]
+    lam = f"{w[k].real:.3g}" + (f" +- {abs(w[k].imag):.3g}j" if w[k].imag else "")
+    return (f"the model is unstable at t = {t0:g}: its linearisation there grows e-fold "
+            f"every {1 / w[k].real:.2g} s (eigenvalue {lam} 1/s, mostly in "
+            f"{', '.join(module.STATE_NAMES[i] for i in top)})")
 
 
 def _last_finite(run: _Run, t_all, x_all):
@@ -600,6 +636,11 @@ def _result(module, solver: Solver, run: _Run, stats: Stats, projection, monitor
         singular = _stopped_singular(problem, monitor, run, t_all, x_all)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
+    if failed and not run.interrupted and hint == _FAIL_HINT and len(x_all):
+        t, _ = _last_finite(run, t_all, x_all)
+        unstable = t is not None and _unstable(module, p, float(t_all[0]), x_all[0], t)
+        if unstable:
+            message, hint = f"{message}; {unstable}", _UNSTABLE_HINT
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver.name, stats, ok, message, projection,
                     p)

@@ -283,3 +283,48 @@ def test_a05_flyball_governor_every_ideal_method_agrees():
             r = simulate(ensure_module(MODELS / "flyball_governor.yaml", gen, method)[0],
                          t_end=10.0, rtol=1e-6, atol=1e-8, points=201)
             assert np.abs(r.column("s") - s).max() < 2e-5, method
+
+
+def test_a_failed_run_says_where_its_model_starts_unstable():
+    """A run that spends its steps or whose step collapses, on a model whose linearisation
+    at the start grows by more than ``UNSTABLE_EFOLDS`` e-folds by then, says so: the
+    growth rate and the states it moves (A05 under parasitic: below). A stable model's,
+    or a slow growth's over that time, does not."""
+    from types import SimpleNamespace
+
+    from bgc.simulate import _unstable
+    A = np.array([[0.0, 1.0, 0.0], [4.0e8, -1.0e3, 0.0], [0.0, 0.0, -5.0]])  # +1.95e4 1/s
+    mod = SimpleNamespace(jac=lambda t, x, p: A, STATE_NAMES=("q", "p", "z"))
+    why = _unstable(mod, None, 0.0, np.zeros(3), 1e-3)
+    assert why.startswith("the model is unstable at t = 0: its linearisation there grows "
+                          "e-fold every 5.1e-05 s (eigenvalue 1.95e+04 1/s, mostly in p, q")
+    assert _unstable(mod, None, 0.0, np.zeros(3), 1e-4) is None        # 2 e-folds
+    B = A * [[1, 1, 1], [-1, 1, 1], [1, 1, 1]]                  # a damped oscillator
+    stable = SimpleNamespace(jac=lambda t, x, p: B, STATE_NAMES=("q", "p", "z"))
+    assert _unstable(stable, None, 0.0, np.zeros(3), 1.0) is None
+
+
+@pytest.mark.slow
+def test_a05_under_parasitic_stops_saying_its_model_is_unstable(compiled):
+    """A05's spring-dampers are joint actuators whose law reads the bodies' velocities:
+    under parasitic they measure the joints' stiff directions too but act along the free
+    ones only, and their damping (4e4 N s/m) feeds the stiff modes: eigenvalues up to
+    +4.3e4 1/s at t = 0 (with c_s = 0 none above 0.12 1/s). The slider's momentum grows
+    from 0 to 4e4 N s within a millisecond and the steps follow it: the run spent its
+    budget there, saying only that. It says why now."""
+    mod = compiled("flyball_governor", "parasitic")
+    p = np.array(mod.PARAMS, dtype=np.float64)
+    x, p, _ = prepare(mod, mod.initial_state(p), p, 0.0)
+    grow = np.linalg.eigvals(mod.jac(0.0, x, p)).real.max()
+    assert 4e4 < grow < 5e4
+    q = p.copy()
+    q[list(mod.PARAM_NAMES).index("c_s")] = 0.0
+    assert np.linalg.eigvals(mod.jac(0.0, x, q)).real.max() < 1.0
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=10.0, max_steps=5000)
+    msg = str(err.value)
+    assert "the step budget (5000 steps) is spent at t = 0.000" in msg, msg
+    assert "the model is unstable at t = 0: its linearisation there grows e-fold every " \
+           "2.3e-05 s (eigenvalue 4.33e+04 1/s" in msg, msg
+    assert "--method parasitic, a joint actuator whose law reads body velocities" in \
+        err.value.hint

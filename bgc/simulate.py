@@ -636,7 +636,9 @@ def _result(module, solver: Solver, run: _Run, stats: Stats, projection, monitor
         singular = _stopped_singular(problem, monitor, run, t_all, x_all)
         if singular:       # the integrator gave up short of the singular pose: say why
             message, hint = f"{singular} ({message})", _SINGULAR_HINT
-    if failed and not run.interrupted and hint == _FAIL_HINT and len(x_all):
+    # (a DAE's, M dx/dt = f with M singular, is not the spectrum of df/dx: not judged)
+    if failed and not run.interrupted and hint == _FAIL_HINT and len(x_all) \
+            and problem.mass is None:
         t, _ = _last_finite(run, t_all, x_all)
         unstable = t is not None and _unstable(module, p, float(t_all[0]), x_all[0], t)
         if unstable:

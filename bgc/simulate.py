@@ -113,9 +113,13 @@ def _singular(monitor, seg: Segment, drop: float) -> str | None:
     return _singular_message(seg.t_reached, monitor.lost(seg.x_end, drop))
 
 
-def _singular_message(t: float, lost: str | None) -> str | None:
+def _singular_message(t: float, lost: list[str] | None) -> str | None:
+    """The message of a singular configuration at t where the joint directions ``lost``
+    became dependent (at most 12 named: a mechanism of N repeated loops loses N ranks at
+    once, A02 3N directions)."""
     return lost and (f"singular configuration at t = {t:.6g}: the constraints lost rank, "
-                     f"joint directions {lost} became dependent")
+                     f"joint directions {names_where(lost, [True] * len(lost), most=12)} "
+                     "became dependent")
 
 
 # how far past the last state of a native loop that failed its rhs is looked at for the

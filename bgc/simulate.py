@@ -88,6 +88,20 @@ _FAIL_HINT = ("tighten --rtol/--atol, try another --solver, or check the model f
               "singularity at that time")
 
 
+_UNSTABLE_HINT = ("the model's own solution grows that fast: check the signs of its laws "
+                  "(dampers' c > 0) and, under --method parasitic, a joint actuator whose "
+                  "law reads body velocities: it measures the joints' stiff directions too "
+                  "but acts along their free ones only, which can feed energy into them "
+                  "(an ideal-joint method, zcp, lagrange or augmented, has no such "
+                  "directions)")
+
+# a failed run is said to start unstable where its linearisation at the start grows by
+# more than this many e-folds over the time the run reached
+UNSTABLE_EFOLDS = 10.0
+# ... for a model of at most so many states (a dense eigenvalue problem, on failure only)
+UNSTABLE_MAX_STATES = 2000
+
+
 _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became dependent); "
                   "use --method augmented, whose ideal joints pass singular configurations "
                   "(redundant constraints too), or --method parasitic (compliant joints), or "
@@ -96,9 +110,92 @@ _SINGULAR_HINT = ("the mechanism reached a dead point (its constraints became de
 
 def _singular(monitor, seg: Segment, drop: float) -> str | None:
     """The message for a segment that ended at a singular configuration, else None."""
-    lost = monitor.lost(seg.x_end, drop)
-    return lost and (f"singular configuration at t = {seg.t_reached:.6g}: the constraints "
-                     f"lost rank, joint directions {lost} became dependent")
+    return _singular_message(seg.t_reached, monitor.lost(seg.x_end, drop))
+
+
+def _singular_message(t: float, lost: list[str] | None) -> str | None:
+    """The message of a singular configuration at t where the joint directions ``lost``
+    became dependent (at most 12 named: a mechanism of N repeated loops loses N ranks at
+    once, A02 3N directions)."""
+    return lost and (f"singular configuration at t = {t:.6g}: the constraints lost rank, "
+                     f"joint directions {names_where(lost, [True] * len(lost), most=12)} "
+                     "became dependent")
+
+
+# how far past the last state of a native loop that failed its rhs is looked at for the
+# state where the model refused (``_refused_ahead``): Radau's step collapses onto that
+# edge (to ~1e-15 s), rk4 fails within its fixed step
+REFUSED_REACH = 1e-6
+
+
+def _stopped_singular(problem: Problem, monitor, run: _Run, t_all, x_all) -> str | None:
+    """The message for a failed constrained run that stopped at a singular configuration,
+    else None. At its last finite state the constraints' conditioning has fallen
+    ``LOST_RANK``-fold from the start, or the generated constraint block refused there or
+    just after (its rhs not finite: ``Problem.non_finite``, or ``_refused_ahead``) and
+    solves that state keeping a lower rank: the block, J M^-1 J^T, squares the
+    constraints' conditioning and spreads it by the masses and inertias, so it refuses
+    before their own conditioning has fallen much (A02 N = 40: 2.4-fold; its links' axial
+    moments are 1e-6 of the others)."""
+    t, x = _last_finite(run, t_all, x_all)
+    if x is None:
+        return None
+    lost = monitor.lost(x, consistent.LOST_RANK)
+    module = problem.module
+    if lost is None and consistent.RANK_PARAM in module.PARAM_NAMES:
+        at = problem.non_finite
+        if at is None or not at[0] >= t:       # none, or a trial before the last state
+            at = _refused_ahead(problem, t, x)
+        if at is not None and _block_rank(module, at[1], problem.p, at[0]) > 0:
+            lost = monitor.dependent(at[1])
+    return _singular_message(t, lost)
+
+
+def _unstable(module, p, t0: float, x0, t: float) -> str | None:
+    """Why a run that failed at ``t`` could not go on, where its model is unstable at the
+    start (t0, x0): the eigenvalue of the Jacobian with the largest real part, where it
+    grows by more than ``UNSTABLE_EFOLDS`` e-folds by ``t``, and the states it moves most;
+    else None. (A05 under parasitic: +4.3e4 1/s, its spring-dampers' law reads body
+    velocities across the parasitic joints: it spent a million steps by t = 1 ms.)"""
+    if len(x0) > UNSTABLE_MAX_STATES or not t > t0:
+        return None
+    J = np.asarray(module.jac(t0, x0, p))
+    if not np.all(np.isfinite(J)):
+        return None
+    w, V = np.linalg.eig(J)
+    k = int(np.argmax(w.real))
+    if not w[k].real * (t - t0) > UNSTABLE_EFOLDS:
+        return None
+    top = np.argsort(-np.abs(V[:, k]))[:3]
+    lam = f"{w[k].real:.3g}" + (f" +- {abs(w[k].imag):.3g}j" if w[k].imag else "")
+    return (f"the model is unstable at t = {t0:g}: its linearisation there grows e-fold "
+            f"every {1 / w[k].real:.2g} s (eigenvalue {lam} 1/s, mostly in "
+            f"{', '.join(module.STATE_NAMES[i] for i in top)})")
+
+
+def _last_finite(run: _Run, t_all, x_all):
+    """The last state of a run that is finite, and its time ((None, None): none)."""
+    seg = run.last
+    if seg is not None and np.all(np.isfinite(seg.x_end)):
+        return seg.t_reached, np.asarray(seg.x_end, dtype=np.float64)
+    rows = np.flatnonzero(np.all(np.isfinite(x_all), axis=1))
+    return (float(t_all[rows[-1]]), x_all[rows[-1]]) if len(rows) else (None, None)
+
+
+def _refused_ahead(problem: Problem, t: float, x):
+    """The first state at (t, x) or ahead along its rate (steps growing tenfold up to
+    rk4's step, or ``REFUSED_REACH`` of t) where the rhs is not finite, as (t, x); None
+    if there is none."""
+    module, p = problem.module, problem.p
+    f = module.rhs(t, x, p)
+    if not np.all(np.isfinite(f)):
+        return t, x
+    reach = problem.step or REFUSED_REACH * max(1.0, abs(t))
+    for h in reach * np.logspace(-12, 0, 13):
+        y = x + h * f
+        if not np.all(np.isfinite(module.rhs(t + h, y, p))):
+            return t + h, y
+    return None
 
 
 def _drifted(module, p, t, g, limit) -> tuple[str, str]:
@@ -182,14 +279,25 @@ def _refuse_non_finite(module, x, p, t):
 
 def _block_rank(module, x, p, t) -> int:
     """The largest rank below the one set in ``p`` that the generated constraint block
-    solve keeps at (t, x) with a finite rhs (0: none)."""
+    solve keeps at (t, x) with a finite rhs (0: none). The block refuses (NaN) where the
+    last singular value it keeps falls below its cut, so a lower rank stays finite where
+    a higher one is: bisection, a few rhs calls whatever the rank (A02 N = 40: 485)."""
     i = list(module.PARAM_NAMES).index(consistent.RANK_PARAM)
     q = np.array(p, dtype=np.float64)
-    for k in range(int(p[i]) - 1, 0, -1):
+
+    def finite(k: int) -> bool:
         q[i] = k
-        if np.all(np.isfinite(module.rhs(t, x, q))):
-            return k
-    return 0
+        return bool(np.all(np.isfinite(module.rhs(t, x, q))))
+
+    lo, hi = 1, int(p[i]) - 1          # finite at lo (once checked), not above hi
+    if hi < 1 or finite(hi):
+        return max(hi, 0)
+    if not finite(lo):
+        return 0
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if finite(mid) else (lo, mid)
+    return lo
 
 
 def _culprit_params(module, x, p, t) -> list[str]:
@@ -517,15 +625,28 @@ def _result(module, solver: Solver, run: _Run, stats: Stats, projection, monitor
         # a state gone non-finite has no drift: NaN there, the run's message says why
         stats.drift_position = float(np.nanmax(g_t, initial=0.0))
         stats.drift_velocity = float(np.nanmax(v_t, initial=0.0))
-        singular = None if ok or run.interrupted or hint == _SINGULAR_HINT or monitor is None \
-            else _singular(monitor, run.last, consistent.LOST_RANK)
-        if singular:       # the integrator gave up short of the singular pose: say why
-            message, hint = f"{singular} ({message})", _SINGULAR_HINT
         limit = consistent.drift_limit(module, x_all[0], problem.rtol, problem.atol)
         if ok and check_drift and stats.drift_position > limit:   # joints apart: keep the run
             k = int(np.argmax(g_t > limit))
             ok, message, hint = False, *_drifted(module, p, t_all[k], g_t[k], limit)
             t_all, x_all, y_all = t_all[:k + 1], x_all[:k + 1], y_all[:k + 1]
+    failed = not run.ok
+    if ok and not np.all(np.isfinite(x_all)):    # an integrator went on through NaN (lsoda)
+        k = int(np.argmax(~np.all(np.isfinite(x_all), axis=1)))
+        ok, failed, hint = False, True, "check the model's parameters and laws"
+        message = f"the solution became non-finite at t = {t_all[k]:.6g}"
+        t_all, x_all, y_all = t_all[:k], x_all[:k], y_all[:k]       # the results so far
+    if failed and monitor is not None and not run.interrupted and hint != _SINGULAR_HINT:
+        singular = _stopped_singular(problem, monitor, run, t_all, x_all)
+        if singular:       # the integrator gave up short of the singular pose: say why
+            message, hint = f"{singular} ({message})", _SINGULAR_HINT
+    # (a DAE's, M dx/dt = f with M singular, is not the spectrum of df/dx: not judged)
+    if failed and not run.interrupted and hint == _FAIL_HINT and len(x_all) \
+            and problem.mass is None:
+        t, _ = _last_finite(run, t_all, x_all)
+        unstable = t is not None and _unstable(module, p, float(t_all[0]), x_all[0], t)
+        if unstable:
+            message, hint = f"{message}; {unstable}", _UNSTABLE_HINT
     result = Result(t_all, x_all, y_all, tuple(module.STATE_NAMES),
                     tuple(module.OUTPUT_NAMES), solver.name, stats, ok, message, projection,
                     p)
@@ -533,8 +654,4 @@ def _result(module, solver: Solver, run: _Run, stats: Stats, projection, monitor
         raise Interrupted(message, result=result, hint=hint)
     if not ok:
         raise SimulationError(message, result=result, hint=hint)
-    if not np.all(np.isfinite(x_all)):
-        bad = t_all[np.argmax(~np.all(np.isfinite(x_all), axis=1))]
-        raise SimulationError(f"the solution became non-finite at t = {bad:.6g}",
-                              result=result, hint="check the model's parameters and laws")
     return result

@@ -118,13 +118,24 @@ class Problem:
     # a constrained run's rank monitor (``consistent.RankMonitor``), among its events too:
     # native Radau checks it in its loop (``bgc.solvers.rank``), the others as an event
     monitor: object = None
+    # the last (t, x) with x finite where ``rhs`` or ``jac`` was not (the integrators
+    # driven from Python call them; native loops do not): where a failed run's model
+    # refused, e.g. a constraint block that lost rank (``simulate``)
+    non_finite: tuple | None = None
 
     def budget(self, counts: Counts) -> int | None:
         """Steps left of the run's budget after ``counts`` (None: no budget)."""
         return max(self.max_steps - (counts.steps or 0), 0) if self.max_steps else None
 
     def rhs(self, t, x):
-        return self.module.rhs(t, x, self.p)
+        return self._seen(t, x, self.module.rhs(t, x, self.p))
+
+    def _seen(self, t, x, value):
+        """``value`` (of rhs or jac at (t, x)); where it is not finite at a finite x, (t, x)
+        kept as ``non_finite``."""
+        if not np.isfinite(value).all() and np.isfinite(x).all():
+            self.non_finite = (float(t), np.array(x, dtype=np.float64))
+        return value
 
     @functools.cached_property
     def lu_plan(self):
@@ -161,7 +172,7 @@ class Problem:
         return out
 
     def jac(self, t, x):
-        return self.module.jac(t, x, self.p)
+        return self._seen(t, x, self.module.jac(t, x, self.p))
 
 
 class Solver(abc.ABC):

@@ -339,7 +339,8 @@ class RankMonitor:
         """The minor's determinant as (sign, log|det|): a determinant of hundreds of rows
         over- or underflows doubles where its logarithm does not."""
         K = self._rows(x)[0]
-        sign, logdet = np.linalg.slogdet(K[np.ix_(self.rows, self.cols)])
+        with np.errstate(invalid="ignore"):     # NaN at a state gone non-finite (lsoda)
+            sign, logdet = np.linalg.slogdet(K[np.ix_(self.rows, self.cols)])
         return float(sign), float(logdet)
 
     def repick(self, x) -> None:
@@ -368,15 +369,22 @@ class RankMonitor:
         self.repick(x)
         return True
 
-    def lost(self, x, drop: float = LOST_RANK) -> str | None:
+    def lost(self, x, drop: float = LOST_RANK) -> list[str] | None:
         """If the constraints at ``x`` have lost (or nearly lost: conditioning ``drop``
         times worse than at the start) the rank they had, the joint directions of the new
         dependency (left out: the redundancy there was at the start)."""
-        K, names, _ = self._scaled(x)
+        K = self._scaled(x)[0]
         if _conditioning(K, self.rank) > max(RANK_TOL, self.projection.conditioning / drop):
             return None
+        return self.dependent(x)
+
+    def dependent(self, x) -> list[str]:
+        """The joint directions of the dependency the constraints at ``x`` come nearest
+        (their smallest kept singular value's and beyond), the start's redundancy left
+        out: those of a singular configuration at or near ``x``."""
+        K, names, _ = self._scaled(x)
         near = np.linalg.svd(K)[0][:, self.rank - 1:]
         # the combination of the near-null rows farthest from the start's redundancy
         off = near - self.start_null @ (self.start_null.T @ near)
         u = np.abs(near @ np.linalg.svd(off)[2][0])
-        return ", ".join(n for n, w in zip(names, u) if w > 0.05 * u.max())
+        return [n for n, w in zip(names, u) if w > 0.05 * u.max()]

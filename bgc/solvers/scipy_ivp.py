@@ -35,19 +35,15 @@ class ScipySolver(Solver):
         import scipy.integrate  # noqa: F401
 
     def integrate(self, t0, t1, x0, t_eval, events=()):
-        from scipy.integrate import solve_ivp
         problem = self.problem
-        kw = {"jac": problem.jac} if self.implicit else {}
         stop = StopEvent(problem, self.counts, span=t1 - t0)
         try:
-            sol = solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=problem.rtol,
-                            atol=problem.atol, dense_output=True, events=[*events, stop],
-                            max_step=problem.max_step, **kw)
+            sol = self._solve_ivp(t0, t1, x0, [*events, stop])
         except (ValueError, np.linalg.LinAlgError) as exc:
             # scipy's LU refuses a Newton matrix with NaN in it ("array must not contain
             # infs or NaNs"): the state left the model's domain after the last step
             t_ok, x_ok = stop.last if stop.last[0] is not None else (t0, x0)
-            return Segment(np.empty((0, len(x0))), np.array(x_ok), t_ok, False,
+            return Segment(self._replay(t0, t_ok, x0, t_eval), np.array(x_ok), t_ok, False,
                            f"{self.name} stopped after t = {t_ok:.6g} ({exc})"
                            + fastest(problem, t_ok, x_ok))
         self.counts.add(steps=max(len(sol.t) - 1, 0), rhs_calls=sol.nfev,
@@ -68,6 +64,32 @@ class ScipySolver(Solver):
                                interrupted=stop.interrupted)
             return Segment(x_eval, x_end, t_ok, False, "", event=k)
         return Segment(_dense(sol, t_eval, len(x0)), x_end, t_ok, True)
+
+    def _solve_ivp(self, t0, t1, x0, events):
+        from scipy.integrate import solve_ivp
+        problem = self.problem
+        kw = {"jac": problem.jac} if self.implicit else {}
+        return solve_ivp(problem.rhs, (t0, t1), x0, method=self.method, rtol=problem.rtol,
+                         atol=problem.atol, dense_output=True, events=events,
+                         max_step=problem.max_step, **kw)
+
+    def _replay(self, t0, t_ok, x0, t_eval) -> np.ndarray:
+        """The outputs up to ``t_ok`` of a segment whose solve_ivp raised after it (its
+        dense output went with the exception): the same integration again, ending there,
+        takes the same steps; its work is counted as the run's up to there."""
+        if not t_ok > t0:
+            return np.empty((0, len(x0)))
+        refused = self.problem.non_finite        # where the run itself failed
+        try:
+            sol = self._solve_ivp(t0, t_ok, x0, [])
+        except (ValueError, np.linalg.LinAlgError):
+            return np.empty((0, len(x0)))
+        finally:
+            self.problem.non_finite = refused
+        self.counts.add(steps=max(len(sol.t) - 1, 0), rhs_calls=sol.nfev,
+                        jac_calls=sol.njev, lu_decompositions=sol.nlu)
+        return _dense(sol, t_eval[t_eval <= t_ok], len(x0)) if sol.sol is not None \
+            else np.empty((0, len(x0)))
 
 
 class Bdf(ScipySolver):

@@ -76,9 +76,12 @@ class SundialsSolver(Solver):
         return solver.solve(tspan, x0)
 
     def integrate(self, t0, t1, x0, t_eval, events=()):
-        # Ctrl-C stops it at the end of a step (SUNDIALS calls events between steps too,
-        # so they do not count its steps: the step budget is its own MAX_STEPS)
-        stop = StopEvent(self.problem, self.counts, budget=False)
+        # Ctrl-C or a collapsed step size stops it at the end of a step (SUNDIALS calls
+        # events between steps too, so they do not count its steps: the step budget is
+        # its own MAX_STEPS; a thousand calls in a row each a tiny step apart are a
+        # collapse all the same: a NaN rhs had CVODE and IDA take steps of 1e-18 s, with
+        # t + h = t, for ever)
+        stop = StopEvent(self.problem, self.counts, budget=False, span=t1 - t0)
         watched = [*events, stop]
         solver = self._solver(watched)
         # output times: the segment's start and end always, so the end state is exact
@@ -99,9 +102,10 @@ class SundialsSolver(Solver):
         keep = np.isin(t, t_eval)
         x_eval = y[keep]
         x_end = np.asarray(sol.y_events[-1] if event is not None else y[-1], dtype=float)
-        if event == len(events):        # the stop event: Ctrl-C
-            return Segment(x_eval, x_end.reshape(-1), float(sol.t_events[-1]), False,
-                           "interrupted", interrupted=True)
+        if event == len(events):        # the stop event: Ctrl-C or a collapse
+            t_stop, x_stop = float(sol.t_events[-1]), x_end.reshape(-1)
+            return Segment(x_eval, x_stop, t_stop, False, stop.why(t_stop, x_stop),
+                           interrupted=stop.interrupted)
         if event is not None:
             return Segment(x_eval, x_end.reshape(-1), float(sol.t_events[-1]), False,
                            event=event)
@@ -117,15 +121,15 @@ class Cvode(SundialsSolver):
 
     def _solver(self, events):
         cvode, _ = _import()
-        m, p = self.problem.module, self.problem.p
+        problem = self.problem
         # SUNDIALS hands read-only views of its vectors: numba would compile the model
         # again for read-only arrays, so the states are copied (0.2 us)
 
         def rhsfn(t, y, yp):
-            yp[:] = m.rhs(t, np.array(y), p)
+            yp[:] = problem.rhs(t, np.array(y))
 
         def jacfn(t, y, yp, JJ):
-            JJ[:, :] = m.jac(t, np.array(y), p)
+            JJ[:, :] = problem.jac(t, np.array(y))
         return cvode.CVODE(rhsfn, jacfn=jacfn, method="BDF", **_options(self.problem),
                            **_events(events, "cvode"))
 
@@ -140,14 +144,15 @@ class Ida(SundialsSolver):
 
     def _solver(self, events):
         _, ida = _import()
-        m, p, M = self.problem.module, self.problem.p, self.problem.mass
+        problem, M = self.problem, self.problem.mass
 
         def resfn(t, y, yp, res):       # the states copied: see Cvode
-            f = m.rhs(t, np.array(y), p)
+            f = problem.rhs(t, np.array(y))
             res[:] = (yp if M is None else M @ yp) - f
 
         def jacfn(t, y, yp, res, cj, JJ):
-            JJ[:, :] = (cj * np.eye(len(y)) if M is None else cj * M) - m.jac(t, np.array(y), p)
+            JJ[:, :] = (cj * np.eye(len(y)) if M is None else cj * M) - problem.jac(
+                t, np.array(y))
         algebraic = None if M is None else np.flatnonzero(~M.any(axis=0))   # x' unused
         return ida.IDA(resfn, jacfn=jacfn, algebraic_idx=algebraic, **_options(self.problem),
                        **_events(events, "ida"))

@@ -22,9 +22,9 @@ ALL_MODELS = sorted(p.stem for p in MODELS.glob("*.yaml"))
 
 
 # models whose default method cannot integrate them over their own run: the IFToMM
-# flyball governor (A05) under parasitic, whose stiff joints on near-massless spins (the
-# shaft's and rods' 5e-6 kg m^2 about their axes) exhaust the step budget within 1 ms
-# (bench part iftomm): its Jacobian is checked under zcp
+# flyball governor (A05) under parasitic, unstable (+4.3e4 1/s: its spring-dampers'
+# actuator law reads body velocities across the parasitic joints) and stopped within
+# 1 ms (tests/system/test_iftomm.py): its Jacobian is checked under zcp
 METHOD = {"flyball_governor": "zcp"}
 
 

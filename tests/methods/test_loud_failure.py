@@ -65,3 +65,43 @@ def test_parasitic_passes_the_singular_configuration(compiled):
     # up to the singular pose the methods agree within the parasitic modelling error
     assert np.abs(par.column("slider_x")[before] - lag.column("slider_x")).max() < 1e-5
     assert par.column("slider_x")[-1] < -0.1          # the rod swung on with the crank
+
+
+NAN_TORQUE = """\
+name: nan_torque
+description: A pendulum whose hinge torque sqrt(0.5 - t) is not a number after 0.5 s.
+gravity: 9.81
+bodies:
+  rod:
+    mass: 2.0
+    com: [0.017450, 0.0, -0.499695]
+    frame: {x: [0, 1, 0], y: [0, 0, 1], z: [1, 0, 0]}
+    inertia: [0.2, 0.2, 0.01]
+joints:
+  hinge: {type: revolute, between: [fixed_frame, rod], at: [0, 0, 0], axis: [0, 1, 0],
+          actuator: "sqrt(0.5 - t)"}
+outputs:
+  x: {expr: rod.x, unit: m}
+"""
+
+
+@pytest.mark.parametrize("solver,why", [("native", "the step size collapsed"),
+                                        ("bdf", "array must not contain infs or NaNs"),
+                                        ("lsoda", "the solution became non-finite")])
+def test_a_model_law_that_fails_is_not_a_singular_configuration(compiled, tmp_path, solver,
+                                                                why):
+    """A constrained run whose rhs stops being finite for a reason of its own (a law out of
+    its domain) is not diagnosed as a singular configuration: the constraint block is not
+    what refuses there (solved at a lower rank it is not finite either), and the
+    constraints are as well conditioned as at the start. The run says how it failed and
+    keeps its results."""
+    path = tmp_path / "nan_torque.yaml"
+    path.write_text(NAN_TORQUE)
+    mod = compiled(path, "lagrange")
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=1.0, rtol=1e-6, atol=1e-8, solver=solver, points=101)
+    msg = str(err.value)
+    assert why in msg and "singular configuration" not in msg, msg
+    assert "augmented" not in (err.value.hint or "")
+    r = err.value.result
+    assert 0.45 < r.t[-1] <= 0.5 and np.isfinite(r.x).all()

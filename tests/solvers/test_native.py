@@ -51,7 +51,8 @@ def test_native_radau_agrees_with_scipy(compiled, name, method, t_end):
 
 
 # a model its default method cannot integrate (the IFToMM flyball governor under
-# parasitic: stiff joints on near-massless spins), checked under another
+# parasitic: unstable, its spring-dampers' law reads body velocities across the
+# parasitic joints), checked under another
 METHOD = {"flyball_governor": "zcp"}
 
 

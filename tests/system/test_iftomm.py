@@ -132,6 +132,85 @@ def test_a02_lagrange_and_zcp_stop_at_the_first_crossings_and_say_why(compiled, 
     assert b0_error(r, 2).max() < 1e-5
 
 
+# A02's first crossing of the horizontal (the exact solution's), by N
+CROSSING = {2: 0.71436, 10: 0.72031, 40: 0.72158}
+
+
+def assert_stopped_at_the_crossing(err, n: int, solver: str = "native"):
+    """A run of lagrange or zcp that stopped where the constraints lose rank: named a
+    singular configuration whose joint directions are the mechanism's (x translations of
+    its pins), the method that passes it named, short of the crossing, the results up to
+    there kept (within the benchmark's limit, rtol 1e-4 .. 1e-6) and the statistics
+    counted."""
+    msg = str(err.value)
+    assert msg.startswith("singular configuration at t = "), msg
+    assert ".tx" in msg.split("joint directions ")[1].split(" became dependent")[0], msg
+    assert "--method augmented" in err.value.hint
+    t_stop = float(msg.split("at t = ")[1].split(":")[0])
+    r = err.value.result
+    assert 0.55 < t_stop < CROSSING[n] + 0.01, t_stop
+    assert 0.5 < r.t[-1] <= t_stop + 1e-6, (t_stop, r.t[-1])
+    assert b0_error(r, n).max() < LIMIT
+    if solver not in ("cvode", "ida"):          # SUNDIALS does not report its steps
+        assert r.stats.steps > 0
+    assert r.stats.rhs_calls > 0
+
+
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_a02_stop_where_the_constraint_block_refuses_is_a_singular_configuration(
+        compiled, monkeypatch, method):
+    """The generated constraint block, J M^-1 J^T kept at the start's rank, refuses (NaN)
+    where its last kept singular value falls below 1e-10 of its largest: with A02's axial
+    moments of 1e-6 it does so short of the crossing, and at N = 10 and 40 the
+    constraints' own conditioning has then fallen only 9 and 2.4-fold, less than
+    ``LOST_RANK``: the run said "the step size collapsed" and named nothing. The block's
+    refusal there, where it solves at a lower rank, is the rank loss itself. N = 2 (a
+    47-fold fall) with ``LOST_RANK`` out of reach takes that path."""
+    from bgc.solvers import consistent
+    monkeypatch.setattr(consistent, "LOST_RANK", 1e12)
+    mod = compiled("n_four_bar", method)
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=1.0, rtol=1e-6, atol=1e-8, points=101)
+    assert_stopped_at_the_crossing(err, 2)
+
+
+@pytest.mark.parametrize("solver", ["bdf", "lsoda", "cvode"])
+def test_a02_lagrange_stops_at_the_crossing_under_the_other_solvers(compiled, solver):
+    """Each integrator fails its own way at the block's refusal: BDF's LU raised on a NaN
+    Jacobian (the run kept no results and no statistics), LSODA went on through NaN to
+    the end (reported as "the solution became non-finite"), CVODE took steps of 1e-18 s
+    with t + h = t for ever. Each now stops and names the singular configuration."""
+    mod = compiled("n_four_bar", "lagrange")
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=1.0, rtol=1e-5, atol=1e-7, points=101, solver=solver)
+    assert_stopped_at_the_crossing(err, 2, solver)
+    assert np.isfinite(err.value.result.x).all()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+def test_a02_lagrange_and_zcp_stop_at_the_crossing_at_n_10_and_40(tmp_path, method):
+    """N = 10 and 40 under native Radau at rtol 1e-4 .. 1e-6 (the block refuses at
+    t = 0.6956 and 0.6144: their crossings are at 0.7203 and 0.7216), and N = 10 under
+    every other solver: a singular configuration, named, the results kept."""
+    from bgc.pipeline import ensure_module
+    from bgc.simulate import SOLVERS
+    for n in (10, 40):
+        mod = ensure_module(MODELS / "n_four_bar.yaml", tmp_path / "gen", method,
+                            constants={"N": n})[0]
+        for rtol in (1e-4, 1e-5, 1e-6):
+            with pytest.raises(SimulationError) as err:
+                simulate(mod, t_end=20.0, rtol=rtol, atol=rtol / 100, points=201)
+            assert_stopped_at_the_crossing(err, n)
+        if n == 10:
+            for solver in SOLVERS:
+                if solver != "native":
+                    with pytest.raises(SimulationError) as err:
+                        simulate(mod, t_end=2.0, rtol=1e-5, atol=1e-7, points=101,
+                                 solver=solver, step=1e-3 if solver == "rk4" else None)
+                    assert_stopped_at_the_crossing(err, n, solver)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("n", [10, 40])
 def test_a02_augmented_at_n(tmp_path, n):
@@ -203,3 +282,48 @@ def test_a05_flyball_governor_every_ideal_method_agrees():
             r = simulate(ensure_module(MODELS / "flyball_governor.yaml", gen, method)[0],
                          t_end=10.0, rtol=1e-6, atol=1e-8, points=201)
             assert np.abs(r.column("s") - s).max() < 2e-5, method
+
+
+def test_a_failed_run_says_where_its_model_starts_unstable():
+    """A run that spends its steps or whose step collapses, on a model whose linearisation
+    at the start grows by more than ``UNSTABLE_EFOLDS`` e-folds by then, says so: the
+    growth rate and the states it moves (A05 under parasitic: below). A stable model's,
+    or a slow growth's over that time, does not."""
+    from types import SimpleNamespace
+
+    from bgc.simulate import _unstable
+    A = np.array([[0.0, 1.0, 0.0], [4.0e8, -1.0e3, 0.0], [0.0, 0.0, -5.0]])  # +1.95e4 1/s
+    mod = SimpleNamespace(jac=lambda t, x, p: A, STATE_NAMES=("q", "p", "z"))
+    why = _unstable(mod, None, 0.0, np.zeros(3), 1e-3)
+    assert why.startswith("the model is unstable at t = 0: its linearisation there grows "
+                          "e-fold every 5.1e-05 s (eigenvalue 1.95e+04 1/s, mostly in p, q")
+    assert _unstable(mod, None, 0.0, np.zeros(3), 1e-4) is None        # 2 e-folds
+    B = A * [[1, 1, 1], [-1, 1, 1], [1, 1, 1]]                  # a damped oscillator
+    stable = SimpleNamespace(jac=lambda t, x, p: B, STATE_NAMES=("q", "p", "z"))
+    assert _unstable(stable, None, 0.0, np.zeros(3), 1.0) is None
+
+
+@pytest.mark.slow
+def test_a05_under_parasitic_stops_saying_its_model_is_unstable(compiled):
+    """A05's spring-dampers are joint actuators whose law reads the bodies' velocities:
+    under parasitic they measure the joints' stiff directions too but act along the free
+    ones only, and their damping (4e4 N s/m) feeds the stiff modes: eigenvalues up to
+    +4.3e4 1/s at t = 0 (with c_s = 0 none above 0.12 1/s). The slider's momentum grows
+    from 0 to 4e4 N s within a millisecond and the steps follow it: the run spent its
+    budget there, saying only that. It says why now."""
+    mod = compiled("flyball_governor", "parasitic")
+    p = np.array(mod.PARAMS, dtype=np.float64)
+    x, p, _ = prepare(mod, mod.initial_state(p), p, 0.0)
+    grow = np.linalg.eigvals(mod.jac(0.0, x, p)).real.max()
+    assert 4e4 < grow < 5e4
+    q = p.copy()
+    q[list(mod.PARAM_NAMES).index("c_s")] = 0.0
+    assert np.linalg.eigvals(mod.jac(0.0, x, q)).real.max() < 1.0
+    with pytest.raises(SimulationError) as err:
+        simulate(mod, t_end=10.0, max_steps=5000)
+    msg = str(err.value)
+    assert "the step budget (5000 steps) is spent at t = 0.000" in msg, msg
+    assert "the model is unstable at t = 0: its linearisation there grows e-fold every " \
+           "2.3e-05 s (eigenvalue 4.33e+04 1/s" in msg, msg
+    assert "--method parasitic, a joint actuator whose law reads body velocities" in \
+        err.value.hint

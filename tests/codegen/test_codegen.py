@@ -26,9 +26,17 @@ ALL_MODELS = sorted(p.stem for p in MODELS.glob("*.yaml"))
 # shaft's and rods' 5e-6 kg m^2 about their axes) exhaust the step budget within 1 ms
 # (bench part iftomm): its Jacobian is checked under zcp
 METHOD = {"flyball_governor": "zcp"}
+# make test checks one model of each kind (scalar networks, a table, events, loops and
+# derivative causality, control blocks, a free body, revolute and spherical joints, closed
+# loops: the four-bar, the slider-crank and its isosceles variant); these the same kinds
+# again (Andrews' and Bricard's loops as the four-bar's, the heavy top's spherical joint
+# as the double pendulum's, A01's revolute as the pendulum's, the zcp loops of A05 as the
+# slider-crank's in test_zcp), in make test-all
+ALSO = {"andrews", "bricard", "heavy_top", "simple_pendulum", "flyball_governor"}
 
 
-@pytest.mark.parametrize("name", model_params())
+@pytest.mark.parametrize("name", model_params([n for n in ALL_MODELS if n not in ALSO]) + [
+    pytest.param(n, marks=pytest.mark.slow) for n in sorted(ALSO)])
 def test_jacobian_matches_finite_differences(compiled, name):
     mod = compiled(name, METHOD.get(name, "parasitic"))
     rng = np.random.default_rng(7)

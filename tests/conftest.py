@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import signal
 import sys
 
 # One BLAS thread per process: `make test` runs a pytest-xdist worker per core, and
@@ -46,6 +47,61 @@ class _Compiled:
         fcntl.flock(self.lock, fcntl.LOCK_EX)
         fcntl.flock(self.lock, fcntl.LOCK_UN)
         return True
+
+
+_COMPILES = pytest.StashKey[list]()
+
+
+def pytest_sessionstart(session):
+    """In the controller of a distributed run (``make test``: ``pytest -n 2``), before any
+    test: bgc's one-time compiles (the native Radau and RK4 step loops into numba's cache,
+    the FMU's Radau object into bgc's; 27 + 4 + 28 s of CPU cold) started in children of
+    their own while the workers start. Every process of the run, the CLI's children among
+    them, then finds them cached: none compiles them again beside a worker that is still
+    compiling them (``native.precompile`` cannot see another process's compile)."""
+    config = session.config
+    if hasattr(config, "workerinput") or not config.pluginmanager.has_plugin("dsession"):
+        return
+    from bgc.solvers import native, radau5, rk4
+    jobs = [native.Precompile(name) for name, mod in (("radau5", radau5), ("rk4", rk4))
+            if not native.cached(getattr(mod, name))]
+    config.stash[_COMPILES] = [*jobs, _FmuObject()]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session):
+    """The controller waits for those compiles before it hands out the first test (the
+    workers import and collect meanwhile); a compile that failed is done again, and its
+    error shown, where a test needs it."""
+    jobs = session.config.stash.get(_COMPILES, [])
+    try:
+        for job in jobs:
+            job.wait()
+    except BaseException:           # Ctrl-C: no compiler left behind
+        for job in jobs:
+            job.stop()
+        raise
+
+
+class _FmuObject:
+    """``bgc.export.radau.object_code()`` in a child (which compiles in a child of its
+    own, hence a session of their own, stopped together); ``wait``/``stop`` as
+    ``native.Precompile``'s."""
+
+    def __init__(self):
+        import subprocess
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", "from bgc.export import radau; radau.object_code()"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True)
+
+    def wait(self) -> bool:
+        return self.proc.wait() == 0
+
+    def stop(self):
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -23,6 +23,10 @@ TUTORIAL_MODEL = ROOT / "docs" / "tutorial" / "absorber.yaml"
 # one-leg SARIB is checked against the rig in test_sarib and in bench's symmetry part at
 # CI scale; the A02 N-four-bar's 20 s through its singular positions)
 SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive", "n_four_bar"}
+# the integrator of a test that checks a model against a closed form or an invariant:
+# bgc's native Radau in make test, scipy's Radau (the independent implementation, tens of
+# times the CPU on parasitic joints' stiffness) in make test-all as well
+REFERENCE_SOLVERS = ["native", pytest.param("radau", marks=pytest.mark.slow)]
 
 
 def model_params(names=None):

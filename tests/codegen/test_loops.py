@@ -9,22 +9,23 @@ from helpers import MODELS
 
 from bgc.codegen.emit import import_module
 from bgc.codegen.equations import LinearBlock
-from bgc.pipeline import compile_model
+from bgc.pipeline import build, compile_model
 from bgc.simulate import simulate
 
 
 @pytest.fixture(scope="module")
-def both(tmp_path_factory):
-    """both(name) -> [(system, module) solved symbolically, (system, module) numerically]."""
+def both(tmp_path_factory, compiled):
+    """both(name) -> [(system, module) solved symbolically, (system, module) numerically]:
+    the symbolic one is the default build (loops up to ``MAX_SYMBOLIC_LOOP`` tearing
+    variables solved symbolically), the session's module."""
     root, cache = tmp_path_factory.mktemp("loops"), {}
 
     def get(name):
         if name not in cache:
-            cache[name] = []
-            for limit, sub in ((6, "sym"), (0, "num")):
-                c, path = compile_model(MODELS / f"{name}.yaml", root / sub,
-                                        max_symbolic_loop=limit)
-                cache[name].append((c.system, import_module(path)))
+            model = MODELS / f"{name}.yaml"
+            c, path = compile_model(model, root / "num", max_symbolic_loop=0)
+            cache[name] = [(build(model).system, compiled(name)),
+                           (c.system, import_module(path))]
         return cache[name]
     return get
 

@@ -41,7 +41,7 @@ def test_torque_free_body_conserves_energy_and_angular_momentum(compiled):
 @pytest.mark.parametrize("inertia, axis, unstable", [
     ([0.1, 0.2, 0.3], 0, False),
     ([0.2, 0.1, 0.3], 0, True),     # the intermediate moment on body x
-    ([0.1, 0.2, 0.3], 2, False)])
+    pytest.param([0.1, 0.2, 0.3], 2, False, marks=pytest.mark.slow)])   # as body x's
 def test_rotation_about_the_intermediate_axis_is_unstable(tmp_path, inertia, axis, unstable):
     """Spin about principal axis `axis` with a 1e-4 rad/s disturbance on the other two.
     The spin is about body x or z, never body y: Cardan angles (measured from the initial

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import fd_jacobian
+from helpers import REFERENCE_SOLVERS, fd_jacobian
 from scipy.special import ellipk
 
 from bgc.codegen.emit import import_module
@@ -24,9 +24,10 @@ def crossings(t, x):
     return t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i])
 
 
-def test_revolute_pendulum_period_energy_and_hinge_force(compiled):
+@pytest.mark.parametrize("solver", REFERENCE_SOLVERS)
+def test_revolute_pendulum_period_energy_and_hinge_force(compiled, solver):
     mod = compiled("pendulum")
-    r = simulate(mod, t_end=4.0, rtol=1e-9, atol=1e-11, solver="radau", points=4001)
+    r = simulate(mod, t_end=4.0, rtol=1e-9, atol=1e-11, solver=solver, points=4001)
     m, d, g, theta0 = 2.0, 0.5, 9.81, np.radians(2.0)
     I_O = 0.2 + m * d ** 2
     # exact period of the (finite-amplitude) physical pendulum; 2 pi sqrt(I/(m g d)) for
@@ -95,14 +96,15 @@ outputs:
 """
 
 
-def test_spherical_pendulum_conserves_energy_and_vertical_angular_momentum(tmp_path):
+@pytest.mark.parametrize("solver", REFERENCE_SOLVERS)
+def test_spherical_pendulum_conserves_energy_and_vertical_angular_momentum(tmp_path, solver):
     """Gravity and the pivot force have no moment about the vertical through the pivot, so
     L_z is conserved; with no functional damping, so is the energy (up to what the
     parasitic dampers dissipate)."""
     f = tmp_path / "spherical_pendulum.yaml"
     f.write_text(SPHERICAL_PENDULUM)
     _, path = compile_model(f, tmp_path / "gen")
-    r = simulate(import_module(path), t_end=3.0, rtol=1e-9, atol=1e-11, solver="radau")
+    r = simulate(import_module(path), t_end=3.0, rtol=1e-9, atol=1e-11, solver=solver)
     E, Lz = r.column("energy"), r.column("Lz")
     assert abs(Lz[0] - 1.5 * 0.3856725658 * 1.2 - 0.01 * 1.2855752194) < 1e-9
     # the pivot load (~15 N) deflects the parasitic spring by F/k: F^2/(2k) ~ 1e-5 J
@@ -130,7 +132,8 @@ outputs:
 """
 
 
-def test_body_of_negligible_mass_between_two_revolutes_is_a_universal_joint(tmp_path):
+@pytest.mark.parametrize("solver", REFERENCE_SOLVERS)
+def test_body_of_negligible_mass_between_two_revolutes_is_a_universal_joint(tmp_path, solver):
     """Int1 (mass 0) between a revolute about x and a revolute about y behaves as a
     universal joint: its twist is solved from the balance of its joints' forces."""
     runs = {}
@@ -149,7 +152,7 @@ def test_body_of_negligible_mass_between_two_revolutes_is_a_universal_joint(tmp_
             assert not any(st.element.startswith("int1__") and ".p" in st.name
                            for st in c.system.states)      # no made-up inertia
         runs[name] = simulate(import_module(path), t_end=1.5, rtol=1e-9, atol=1e-11,
-                              solver="radau")
+                              solver=solver)
     a, b = runs["chain"], runs["univ"]
     swing = np.ptp(b.column("x"))
     assert swing > 0.15                                       # it swings through -0.1..0.1

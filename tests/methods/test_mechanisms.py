@@ -5,14 +5,16 @@ falls as the parasitic stiffness grows."""
 from __future__ import annotations
 
 import numpy as np
-from helpers import slider_closure, stiffer
+import pytest
+from helpers import REFERENCE_SOLVERS, slider_closure, stiffer
 
 from bgc.simulate import simulate
 
 
-def test_slider_crank_closes_its_loop_to_the_parasitic_error(compiled):
+@pytest.mark.parametrize("solver", REFERENCE_SOLVERS)
+def test_slider_crank_closes_its_loop_to_the_parasitic_error(compiled, solver):
     mod = compiled("slider_crank")
-    runs = [simulate(mod, t_end=1.0, rtol=1e-8, atol=1e-10, solver="radau",
+    runs = [simulate(mod, t_end=1.0, rtol=1e-8, atol=1e-10, solver=solver,
                      params=stiffer(mod, f)) for f in (1.0, 10.0)]
     (err1, th), (err10, _) = (slider_closure(r) for r in runs)
     assert np.unwrap(th)[-1] - th[0] > 2 * np.pi               # the crank turns over

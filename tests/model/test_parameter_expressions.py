@@ -46,20 +46,22 @@ def test_the_expression_is_kept_and_no_joint_parameter_made_for_it():
     assert {"rail__tx_k", "rail__tx_c", "rail__tx_preload"} <= set(lit.parameters)
 
 
-def test_minus_p_retunes_it_without_recompiling_and_matches_the_numbers(tmp_path):
+# a value -p gives (650) and the model's own (400: the number the expression takes
+# unretuned, in make test-all), each against the model written with the number
+@pytest.mark.parametrize("k_s", [650.0, pytest.param(400.0, marks=pytest.mark.slow)])
+def test_minus_p_retunes_it_without_recompiling_and_matches_the_numbers(tmp_path, k_s):
     _, path = compile_model(_model(), tmp_path)
     mod = import_module(path)
     names = list(mod.PARAM_NAMES)
-    for k_s in (400.0, 650.0):
-        p = mod.PARAMS.copy()
-        p[names.index("k_s")] = k_s
-        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
-        _, lit_path = compile_model(_model(f"slider_{int(k_s)}", k=f"{2 * k_s}", c="2.0",
-                                           f="5.0"), tmp_path)
-        ref = simulate(import_module(lit_path), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
-        assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
-        # it oscillates about the preload's deflection f0 / (2 k_s), at sqrt(2 k_s / m)
-        assert np.mean(r.column("x")[10:]) == pytest.approx(5.0 / (2 * k_s), rel=0.2)
+    p = mod.PARAMS.copy()
+    p[names.index("k_s")] = k_s
+    r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+    _, lit_path = compile_model(_model(f"slider_{int(k_s)}", k=f"{2 * k_s}", c="2.0",
+                                       f="5.0"), tmp_path)
+    ref = simulate(import_module(lit_path), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+    assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
+    # it oscillates about the preload's deflection f0 / (2 k_s), at sqrt(2 k_s / m)
+    assert np.mean(r.column("x")[10:]) == pytest.approx(5.0 / (2 * k_s), rel=0.2)
 
 
 @pytest.mark.parametrize("k, c, f, msg", [
@@ -91,21 +93,23 @@ simulation: {{t_end: 0.5}}
 """
 
 
-def test_a_mass_and_moments_given_by_parameters_retune_without_recompiling(tmp_path):
+# a value -p gives (3) and the model's own (2, in make test-all), each against the model
+# written with the numbers
+@pytest.mark.parametrize("m_c", [3.0, pytest.param(2.0, marks=pytest.mark.slow)])
+def test_a_mass_and_moments_given_by_parameters_retune_without_recompiling(tmp_path, m_c):
     m = loads(CART.format(name="cart", m="m_c", i='"0.05 * m_c"'), "cart.yaml")
     cart = m.bodies["cart"]
     assert cart.mass == 2.0 and cart.mass_expr == symbols.param("m_c")
     assert cart.inertia == (0.1, 0.1, 0.1) and cart.inertia_expr[1] == 0.05 * symbols.param("m_c")
     _, path = compile_model(m, tmp_path)
     mod = import_module(path)
-    for m_c in (2.0, 3.0):
-        p = mod.PARAMS.copy()
-        p[list(mod.PARAM_NAMES).index("m_c")] = m_c
-        r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
-        _, lit = compile_model(loads(CART.format(name=f"cart_{int(m_c)}", m=m_c,
-                                                 i=0.05 * m_c), "cart.yaml"), tmp_path)
-        ref = simulate(import_module(lit), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
-        assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
+    p = mod.PARAMS.copy()
+    p[list(mod.PARAM_NAMES).index("m_c")] = m_c
+    r = simulate(mod, t_end=0.5, rtol=1e-10, atol=1e-12, params=p, points=51)
+    _, lit = compile_model(loads(CART.format(name=f"cart_{int(m_c)}", m=m_c,
+                                             i=0.05 * m_c), "cart.yaml"), tmp_path)
+    ref = simulate(import_module(lit), t_end=0.5, rtol=1e-10, atol=1e-12, points=51)
+    assert np.abs(r.column("x") - ref.column("x")).max() < 1e-9
 
 
 @pytest.mark.parametrize("m, i, msg", [

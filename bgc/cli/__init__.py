@@ -31,6 +31,6 @@ from bgc.cli import (  # noqa: F401
     sweep,
     tune,
 )
-from bgc.cli.app import main
+from bgc.cli.app import entry, main
 
-__all__ = ["main"]
+__all__ = ["entry", "main"]

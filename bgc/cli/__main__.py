@@ -1,5 +1,5 @@
 """``python -m bgc.cli ARGS``: the ``bgc`` command."""
 
-from bgc.cli import main
+from bgc.cli.app import entry
 
-main()
+entry()

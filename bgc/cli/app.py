@@ -7,10 +7,12 @@ form. Ctrl-C exits with status 130 and no traceback.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import json
 import os
 import sys
+import threading
 import traceback
 import warnings
 from pathlib import Path
@@ -145,3 +147,32 @@ def _save_partial(result, kwargs) -> str | None:
 @click.version_option(__version__, prog_name="bgc")
 def main():
     """bgc: compile bond-graph models to fast simulation code."""
+
+
+def entry():
+    """The ``bgc`` console script (and ``python -m bgc.cli``): the command group, then the
+    process ends as soon as the command's output is out and the ``atexit`` handlers ran,
+    without the interpreter's teardown, which frees every object one by one: after a
+    large build, millions of sympy nodes (0.6 s of a 13 s ``bgc compile`` of A02 with 40
+    windows; compilers skip the same work, mypy's ``hard_exit`` too). Where a thread of
+    the command's is still running, the interpreter's own exit waits for it instead."""
+    try:
+        main()
+        code = 0
+    except SystemExit as exc:
+        if exc.code is None or isinstance(exc.code, int):
+            code = exc.code or 0
+        else:
+            print(exc.code, file=sys.stderr)
+            code = 1
+    if any(not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+        sys.exit(code)
+    try:
+        atexit._run_exitfuncs()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):     # a closed pipe: nothing more to say there
+                pass
+        os._exit(code)

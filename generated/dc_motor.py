@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "dc_motor"
 MODEL_FILE = "dc_motor.yaml"
-MODEL_HASH = "24532d2164a62f1d1451b940600ec092"
+MODEL_HASH = "e87a53c0a9f515e4bfad484987e625fb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.2, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_dc_motor_24532d2164a62f1d1451b940600ec092", sys.modules[__name__])
-__name__ = "_bgc_dc_motor_24532d2164a62f1d1451b940600ec092"
+    sys.modules.setdefault("_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb", sys.modules[__name__])
+__name__ = "_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb"
 
 STATE_NAMES = ("L_a.p", "J.p", )
 PARAM_NAMES = ("Ra", "La", "km", "b_m", "ratio", "J_load", "b_load", "T_load", "U", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0"
+_KERNEL_PREFIX = "_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -113,53 +113,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape_ptr = internal constant [15 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 7, i64 8, i64 9, i64 10, i64 12, i64 13, i64 14, i64 16, i64 17]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape_ptr = internal constant [15 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 7, i64 8, i64 9, i64 10, i64 12, i64 13, i64 14, i64 16, i64 17]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape_src = internal constant [17 x i64] [i64 -1, i64 0, i64 -2, i64 2, i64 3, i64 1, i64 4, i64 5, i64 0, i64 3, i64 8, i64 7, i64 9, i64 2, i64 11, i64 10, i64 12]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape_src = internal constant [17 x i64] [i64 -1, i64 0, i64 -2, i64 2, i64 3, i64 1, i64 4, i64 5, i64 0, i64 3, i64 8, i64 7, i64 9, i64 2, i64 11, i64 10, i64 12]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_row = internal constant [4 x i64] [i64 6, i64 6, i64 13, i64 13]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_row = internal constant [4 x i64] [i64 6, i64 6, i64 13, i64 13]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_col = internal constant [4 x i64] [i64 0, i64 1, i64 0, i64 1]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_col = internal constant [4 x i64] [i64 0, i64 1, i64 0, i64 1]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_zero = internal constant [4 x i64] [i64 0, i64 0, i64 0, i64 0]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_zero = internal constant [4 x i64] [i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_k = internal constant [4 x i64] [i64 0, i64 1, i64 2, i64 3]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_k = internal constant [4 x i64] [i64 0, i64 1, i64 2, i64 3]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_i = internal constant [4 x i64] [i64 0, i64 0, i64 1, i64 1]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_i = internal constant [4 x i64] [i64 0, i64 0, i64 1, i64 1]
 
-@_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_j = internal constant [4 x i64] [i64 0, i64 1, i64 0, i64 1]
+@_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_j = internal constant [4 x i64] [i64 0, i64 1, i64 0, i64 1]
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 60
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -218,7 +220,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -249,7 +251,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -307,82 +309,82 @@ ends:
 }
 
 
-define internal void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 15
   %v2 = getelementptr inbounds double, double* %w, i64 32
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 32
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 224, i1 false)
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape(double* %v2, double* %v1, i64 0, i64 14, i64 2, i64* getelementptr inbounds ([15 x i64], [15 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([17 x i64], [17 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_tape_src, i64 0, i64 0))
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape(double* %v2, double* %v1, i64 0, i64 14, i64 2, i64* getelementptr inbounds ([15 x i64], [15 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([17 x i64], [17 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 32
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_scatter(double* %J, double* %v1, i64 4, i64 2, i64 2, i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_col, i64 0, i64 0))
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_scatter(double* %J, double* %v1, i64 4, i64 2, i64 2, i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 32
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_scatter(double* %J, double* %v1, i64 4, i64 0, i64 2, i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_col, i64 0, i64 0))
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_scatter(double* %J, double* %v1, i64 4, i64 0, i64 2, i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 120)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 480)
+  %raw = call i8* @malloc(i64 496)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 120)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 480)
+  %raw = call i8* @malloc(i64 496)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -391,29 +393,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 8
   %v2 = load double, double* %v1, align 8
@@ -495,131 +497,96 @@ entry:
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 8
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x3F847AE147AE147B
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 0
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 1
+  %v3 = getelementptr inbounds double, double* %p, i64 1
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %w, i64 1
   %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 0
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v13
-  %v15 = getelementptr inbounds double, double* %w, i64 2
-  store double %v14, double* %v15, align 8
-  %v16 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = getelementptr inbounds double, double* %p, i64 0
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v11
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %x, i64 1
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 5
   %v17 = load double, double* %v16, align 8
-  %v18 = getelementptr inbounds double, double* %p, i64 5
-  %v19 = load double, double* %v18, align 8
-  %v20 = fdiv double %v17, %v19
+  %v18 = fdiv double 0x3FF0000000000000, %v17
+  %v19 = fmul double 0x3FF0000000000000, %v18
+  %v20 = getelementptr inbounds double, double* %out, i64 2
+  store double %v19, double* %v20, align 8
   %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v20, double* %v21, align 8
-  %v22 = getelementptr inbounds double, double* %p, i64 4
-  %v23 = load double, double* %v22, align 8
-  %v24 = fdiv double %v20, %v23
-  %v25 = getelementptr inbounds double, double* %w, i64 4
-  store double %v24, double* %v25, align 8
-  %v26 = getelementptr inbounds double, double* %p, i64 2
-  %v27 = load double, double* %v26, align 8
-  %v28 = fmul double %v24, %v27
-  %v29 = getelementptr inbounds double, double* %w, i64 5
-  store double %v28, double* %v29, align 8
-  %v30 = fneg double %v14
-  %v31 = fneg double %v28
-  %v32 = fadd double %v4, %v30
-  %v33 = fadd double %v32, %v31
-  %v34 = getelementptr inbounds double, double* %w, i64 6
-  store double %v33, double* %v34, align 8
-  %v35 = fmul double %v10, %v27
-  %v36 = getelementptr inbounds double, double* %w, i64 8
-  store double %v35, double* %v36, align 8
-  %v37 = getelementptr inbounds double, double* %p, i64 3
+  %v22 = load double, double* %v21, align 8
+  %v23 = getelementptr inbounds double, double* %p, i64 4
+  %v24 = load double, double* %v23, align 8
+  %v25 = fdiv double 0x3FF0000000000000, %v24
+  %v26 = fmul double 0x3FF0000000000000, %v25
+  %v27 = getelementptr inbounds double, double* %out, i64 3
+  store double %v26, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %w, i64 4
+  %v29 = load double, double* %v28, align 8
+  %v30 = getelementptr inbounds double, double* %p, i64 2
+  %v31 = load double, double* %v30, align 8
+  %v32 = fmul double 0x3FF0000000000000, %v31
+  %v33 = getelementptr inbounds double, double* %out, i64 4
+  store double %v32, double* %v33, align 8
+  %v34 = getelementptr inbounds double, double* %w, i64 5
+  %v35 = load double, double* %v34, align 8
+  %v36 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v37 = getelementptr inbounds double, double* %w, i64 2
   %v38 = load double, double* %v37, align 8
-  %v39 = fmul double %v24, %v38
-  %v40 = getelementptr inbounds double, double* %w, i64 9
+  %v39 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v40 = getelementptr inbounds double, double* %out, i64 5
   store double %v39, double* %v40, align 8
-  %v41 = fneg double %v39
-  %v42 = fadd double %v35, %v41
-  %v43 = getelementptr inbounds double, double* %w, i64 10
-  store double %v42, double* %v43, align 8
-  %v44 = fdiv double %v42, %v23
-  %v45 = getelementptr inbounds double, double* %w, i64 11
-  store double %v44, double* %v45, align 8
-  %v46 = getelementptr inbounds double, double* %p, i64 6
-  %v47 = load double, double* %v46, align 8
-  %v48 = fmul double %v20, %v47
-  %v49 = getelementptr inbounds double, double* %w, i64 12
-  store double %v48, double* %v49, align 8
-  %v50 = fneg double %v48
-  %v51 = getelementptr inbounds double, double* %p, i64 7
-  %v52 = load double, double* %v51, align 8
-  %v53 = fneg double %v52
-  %v54 = fadd double %v44, %v50
-  %v55 = fadd double %v54, %v53
-  %v56 = getelementptr inbounds double, double* %w, i64 13
-  store double %v55, double* %v56, align 8
-  %v57 = fdiv double 0x3FF0000000000000, %v9
-  %v58 = fmul double 0x3FF0000000000000, %v57
-  %v59 = getelementptr inbounds double, double* %out, i64 0
-  store double %v58, double* %v59, align 8
-  %v60 = fmul double 0x3FF0000000000000, %v13
-  %v61 = getelementptr inbounds double, double* %out, i64 1
+  %v41 = getelementptr inbounds double, double* %out, i64 6
+  store double %v36, double* %v41, align 8
+  %v42 = getelementptr inbounds double, double* %out, i64 7
+  store double 0x3FF0000000000000, double* %v42, align 8
+  %v43 = fmul double 0x3FF0000000000000, %v31
+  %v44 = getelementptr inbounds double, double* %out, i64 8
+  store double %v43, double* %v44, align 8
+  %v45 = getelementptr inbounds double, double* %p, i64 3
+  %v46 = load double, double* %v45, align 8
+  %v47 = fmul double 0x3FF0000000000000, %v46
+  %v48 = getelementptr inbounds double, double* %out, i64 9
+  store double %v47, double* %v48, align 8
+  %v49 = getelementptr inbounds double, double* %w, i64 9
+  %v50 = load double, double* %v49, align 8
+  %v51 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v52 = getelementptr inbounds double, double* %out, i64 10
+  store double %v51, double* %v52, align 8
+  %v53 = getelementptr inbounds double, double* %out, i64 11
+  store double 0x3FF0000000000000, double* %v53, align 8
+  %v54 = getelementptr inbounds double, double* %w, i64 10
+  %v55 = load double, double* %v54, align 8
+  %v56 = fmul double 0x3FF0000000000000, %v25
+  %v57 = getelementptr inbounds double, double* %out, i64 12
+  store double %v56, double* %v57, align 8
+  %v58 = getelementptr inbounds double, double* %p, i64 6
+  %v59 = load double, double* %v58, align 8
+  %v60 = fmul double 0x3FF0000000000000, %v59
+  %v61 = getelementptr inbounds double, double* %out, i64 13
   store double %v60, double* %v61, align 8
-  %v62 = fdiv double 0x3FF0000000000000, %v19
-  %v63 = fmul double 0x3FF0000000000000, %v62
-  %v64 = getelementptr inbounds double, double* %out, i64 2
-  store double %v63, double* %v64, align 8
-  %v65 = fdiv double 0x3FF0000000000000, %v23
-  %v66 = fmul double 0x3FF0000000000000, %v65
-  %v67 = getelementptr inbounds double, double* %out, i64 3
-  store double %v66, double* %v67, align 8
-  %v68 = fmul double 0x3FF0000000000000, %v27
-  %v69 = getelementptr inbounds double, double* %out, i64 4
-  store double %v68, double* %v69, align 8
-  %v70 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v71 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v72 = getelementptr inbounds double, double* %out, i64 5
-  store double %v71, double* %v72, align 8
-  %v73 = getelementptr inbounds double, double* %out, i64 6
-  store double %v70, double* %v73, align 8
-  %v74 = getelementptr inbounds double, double* %out, i64 7
-  store double 0x3FF0000000000000, double* %v74, align 8
-  %v75 = fmul double 0x3FF0000000000000, %v27
-  %v76 = getelementptr inbounds double, double* %out, i64 8
-  store double %v75, double* %v76, align 8
-  %v77 = fmul double 0x3FF0000000000000, %v38
-  %v78 = getelementptr inbounds double, double* %out, i64 9
-  store double %v77, double* %v78, align 8
-  %v79 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v80 = getelementptr inbounds double, double* %out, i64 10
-  store double %v79, double* %v80, align 8
-  %v81 = getelementptr inbounds double, double* %out, i64 11
-  store double 0x3FF0000000000000, double* %v81, align 8
-  %v82 = fmul double 0x3FF0000000000000, %v65
-  %v83 = getelementptr inbounds double, double* %out, i64 12
-  store double %v82, double* %v83, align 8
-  %v84 = fmul double 0x3FF0000000000000, %v47
-  %v85 = getelementptr inbounds double, double* %out, i64 13
-  store double %v84, double* %v85, align 8
-  %v86 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v87 = getelementptr inbounds double, double* %out, i64 14
-  store double %v86, double* %v87, align 8
-  %v88 = getelementptr inbounds double, double* %out, i64 15
-  store double 0x3FF0000000000000, double* %v88, align 8
-  %v89 = getelementptr inbounds double, double* %out, i64 16
-  store double 0x3FF0000000000000, double* %v89, align 8
+  %v62 = getelementptr inbounds double, double* %w, i64 12
+  %v63 = load double, double* %v62, align 8
+  %v64 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v65 = getelementptr inbounds double, double* %out, i64 14
+  store double %v64, double* %v65, align 8
+  %v66 = getelementptr inbounds double, double* %out, i64 15
+  store double 0x3FF0000000000000, double* %v66, align 8
+  %v67 = getelementptr inbounds double, double* %out, i64 16
+  store double 0x3FF0000000000000, double* %v67, align 8
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -658,17 +625,17 @@ entry:
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_dc_motor_24532d2164a62f1d1451b940600ec092_eda27f703cb0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_dc_motor_e87a53c0a9f515e4bfad484987e625fb_3c811a5febf1_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 60, 15   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 62, 15   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 9, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "duffing"
 MODEL_FILE = "duffing.yaml"
-MODEL_HASH = "0fede135cf1d9d4c682429c01ea9df64"
+MODEL_HASH = "4c44327552e5d414bc872b69972e58aa"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64", sys.modules[__name__])
-__name__ = "_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64"
+    sys.modules.setdefault("_bgc_duffing_4c44327552e5d414bc872b69972e58aa", sys.modules[__name__])
+__name__ = "_bgc_duffing_4c44327552e5d414bc872b69972e58aa"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "k3", "x0", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732"
+_KERNEL_PREFIX = "_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -114,53 +114,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape_src = internal constant [4 x i64] [i64 -1, i64 -1, i64 1, i64 0]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape_src = internal constant [4 x i64] [i64 -1, i64 -1, i64 1, i64 0]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_row = internal constant [2 x i64] [i64 2, i64 3]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_row = internal constant [2 x i64] [i64 2, i64 3]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_col = internal constant [2 x i64] [i64 0, i64 0]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_col = internal constant [2 x i64] [i64 0, i64 0]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_zero = internal constant [2 x i64] [i64 0, i64 0]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_zero = internal constant [2 x i64] [i64 0, i64 0]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_k = internal constant [2 x i64] [i64 0, i64 1]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_k = internal constant [2 x i64] [i64 0, i64 1]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_i = internal constant [2 x i64] [i64 0, i64 1]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_i = internal constant [2 x i64] [i64 0, i64 1]
 
-@_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_j = internal constant [2 x i64] [i64 1, i64 0]
+@_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_j = internal constant [2 x i64] [i64 1, i64 0]
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 12
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -219,7 +221,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -250,7 +252,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -308,82 +310,82 @@ ends:
 }
 
 
-define internal void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4
   %v2 = getelementptr inbounds double, double* %w, i64 8
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 8
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_tape_src, i64 0, i64 0))
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_scatter(double* %J, double* %v1, i64 2, i64 2, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_col, i64 0, i64 0))
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_scatter(double* %J, double* %v1, i64 2, i64 2, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_scatter(double* %J, double* %v1, i64 2, i64 0, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_col, i64 0, i64 0))
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_scatter(double* %J, double* %v1, i64 2, i64 0, i64 1, i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([2 x i64], [2 x i64]* @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 32)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 96)
+  %raw = call i8* @malloc(i64 112)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 32)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 96)
+  %raw = call i8* @malloc(i64 112)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -392,29 +394,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -448,49 +450,43 @@ entry:
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
   %v3 = getelementptr inbounds double, double* %p, i64 0
   %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 2
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v10
-  %v15 = fmul double %v10, %v14
-  %v16 = fmul double %v13, %v15
-  %v17 = fadd double %v11, %v16
-  %v18 = getelementptr inbounds double, double* %w, i64 1
-  store double %v17, double* %v18, align 8
-  %v19 = fdiv double 0x3FF0000000000000, %v4
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 2
+  %v9 = load double, double* %v8, align 8
+  %v10 = getelementptr inbounds double, double* %x, i64 1
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double %v11, %v11
+  %v13 = fmul double %v11, %v12
+  %v14 = fmul double 0x3FF0000000000000, %v9
+  %v15 = fmul double %v11, %v11
+  %v16 = fmul double 0x4008000000000000, %v15
+  %v17 = fmul double %v14, %v16
+  %v18 = getelementptr inbounds double, double* %p, i64 1
+  %v19 = load double, double* %v18, align 8
   %v20 = fmul double 0x3FF0000000000000, %v19
-  %v21 = getelementptr inbounds double, double* %out, i64 0
-  store double %v20, double* %v21, align 8
-  %v22 = fmul double 0x3FF0000000000000, %v13
-  %v23 = fmul double %v10, %v10
-  %v24 = fmul double 0x4008000000000000, %v23
-  %v25 = fmul double %v22, %v24
-  %v26 = fmul double 0x3FF0000000000000, %v8
-  %v27 = fadd double %v25, %v26
-  %v28 = getelementptr inbounds double, double* %out, i64 1
-  store double %v27, double* %v28, align 8
-  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v30 = getelementptr inbounds double, double* %out, i64 2
-  store double %v29, double* %v30, align 8
-  %v31 = getelementptr inbounds double, double* %out, i64 3
-  store double 0x3FF0000000000000, double* %v31, align 8
+  %v21 = fadd double %v17, %v20
+  %v22 = getelementptr inbounds double, double* %out, i64 1
+  store double %v21, double* %v22, align 8
+  %v23 = getelementptr inbounds double, double* %w, i64 1
+  %v24 = load double, double* %v23, align 8
+  %v25 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v26 = getelementptr inbounds double, double* %out, i64 2
+  store double %v25, double* %v26, align 8
+  %v27 = getelementptr inbounds double, double* %out, i64 3
+  store double 0x3FF0000000000000, double* %v27, align 8
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 1
   %v2 = load double, double* %v1, align 8
@@ -530,17 +526,17 @@ entry:
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_duffing_0fede135cf1d9d4c682429c01ea9df64_fd8c97e15732_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_duffing_4c44327552e5d414bc872b69972e58aa_cd6ff9de2c75_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 12, 4   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 14, 4   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 4, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "0ac675b6c253e21a1e644fcaf9854cbc"
+MODEL_HASH = "a0d33b5d81d9a6efe33eaa58ede1ccfc"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc"
+    sys.modules.setdefault("_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1"
+_KERNEL_PREFIX = "_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -113,53 +113,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape_ptr = internal constant [8 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7, i64 8]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_ptr = internal constant [8 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7, i64 8]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape_src = internal constant [8 x i64] [i64 -1, i64 -2, i64 0, i64 2, i64 1, i64 3, i64 4, i64 2]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_src = internal constant [8 x i64] [i64 -1, i64 -2, i64 0, i64 2, i64 1, i64 3, i64 4, i64 2]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_row = internal constant [3 x i64] [i64 5, i64 5, i64 6]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row = internal constant [3 x i64] [i64 5, i64 5, i64 6]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 34
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -218,7 +220,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -249,7 +251,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -307,82 +309,82 @@ ends:
 }
 
 
-define internal void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 12
   %v2 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 20
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 112, i1 false)
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_tape_src, i64 0, i64 0))
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 272)
+  %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 272)
+  %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -391,29 +393,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -471,84 +473,73 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 0
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x0000000000000000
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 0
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 1
+  %v3 = getelementptr inbounds double, double* %p, i64 1
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 4
   %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 4
-  %v13 = load double, double* %v12, align 8
-  %v14 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = getelementptr inbounds double, double* %x, i64 1
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v9
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %w, i64 1
   %v15 = load double, double* %v14, align 8
-  %v16 = fmul double %v13, %v15
-  %v17 = getelementptr inbounds double, double* %w, i64 2
-  store double %v16, double* %v17, align 8
-  %v18 = getelementptr inbounds double, double* %p, i64 3
-  %v19 = load double, double* %v18, align 8
-  %v20 = fmul double %v10, %v19
-  %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v20, double* %v21, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 3
+  %v17 = load double, double* %v16, align 8
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 2
+  store double %v18, double* %v19, align 8
+  %v20 = getelementptr inbounds double, double* %w, i64 3
+  %v21 = load double, double* %v20, align 8
   %v22 = getelementptr inbounds double, double* %p, i64 5
   %v23 = load double, double* %v22, align 8
-  %v24 = fmul double %v20, %v23
-  %v25 = getelementptr inbounds double, double* %w, i64 4
+  %v24 = fmul double 0x3FF0000000000000, %v23
+  %v25 = getelementptr inbounds double, double* %out, i64 3
   store double %v24, double* %v25, align 8
   %v26 = getelementptr inbounds double, double* %p, i64 2
   %v27 = load double, double* %v26, align 8
-  %v28 = fmul double %v19, %v19
+  %v28 = fmul double %v17, %v17
   %v29 = fmul double %v27, %v28
-  %v30 = fdiv double %v29, %v9
+  %v30 = fdiv double %v29, %v4
   %v31 = fadd double 0x3FF0000000000000, %v30
-  %v32 = fmul double %v16, %v19
-  %v33 = fneg double %v32
-  %v34 = fmul double %v24, %v19
-  %v35 = fneg double %v34
-  %v36 = fadd double %v4, %v33
-  %v37 = fadd double %v36, %v35
-  %v38 = fdiv double %v37, %v31
-  %v39 = getelementptr inbounds double, double* %w, i64 5
-  store double %v38, double* %v39, align 8
-  %v40 = fdiv double 0x3FF0000000000000, %v9
-  %v41 = fmul double 0x3FF0000000000000, %v40
-  %v42 = getelementptr inbounds double, double* %out, i64 0
-  store double %v41, double* %v42, align 8
-  %v43 = fmul double 0x3FF0000000000000, %v13
-  %v44 = getelementptr inbounds double, double* %out, i64 1
-  store double %v43, double* %v44, align 8
-  %v45 = fmul double 0x3FF0000000000000, %v19
-  %v46 = getelementptr inbounds double, double* %out, i64 2
-  store double %v45, double* %v46, align 8
-  %v47 = fmul double 0x3FF0000000000000, %v23
-  %v48 = getelementptr inbounds double, double* %out, i64 3
-  store double %v47, double* %v48, align 8
-  %v49 = fdiv double 0x3FF0000000000000, %v31
-  %v50 = fmul double 0x3FF0000000000000, %v49
-  %v51 = fmul double 0xBFF0000000000000, %v19
-  %v52 = fmul double %v50, %v51
-  %v53 = fmul double 0xBFF0000000000000, %v19
-  %v54 = fmul double %v50, %v53
-  %v55 = getelementptr inbounds double, double* %out, i64 4
-  store double %v54, double* %v55, align 8
-  %v56 = getelementptr inbounds double, double* %out, i64 5
-  store double %v52, double* %v56, align 8
-  %v57 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v57, align 8
-  %v58 = getelementptr inbounds double, double* %out, i64 7
-  store double 0x3FF0000000000000, double* %v58, align 8
+  %v32 = fdiv double 0x3FF0000000000000, %v31
+  %v33 = getelementptr inbounds double, double* %w, i64 0
+  %v34 = load double, double* %v33, align 8
+  %v35 = getelementptr inbounds double, double* %w, i64 2
+  %v36 = load double, double* %v35, align 8
+  %v37 = fmul double %v36, %v17
+  %v38 = fneg double %v37
+  %v39 = getelementptr inbounds double, double* %w, i64 4
+  %v40 = load double, double* %v39, align 8
+  %v41 = fmul double %v40, %v17
+  %v42 = fneg double %v41
+  %v43 = fadd double %v34, %v38
+  %v44 = fadd double %v43, %v42
+  %v45 = fmul double 0x3FF0000000000000, %v32
+  %v46 = fmul double 0xBFF0000000000000, %v17
+  %v47 = fmul double %v45, %v46
+  %v48 = fmul double 0xBFF0000000000000, %v17
+  %v49 = fmul double %v45, %v48
+  %v50 = getelementptr inbounds double, double* %out, i64 4
+  store double %v49, double* %v50, align 8
+  %v51 = getelementptr inbounds double, double* %out, i64 5
+  store double %v47, double* %v51, align 8
+  %v52 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v52, align 8
+  %v53 = getelementptr inbounds double, double* %out, i64 7
+  store double 0x3FF0000000000000, double* %v53, align 8
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -580,17 +571,17 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_0ac675b6c253e21a1e644fcaf9854cbc_bf0052866cd1_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 34, 12   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 36, 12   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 6, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

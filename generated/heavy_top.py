@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "b6734ca431dcbe6c833865d8a7a9956c"
+MODEL_HASH = "06af53f60f35c12806b8b9e6b5120690"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 3.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c"
+    sys.modules.setdefault("_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256"
+_KERNEL_PREFIX = "_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -119,53 +119,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape_ptr = internal constant [60 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 12, i64 15, i64 18, i64 19, i64 20, i64 21, i64 22, i64 24, i64 25, i64 31, i64 37, i64 39, i64 40, i64 42, i64 47, i64 49, i64 52, i64 57, i64 63, i64 65, i64 66, i64 68, i64 74, i64 77, i64 80, i64 86, i64 92, i64 94, i64 95, i64 97, i64 98, i64 100, i64 106, i64 107, i64 109, i64 111, i64 117, i64 123, i64 125, i64 127, i64 128, i64 129, i64 130, i64 131, i64 132, i64 133, i64 134, i64 135, i64 140, i64 141, i64 145, i64 146, i64 153]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape_ptr = internal constant [60 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 12, i64 15, i64 18, i64 19, i64 20, i64 21, i64 22, i64 24, i64 25, i64 31, i64 37, i64 39, i64 40, i64 42, i64 47, i64 49, i64 52, i64 57, i64 63, i64 65, i64 66, i64 68, i64 74, i64 77, i64 80, i64 86, i64 92, i64 94, i64 95, i64 97, i64 98, i64 100, i64 106, i64 107, i64 109, i64 111, i64 117, i64 123, i64 125, i64 127, i64 128, i64 129, i64 130, i64 131, i64 132, i64 133, i64 134, i64 135, i64 140, i64 141, i64 145, i64 146, i64 153]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape_src = internal constant [153 x i64] [i64 -6, i64 -4, i64 -3, i64 -6, i64 -4, i64 -3, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 6, i64 7, i64 -10, i64 -2, i64 9, i64 -1, i64 -5, i64 11, i64 12, i64 9, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 6, i64 15, i64 7, i64 16, i64 -7, i64 17, i64 8, i64 18, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 20, i64 21, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 20, i64 23, i64 21, i64 24, i64 -8, i64 25, i64 22, i64 26, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 28, i64 29, i64 -12, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 28, i64 31, i64 29, i64 32, i64 -9, i64 33, i64 30, i64 34, i64 35, i64 9, i64 12, i64 19, i64 27, i64 35, i64 15, i64 23, i64 31, i64 38, i64 37, i64 39, i64 11, i64 12, i64 19, i64 27, i64 35, i64 6, i64 20, i64 28, i64 19, i64 27, i64 35, i64 7, i64 21, i64 29, i64 42, i64 43, i64 41, i64 44, i64 38, i64 19, i64 27, i64 36, i64 40, i64 45, i64 46, i64 -7, i64 4, i64 5, i64 11, i64 9, i64 2, i64 -8, i64 5, i64 11, i64 9, i64 2, i64 -9, i64 4, i64 5, i64 11, i64 9, i64 12, i64 1, i64 2]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape_src = internal constant [153 x i64] [i64 -6, i64 -4, i64 -3, i64 -6, i64 -4, i64 -3, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 6, i64 7, i64 -10, i64 -2, i64 9, i64 -1, i64 -5, i64 11, i64 12, i64 9, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 6, i64 15, i64 7, i64 16, i64 -7, i64 17, i64 8, i64 18, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 20, i64 21, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 20, i64 23, i64 21, i64 24, i64 -8, i64 25, i64 22, i64 26, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 28, i64 29, i64 -12, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 28, i64 31, i64 29, i64 32, i64 -9, i64 33, i64 30, i64 34, i64 35, i64 9, i64 12, i64 19, i64 27, i64 35, i64 15, i64 23, i64 31, i64 38, i64 37, i64 39, i64 11, i64 12, i64 19, i64 27, i64 35, i64 6, i64 20, i64 28, i64 19, i64 27, i64 35, i64 7, i64 21, i64 29, i64 42, i64 43, i64 41, i64 44, i64 38, i64 19, i64 27, i64 36, i64 40, i64 45, i64 46, i64 -7, i64 4, i64 5, i64 11, i64 9, i64 2, i64 -8, i64 5, i64 11, i64 9, i64 2, i64 -9, i64 4, i64 5, i64 11, i64 9, i64 12, i64 1, i64 2]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_row = internal constant [75 x i64] [i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 53, i64 54, i64 54, i64 54, i64 54, i64 55, i64 56, i64 56, i64 56, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_row = internal constant [75 x i64] [i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 53, i64 54, i64 54, i64 54, i64 54, i64 55, i64 56, i64 56, i64 56, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_col = internal constant [75 x i64] [i64 6, i64 0, i64 1, i64 4, i64 9, i64 5, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 5, i64 10, i64 3, i64 2, i64 8, i64 0, i64 1, i64 4, i64 5, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 0, i64 1, i64 3, i64 2, i64 7, i64 0, i64 1, i64 2, i64 8, i64 0, i64 1, i64 4, i64 3, i64 2]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_col = internal constant [75 x i64] [i64 6, i64 0, i64 1, i64 4, i64 9, i64 5, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 5, i64 10, i64 3, i64 2, i64 8, i64 0, i64 1, i64 4, i64 5, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 0, i64 1, i64 3, i64 2, i64 7, i64 0, i64 1, i64 2, i64 8, i64 0, i64 1, i64 4, i64 3, i64 2]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_zero = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_zero = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_k = internal constant [75 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73, i64 74]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_k = internal constant [75 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73, i64 74]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_i = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_i = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_j = internal constant [75 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_j = internal constant [75 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 920
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -224,7 +226,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -255,7 +257,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -313,82 +315,82 @@ ends:
 }
 
 
-define internal void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 59
   %v2 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 212
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 5664, i1 false)
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_tape_src, i64 0, i64 0))
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 7360)
+  %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 7360)
+  %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -403,29 +405,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -767,819 +769,655 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
-  %v3 = call double @llvm.sin.f64(double %v2)
-  %v4 = getelementptr inbounds double, double* %w, i64 0
-  store double %v3, double* %v4, align 8
-  %v5 = getelementptr inbounds double, double* %x, i64 9
-  %v6 = load double, double* %v5, align 8
-  %v7 = call double @llvm.sin.f64(double %v6)
-  %v8 = getelementptr inbounds double, double* %w, i64 1
-  store double %v7, double* %v8, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 11
-  %v10 = load double, double* %v9, align 8
-  %v11 = call double @llvm.sin.f64(double %v10)
-  %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = call double @llvm.cos.f64(double %v2)
-  %v14 = getelementptr inbounds double, double* %w, i64 3
-  store double %v13, double* %v14, align 8
-  %v15 = call double @llvm.cos.f64(double %v6)
-  %v16 = getelementptr inbounds double, double* %w, i64 4
-  store double %v15, double* %v16, align 8
-  %v17 = call double @llvm.cos.f64(double %v10)
-  %v18 = getelementptr inbounds double, double* %w, i64 5
-  store double %v17, double* %v18, align 8
-  %v19 = fmul double 0x3FEBB67AE858D58C, %v15
-  %v20 = fmul double %v19, %v17
-  %v21 = fmul double 0x3FDFFFFFFFFE25D6, %v3
-  %v22 = fmul double %v21, %v11
-  %v23 = fmul double 0xBFDFFFFFFFFE25D6, %v13
-  %v24 = fmul double %v23, %v17
-  %v25 = fmul double %v24, %v7
-  %v26 = fadd double %v20, %v22
-  %v27 = fadd double %v26, %v25
-  %v28 = getelementptr inbounds double, double* %w, i64 6
-  store double %v27, double* %v28, align 8
-  %v29 = fmul double 0x3FEBB67AE858D58C, %v7
-  %v30 = fmul double 0x3FDFFFFFFFFE25D6, %v13
-  %v31 = fmul double %v30, %v15
-  %v32 = fadd double %v29, %v31
-  %v33 = getelementptr inbounds double, double* %w, i64 7
-  store double %v32, double* %v33, align 8
-  %v34 = getelementptr inbounds double, double* %p, i64 4
-  %v35 = load double, double* %v34, align 8
-  %v36 = fneg double %v35
-  %v37 = getelementptr inbounds double, double* %p, i64 0
-  %v38 = load double, double* %v37, align 8
-  %v39 = getelementptr inbounds double, double* %x, i64 6
-  %v40 = load double, double* %v39, align 8
-  %v41 = fmul double 0xBFB9999999AE2038, %v32
-  %v42 = fmul double 0x3DA5FD7F51AA09BB, %v27
-  %v43 = fadd double %v40, %v41
-  %v44 = fadd double %v43, %v42
-  %v45 = fmul double %v38, %v44
-  %v46 = fadd double %v36, %v45
-  %v47 = getelementptr inbounds double, double* %w, i64 8
-  store double %v46, double* %v47, align 8
-  %v48 = getelementptr inbounds double, double* %x, i64 4
-  %v49 = load double, double* %v48, align 8
-  %v50 = fmul double 0x4049000000000000, %v49
-  %v51 = getelementptr inbounds double, double* %w, i64 9
-  store double %v50, double* %v51, align 8
-  %v52 = fmul double 0xBFB9999999AE2038, %v50
-  %v53 = getelementptr inbounds double, double* %w, i64 10
-  store double %v52, double* %v53, align 8
-  %v54 = getelementptr inbounds double, double* %x, i64 3
-  %v55 = load double, double* %v54, align 8
-  %v56 = fmul double 0x4049000000000000, %v55
-  %v57 = getelementptr inbounds double, double* %w, i64 11
-  store double %v56, double* %v57, align 8
-  %v58 = getelementptr inbounds double, double* %x, i64 5
-  %v59 = load double, double* %v58, align 8
-  %v60 = fmul double 0x4039000000000000, %v59
-  %v61 = getelementptr inbounds double, double* %w, i64 12
-  store double %v60, double* %v61, align 8
-  %v62 = fmul double 0x3FB9999999AE2038, %v56
-  %v63 = fmul double 0x3DA5FD7F51AA09BB, %v60
-  %v64 = fadd double %v62, %v63
-  %v65 = getelementptr inbounds double, double* %w, i64 13
-  store double %v64, double* %v65, align 8
-  %v66 = fmul double 0xBDA5FD7F51AA09BB, %v50
-  %v67 = getelementptr inbounds double, double* %w, i64 14
-  store double %v66, double* %v67, align 8
-  %v68 = fmul double 0xBFEBB67AE858D58C, %v15
-  %v69 = fmul double %v68, %v11
-  %v70 = fmul double 0x3FDFFFFFFFFE25D6, %v17
-  %v71 = fmul double %v70, %v3
-  %v72 = fmul double 0x3FDFFFFFFFFE25D6, %v13
-  %v73 = fmul double %v72, %v7
-  %v74 = fmul double %v73, %v11
-  %v75 = fadd double %v69, %v71
-  %v76 = fadd double %v75, %v74
-  %v77 = getelementptr inbounds double, double* %w, i64 15
-  store double %v76, double* %v77, align 8
-  %v78 = fmul double %v52, %v27
-  %v79 = fmul double %v64, %v76
-  %v80 = fmul double %v66, %v32
-  %v81 = fadd double %v78, %v79
-  %v82 = fadd double %v81, %v80
-  %v83 = getelementptr inbounds double, double* %w, i64 16
-  store double %v82, double* %v83, align 8
-  %v84 = getelementptr inbounds double, double* %x, i64 0
-  %v85 = load double, double* %v84, align 8
-  %v86 = fadd double %v82, %v85
-  %v87 = getelementptr inbounds double, double* %w, i64 17
-  store double %v86, double* %v87, align 8
-  %v88 = getelementptr inbounds double, double* %p, i64 1
-  %v89 = load double, double* %v88, align 8
-  %v90 = fmul double %v86, %v89
-  %v91 = getelementptr inbounds double, double* %w, i64 18
-  store double %v90, double* %v91, align 8
-  %v92 = fadd double %v46, %v90
-  %v93 = getelementptr inbounds double, double* %w, i64 19
+  %v3 = call double @llvm.cos.f64(double %v2)
+  %v4 = fmul double 0x3FF0000000000000, %v3
+  %v5 = getelementptr inbounds double, double* %out, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 9
+  %v7 = load double, double* %v6, align 8
+  %v8 = call double @llvm.cos.f64(double %v7)
+  %v9 = fmul double 0x3FF0000000000000, %v8
+  %v10 = getelementptr inbounds double, double* %out, i64 1
+  store double %v9, double* %v10, align 8
+  %v11 = getelementptr inbounds double, double* %x, i64 11
+  %v12 = load double, double* %v11, align 8
+  %v13 = call double @llvm.cos.f64(double %v12)
+  %v14 = fmul double 0x3FF0000000000000, %v13
+  %v15 = getelementptr inbounds double, double* %out, i64 2
+  store double %v14, double* %v15, align 8
+  %v16 = call double @llvm.sin.f64(double %v2)
+  %v17 = fneg double %v16
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 3
+  store double %v18, double* %v19, align 8
+  %v20 = call double @llvm.sin.f64(double %v7)
+  %v21 = fneg double %v20
+  %v22 = fmul double 0x3FF0000000000000, %v21
+  %v23 = getelementptr inbounds double, double* %out, i64 4
+  store double %v22, double* %v23, align 8
+  %v24 = call double @llvm.sin.f64(double %v12)
+  %v25 = fneg double %v24
+  %v26 = fmul double 0x3FF0000000000000, %v25
+  %v27 = getelementptr inbounds double, double* %out, i64 5
+  store double %v26, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %w, i64 3
+  %v29 = load double, double* %v28, align 8
+  %v30 = getelementptr inbounds double, double* %w, i64 5
+  %v31 = load double, double* %v30, align 8
+  %v32 = getelementptr inbounds double, double* %w, i64 1
+  %v33 = load double, double* %v32, align 8
+  %v34 = fmul double 0xBFDFFFFFFFFE25D6, %v31
+  %v35 = fmul double %v34, %v33
+  %v36 = fmul double 0xBFDFFFFFFFFE25D6, %v29
+  %v37 = fmul double %v36, %v33
+  %v38 = fmul double 0xBFDFFFFFFFFE25D6, %v29
+  %v39 = fmul double %v38, %v31
+  %v40 = fmul double 0x3FF0000000000000, %v35
+  %v41 = fmul double 0x3FF0000000000000, %v37
+  %v42 = fmul double 0x3FF0000000000000, %v39
+  %v43 = getelementptr inbounds double, double* %w, i64 0
+  %v44 = load double, double* %v43, align 8
+  %v45 = getelementptr inbounds double, double* %w, i64 2
+  %v46 = load double, double* %v45, align 8
+  %v47 = fmul double 0x3FDFFFFFFFFE25D6, %v46
+  %v48 = fmul double 0x3FDFFFFFFFFE25D6, %v44
+  %v49 = fmul double 0x3FF0000000000000, %v47
+  %v50 = fmul double 0x3FF0000000000000, %v48
+  %v51 = getelementptr inbounds double, double* %w, i64 4
+  %v52 = load double, double* %v51, align 8
+  %v53 = fmul double 0x3FEBB67AE858D58C, %v31
+  %v54 = fmul double 0x3FEBB67AE858D58C, %v52
+  %v55 = fmul double 0x3FF0000000000000, %v53
+  %v56 = fmul double 0x3FF0000000000000, %v54
+  %v57 = fadd double %v41, %v56
+  %v58 = getelementptr inbounds double, double* %out, i64 6
+  store double %v40, double* %v58, align 8
+  %v59 = getelementptr inbounds double, double* %out, i64 7
+  store double %v55, double* %v59, align 8
+  %v60 = getelementptr inbounds double, double* %out, i64 8
+  store double %v57, double* %v60, align 8
+  %v61 = getelementptr inbounds double, double* %out, i64 9
+  store double %v49, double* %v61, align 8
+  %v62 = getelementptr inbounds double, double* %out, i64 10
+  store double %v42, double* %v62, align 8
+  %v63 = getelementptr inbounds double, double* %out, i64 11
+  store double %v50, double* %v63, align 8
+  %v64 = fmul double 0x3FDFFFFFFFFE25D6, %v52
+  %v65 = fmul double 0x3FDFFFFFFFFE25D6, %v29
+  %v66 = fmul double 0x3FF0000000000000, %v64
+  %v67 = fmul double 0x3FF0000000000000, %v65
+  %v68 = fmul double 0x3FF0000000000000, 0x3FEBB67AE858D58C
+  %v69 = getelementptr inbounds double, double* %out, i64 12
+  store double %v66, double* %v69, align 8
+  %v70 = getelementptr inbounds double, double* %out, i64 13
+  store double %v67, double* %v70, align 8
+  %v71 = getelementptr inbounds double, double* %out, i64 14
+  store double %v68, double* %v71, align 8
+  %v72 = getelementptr inbounds double, double* %p, i64 0
+  %v73 = load double, double* %v72, align 8
+  %v74 = getelementptr inbounds double, double* %x, i64 6
+  %v75 = load double, double* %v74, align 8
+  %v76 = getelementptr inbounds double, double* %w, i64 7
+  %v77 = load double, double* %v76, align 8
+  %v78 = fmul double 0xBFB9999999AE2038, %v77
+  %v79 = getelementptr inbounds double, double* %w, i64 6
+  %v80 = load double, double* %v79, align 8
+  %v81 = fmul double 0x3DA5FD7F51AA09BB, %v80
+  %v82 = fadd double %v75, %v78
+  %v83 = fadd double %v82, %v81
+  %v84 = fmul double 0x3FF0000000000000, %v73
+  %v85 = fmul double %v84, 0x3DA5FD7F51AA09BB
+  %v86 = fmul double %v84, 0xBFB9999999AE2038
+  %v87 = getelementptr inbounds double, double* %out, i64 15
+  store double %v85, double* %v87, align 8
+  %v88 = getelementptr inbounds double, double* %out, i64 16
+  store double %v86, double* %v88, align 8
+  %v89 = getelementptr inbounds double, double* %out, i64 17
+  store double %v84, double* %v89, align 8
+  %v90 = getelementptr inbounds double, double* %x, i64 4
+  %v91 = load double, double* %v90, align 8
+  %v92 = fmul double 0x3FF0000000000000, 0x4049000000000000
+  %v93 = getelementptr inbounds double, double* %out, i64 18
   store double %v92, double* %v93, align 8
-  %v94 = fmul double %v13, %v11
-  %v95 = fmul double %v17, %v3
-  %v96 = fmul double %v95, %v7
-  %v97 = fadd double %v94, %v96
-  %v98 = getelementptr inbounds double, double* %w, i64 20
-  store double %v97, double* %v98, align 8
-  %v99 = fmul double %v15, %v3
-  %v100 = fneg double %v99
-  %v101 = getelementptr inbounds double, double* %w, i64 21
+  %v94 = getelementptr inbounds double, double* %w, i64 9
+  %v95 = load double, double* %v94, align 8
+  %v96 = fmul double 0x3FF0000000000000, 0xBFB9999999AE2038
+  %v97 = getelementptr inbounds double, double* %out, i64 19
+  store double %v96, double* %v97, align 8
+  %v98 = getelementptr inbounds double, double* %x, i64 3
+  %v99 = load double, double* %v98, align 8
+  %v100 = fmul double 0x3FF0000000000000, 0x4049000000000000
+  %v101 = getelementptr inbounds double, double* %out, i64 20
   store double %v100, double* %v101, align 8
-  %v102 = getelementptr inbounds double, double* %p, i64 5
+  %v102 = getelementptr inbounds double, double* %x, i64 5
   %v103 = load double, double* %v102, align 8
-  %v104 = fneg double %v103
-  %v105 = getelementptr inbounds double, double* %x, i64 8
-  %v106 = load double, double* %v105, align 8
-  %v107 = fmul double 0xBFB9999999AE2038, %v100
-  %v108 = fmul double 0x3DA5FD7F51AA09BB, %v97
-  %v109 = fadd double %v106, %v107
-  %v110 = fadd double %v109, %v108
-  %v111 = fmul double %v38, %v110
-  %v112 = fadd double %v104, %v111
-  %v113 = getelementptr inbounds double, double* %w, i64 22
-  store double %v112, double* %v113, align 8
-  %v114 = fmul double %v13, %v17
-  %v115 = fmul double %v3, %v7
-  %v116 = fmul double %v115, %v11
-  %v117 = fneg double %v116
-  %v118 = fadd double %v114, %v117
-  %v119 = getelementptr inbounds double, double* %w, i64 23
-  store double %v118, double* %v119, align 8
-  %v120 = fmul double %v52, %v97
-  %v121 = fmul double %v64, %v118
-  %v122 = fmul double %v66, %v100
-  %v123 = fadd double %v120, %v121
-  %v124 = fadd double %v123, %v122
-  %v125 = getelementptr inbounds double, double* %w, i64 24
-  store double %v124, double* %v125, align 8
-  %v126 = getelementptr inbounds double, double* %x, i64 1
-  %v127 = load double, double* %v126, align 8
-  %v128 = fadd double %v124, %v127
-  %v129 = getelementptr inbounds double, double* %w, i64 25
-  store double %v128, double* %v129, align 8
-  %v130 = fmul double %v128, %v89
-  %v131 = getelementptr inbounds double, double* %w, i64 26
-  store double %v130, double* %v131, align 8
-  %v132 = fadd double %v112, %v130
-  %v133 = getelementptr inbounds double, double* %w, i64 27
-  store double %v132, double* %v133, align 8
-  %v134 = fmul double 0xBFDFFFFFFFFE25D6, %v15
-  %v135 = fmul double %v134, %v17
-  %v136 = fmul double 0x3FEBB67AE858D58C, %v3
-  %v137 = fmul double %v136, %v11
-  %v138 = fmul double 0xBFEBB67AE858D58C, %v13
-  %v139 = fmul double %v138, %v17
-  %v140 = fmul double %v139, %v7
-  %v141 = fadd double %v135, %v137
-  %v142 = fadd double %v141, %v140
-  %v143 = getelementptr inbounds double, double* %w, i64 28
-  store double %v142, double* %v143, align 8
-  %v144 = fmul double 0xBFDFFFFFFFFE25D6, %v7
-  %v145 = fmul double 0x3FEBB67AE858D58C, %v13
-  %v146 = fmul double %v145, %v15
-  %v147 = fadd double %v144, %v146
-  %v148 = getelementptr inbounds double, double* %w, i64 29
-  store double %v147, double* %v148, align 8
-  %v149 = getelementptr inbounds double, double* %p, i64 6
-  %v150 = load double, double* %v149, align 8
-  %v151 = fneg double %v150
-  %v152 = getelementptr inbounds double, double* %x, i64 10
-  %v153 = load double, double* %v152, align 8
-  %v154 = fmul double 0xBFB9999999AE2038, %v147
-  %v155 = fmul double 0x3DA5FD7F51AA09BB, %v142
-  %v156 = fadd double %v153, %v154
-  %v157 = fadd double %v156, %v155
-  %v158 = fmul double %v38, %v157
-  %v159 = fadd double %v151, %v158
-  %v160 = getelementptr inbounds double, double* %w, i64 30
-  store double %v159, double* %v160, align 8
-  %v161 = fmul double 0x3FEBB67AE858D58C, %v17
-  %v162 = fmul double %v161, %v3
-  %v163 = fmul double 0x3FDFFFFFFFFE25D6, %v15
-  %v164 = fmul double %v163, %v11
-  %v165 = fmul double 0x3FEBB67AE858D58C, %v13
-  %v166 = fmul double %v165, %v7
-  %v167 = fmul double %v166, %v11
-  %v168 = fadd double %v162, %v164
-  %v169 = fadd double %v168, %v167
-  %v170 = getelementptr inbounds double, double* %w, i64 31
-  store double %v169, double* %v170, align 8
-  %v171 = fmul double %v52, %v142
-  %v172 = fmul double %v64, %v169
-  %v173 = fmul double %v66, %v147
-  %v174 = fadd double %v171, %v172
-  %v175 = fadd double %v174, %v173
-  %v176 = getelementptr inbounds double, double* %w, i64 32
-  store double %v175, double* %v176, align 8
-  %v177 = getelementptr inbounds double, double* %x, i64 2
-  %v178 = load double, double* %v177, align 8
-  %v179 = fadd double %v175, %v178
-  %v180 = getelementptr inbounds double, double* %w, i64 33
-  store double %v179, double* %v180, align 8
-  %v181 = fmul double %v179, %v89
-  %v182 = getelementptr inbounds double, double* %w, i64 34
-  store double %v181, double* %v182, align 8
-  %v183 = fadd double %v159, %v181
-  %v184 = getelementptr inbounds double, double* %w, i64 35
-  store double %v183, double* %v184, align 8
-  %v185 = fneg double %v183
-  %v186 = fadd double 0xC0239EB851EB851F, %v185
-  %v187 = getelementptr inbounds double, double* %w, i64 36
-  store double %v186, double* %v187, align 8
-  %v188 = fmul double 0x3F947AE147AE147B, %v50
-  %v189 = fmul double %v188, %v60
-  %v190 = getelementptr inbounds double, double* %w, i64 37
-  store double %v189, double* %v190, align 8
-  %v191 = fmul double %v92, %v76
-  %v192 = fmul double %v132, %v118
-  %v193 = fmul double %v183, %v169
-  %v194 = fadd double %v191, %v192
-  %v195 = fadd double %v194, %v193
-  %v196 = getelementptr inbounds double, double* %w, i64 38
-  store double %v195, double* %v196, align 8
-  %v197 = fmul double 0x3FB9999999AE2038, %v195
-  %v198 = getelementptr inbounds double, double* %w, i64 39
-  store double %v197, double* %v198, align 8
-  %v199 = fneg double %v189
-  %v200 = fneg double %v197
-  %v201 = fadd double %v199, %v200
-  %v202 = getelementptr inbounds double, double* %w, i64 40
-  store double %v201, double* %v202, align 8
-  %v203 = fmul double 0xBF947AE147AE147B, %v56
-  %v204 = fmul double %v203, %v60
-  %v205 = getelementptr inbounds double, double* %w, i64 41
-  store double %v204, double* %v205, align 8
-  %v206 = fmul double %v92, %v27
-  %v207 = fmul double %v132, %v97
-  %v208 = fmul double %v183, %v142
-  %v209 = fadd double %v206, %v207
-  %v210 = fadd double %v209, %v208
-  %v211 = getelementptr inbounds double, double* %w, i64 42
-  store double %v210, double* %v211, align 8
-  %v212 = fmul double %v92, %v32
-  %v213 = fmul double %v132, %v100
-  %v214 = fmul double %v183, %v147
-  %v215 = fadd double %v212, %v213
-  %v216 = fadd double %v215, %v214
-  %v217 = getelementptr inbounds double, double* %w, i64 43
-  store double %v216, double* %v217, align 8
-  %v218 = fmul double 0xBDA5FD7F51AA09BB, %v216
-  %v219 = fmul double 0xBFB9999999AE2038, %v210
-  %v220 = fadd double %v218, %v219
-  %v221 = getelementptr inbounds double, double* %w, i64 44
-  store double %v220, double* %v221, align 8
-  %v222 = fneg double %v204
-  %v223 = fneg double %v220
-  %v224 = fadd double %v222, %v223
-  %v225 = getelementptr inbounds double, double* %w, i64 45
-  store double %v224, double* %v225, align 8
-  %v226 = fmul double 0x3DA5FD7F51AA09BB, %v195
-  %v227 = getelementptr inbounds double, double* %w, i64 46
-  store double %v226, double* %v227, align 8
-  %v228 = fmul double 0x3FF0000000000000, %v13
-  %v229 = getelementptr inbounds double, double* %out, i64 0
-  store double %v228, double* %v229, align 8
-  %v230 = fmul double 0x3FF0000000000000, %v15
-  %v231 = getelementptr inbounds double, double* %out, i64 1
-  store double %v230, double* %v231, align 8
-  %v232 = fmul double 0x3FF0000000000000, %v17
-  %v233 = getelementptr inbounds double, double* %out, i64 2
-  store double %v232, double* %v233, align 8
-  %v234 = fneg double %v3
-  %v235 = fmul double 0x3FF0000000000000, %v234
-  %v236 = getelementptr inbounds double, double* %out, i64 3
-  store double %v235, double* %v236, align 8
-  %v237 = fneg double %v7
-  %v238 = fmul double 0x3FF0000000000000, %v237
-  %v239 = getelementptr inbounds double, double* %out, i64 4
-  store double %v238, double* %v239, align 8
-  %v240 = fneg double %v11
-  %v241 = fmul double 0x3FF0000000000000, %v240
-  %v242 = getelementptr inbounds double, double* %out, i64 5
-  store double %v241, double* %v242, align 8
-  %v243 = fmul double 0xBFDFFFFFFFFE25D6, %v17
-  %v244 = fmul double %v243, %v7
-  %v245 = fmul double 0xBFDFFFFFFFFE25D6, %v13
-  %v246 = fmul double %v245, %v7
-  %v247 = fmul double 0xBFDFFFFFFFFE25D6, %v13
-  %v248 = fmul double %v247, %v17
+  %v104 = fmul double 0x3FF0000000000000, 0x4039000000000000
+  %v105 = getelementptr inbounds double, double* %out, i64 21
+  store double %v104, double* %v105, align 8
+  %v106 = getelementptr inbounds double, double* %w, i64 12
+  %v107 = load double, double* %v106, align 8
+  %v108 = fmul double 0x3FF0000000000000, 0x3DA5FD7F51AA09BB
+  %v109 = getelementptr inbounds double, double* %w, i64 11
+  %v110 = load double, double* %v109, align 8
+  %v111 = fmul double 0x3FF0000000000000, 0x3FB9999999AE2038
+  %v112 = getelementptr inbounds double, double* %out, i64 22
+  store double %v111, double* %v112, align 8
+  %v113 = getelementptr inbounds double, double* %out, i64 23
+  store double %v108, double* %v113, align 8
+  %v114 = fmul double 0x3FF0000000000000, 0xBDA5FD7F51AA09BB
+  %v115 = getelementptr inbounds double, double* %out, i64 24
+  store double %v114, double* %v115, align 8
+  %v116 = fmul double 0x3FDFFFFFFFFE25D6, %v33
+  %v117 = fmul double %v116, %v46
+  %v118 = fmul double 0x3FDFFFFFFFFE25D6, %v29
+  %v119 = fmul double %v118, %v46
+  %v120 = fmul double 0x3FDFFFFFFFFE25D6, %v29
+  %v121 = fmul double %v120, %v33
+  %v122 = fmul double 0x3FF0000000000000, %v117
+  %v123 = fmul double 0x3FF0000000000000, %v119
+  %v124 = fmul double 0x3FF0000000000000, %v121
+  %v125 = fmul double 0x3FDFFFFFFFFE25D6, %v44
+  %v126 = fmul double 0x3FDFFFFFFFFE25D6, %v31
+  %v127 = fmul double 0x3FF0000000000000, %v125
+  %v128 = fmul double 0x3FF0000000000000, %v126
+  %v129 = fmul double 0xBFEBB67AE858D58C, %v46
+  %v130 = fmul double 0xBFEBB67AE858D58C, %v52
+  %v131 = fmul double 0x3FF0000000000000, %v129
+  %v132 = fmul double 0x3FF0000000000000, %v130
+  %v133 = fadd double %v124, %v132
+  %v134 = getelementptr inbounds double, double* %out, i64 25
+  store double %v122, double* %v134, align 8
+  %v135 = getelementptr inbounds double, double* %out, i64 26
+  store double %v131, double* %v135, align 8
+  %v136 = getelementptr inbounds double, double* %out, i64 27
+  store double %v127, double* %v136, align 8
+  %v137 = getelementptr inbounds double, double* %out, i64 28
+  store double %v128, double* %v137, align 8
+  %v138 = getelementptr inbounds double, double* %out, i64 29
+  store double %v123, double* %v138, align 8
+  %v139 = getelementptr inbounds double, double* %out, i64 30
+  store double %v133, double* %v139, align 8
+  %v140 = getelementptr inbounds double, double* %w, i64 14
+  %v141 = load double, double* %v140, align 8
+  %v142 = fmul double 0x3FF0000000000000, %v77
+  %v143 = fmul double 0x3FF0000000000000, %v141
+  %v144 = getelementptr inbounds double, double* %w, i64 13
+  %v145 = load double, double* %v144, align 8
+  %v146 = getelementptr inbounds double, double* %w, i64 15
+  %v147 = load double, double* %v146, align 8
+  %v148 = fmul double 0x3FF0000000000000, %v147
+  %v149 = fmul double 0x3FF0000000000000, %v145
+  %v150 = getelementptr inbounds double, double* %w, i64 10
+  %v151 = load double, double* %v150, align 8
+  %v152 = fmul double 0x3FF0000000000000, %v80
+  %v153 = fmul double 0x3FF0000000000000, %v151
+  %v154 = getelementptr inbounds double, double* %out, i64 31
+  store double %v152, double* %v154, align 8
+  %v155 = getelementptr inbounds double, double* %out, i64 32
+  store double %v148, double* %v155, align 8
+  %v156 = getelementptr inbounds double, double* %out, i64 33
+  store double %v142, double* %v156, align 8
+  %v157 = getelementptr inbounds double, double* %out, i64 34
+  store double %v153, double* %v157, align 8
+  %v158 = getelementptr inbounds double, double* %out, i64 35
+  store double %v149, double* %v158, align 8
+  %v159 = getelementptr inbounds double, double* %out, i64 36
+  store double %v143, double* %v159, align 8
+  %v160 = getelementptr inbounds double, double* %out, i64 37
+  store double 0x3FF0000000000000, double* %v160, align 8
+  %v161 = getelementptr inbounds double, double* %out, i64 38
+  store double 0x3FF0000000000000, double* %v161, align 8
+  %v162 = getelementptr inbounds double, double* %w, i64 17
+  %v163 = load double, double* %v162, align 8
+  %v164 = getelementptr inbounds double, double* %p, i64 1
+  %v165 = load double, double* %v164, align 8
+  %v166 = fmul double 0x3FF0000000000000, %v165
+  %v167 = getelementptr inbounds double, double* %out, i64 39
+  store double %v166, double* %v167, align 8
+  %v168 = getelementptr inbounds double, double* %out, i64 40
+  store double 0x3FF0000000000000, double* %v168, align 8
+  %v169 = getelementptr inbounds double, double* %out, i64 41
+  store double 0x3FF0000000000000, double* %v169, align 8
+  %v170 = fmul double %v44, %v33
+  %v171 = fmul double %v31, %v33
+  %v172 = fmul double %v31, %v44
+  %v173 = fmul double 0x3FF0000000000000, %v170
+  %v174 = fmul double 0x3FF0000000000000, %v171
+  %v175 = fmul double 0x3FF0000000000000, %v172
+  %v176 = fmul double 0x3FF0000000000000, %v46
+  %v177 = fmul double 0x3FF0000000000000, %v29
+  %v178 = getelementptr inbounds double, double* %out, i64 42
+  store double %v176, double* %v178, align 8
+  %v179 = getelementptr inbounds double, double* %out, i64 43
+  store double %v173, double* %v179, align 8
+  %v180 = getelementptr inbounds double, double* %out, i64 44
+  store double %v174, double* %v180, align 8
+  %v181 = getelementptr inbounds double, double* %out, i64 45
+  store double %v175, double* %v181, align 8
+  %v182 = getelementptr inbounds double, double* %out, i64 46
+  store double %v177, double* %v182, align 8
+  %v183 = fmul double 0xBFF0000000000000, %v44
+  %v184 = fmul double 0xBFF0000000000000, %v52
+  %v185 = fmul double 0x3FF0000000000000, %v183
+  %v186 = fmul double 0x3FF0000000000000, %v184
+  %v187 = getelementptr inbounds double, double* %out, i64 47
+  store double %v185, double* %v187, align 8
+  %v188 = getelementptr inbounds double, double* %out, i64 48
+  store double %v186, double* %v188, align 8
+  %v189 = getelementptr inbounds double, double* %x, i64 8
+  %v190 = load double, double* %v189, align 8
+  %v191 = getelementptr inbounds double, double* %w, i64 21
+  %v192 = load double, double* %v191, align 8
+  %v193 = fmul double 0xBFB9999999AE2038, %v192
+  %v194 = getelementptr inbounds double, double* %w, i64 20
+  %v195 = load double, double* %v194, align 8
+  %v196 = fmul double 0x3DA5FD7F51AA09BB, %v195
+  %v197 = fadd double %v190, %v193
+  %v198 = fadd double %v197, %v196
+  %v199 = fmul double 0x3FF0000000000000, %v73
+  %v200 = fmul double %v199, 0x3DA5FD7F51AA09BB
+  %v201 = fmul double %v199, 0xBFB9999999AE2038
+  %v202 = getelementptr inbounds double, double* %out, i64 49
+  store double %v200, double* %v202, align 8
+  %v203 = getelementptr inbounds double, double* %out, i64 50
+  store double %v201, double* %v203, align 8
+  %v204 = getelementptr inbounds double, double* %out, i64 51
+  store double %v199, double* %v204, align 8
+  %v205 = fmul double 0xBFF0000000000000, %v33
+  %v206 = fmul double %v205, %v46
+  %v207 = fmul double 0xBFF0000000000000, %v44
+  %v208 = fmul double %v207, %v46
+  %v209 = fmul double 0xBFF0000000000000, %v44
+  %v210 = fmul double %v209, %v33
+  %v211 = fmul double 0x3FF0000000000000, %v206
+  %v212 = fmul double 0x3FF0000000000000, %v208
+  %v213 = fmul double 0x3FF0000000000000, %v210
+  %v214 = fmul double 0x3FF0000000000000, %v31
+  %v215 = fmul double 0x3FF0000000000000, %v29
+  %v216 = getelementptr inbounds double, double* %out, i64 52
+  store double %v214, double* %v216, align 8
+  %v217 = getelementptr inbounds double, double* %out, i64 53
+  store double %v215, double* %v217, align 8
+  %v218 = getelementptr inbounds double, double* %out, i64 54
+  store double %v211, double* %v218, align 8
+  %v219 = getelementptr inbounds double, double* %out, i64 55
+  store double %v212, double* %v219, align 8
+  %v220 = getelementptr inbounds double, double* %out, i64 56
+  store double %v213, double* %v220, align 8
+  %v221 = fmul double 0x3FF0000000000000, %v192
+  %v222 = fmul double 0x3FF0000000000000, %v141
+  %v223 = getelementptr inbounds double, double* %w, i64 23
+  %v224 = load double, double* %v223, align 8
+  %v225 = fmul double 0x3FF0000000000000, %v224
+  %v226 = fmul double 0x3FF0000000000000, %v145
+  %v227 = fmul double 0x3FF0000000000000, %v195
+  %v228 = fmul double 0x3FF0000000000000, %v151
+  %v229 = getelementptr inbounds double, double* %out, i64 57
+  store double %v227, double* %v229, align 8
+  %v230 = getelementptr inbounds double, double* %out, i64 58
+  store double %v225, double* %v230, align 8
+  %v231 = getelementptr inbounds double, double* %out, i64 59
+  store double %v221, double* %v231, align 8
+  %v232 = getelementptr inbounds double, double* %out, i64 60
+  store double %v228, double* %v232, align 8
+  %v233 = getelementptr inbounds double, double* %out, i64 61
+  store double %v226, double* %v233, align 8
+  %v234 = getelementptr inbounds double, double* %out, i64 62
+  store double %v222, double* %v234, align 8
+  %v235 = getelementptr inbounds double, double* %out, i64 63
+  store double 0x3FF0000000000000, double* %v235, align 8
+  %v236 = getelementptr inbounds double, double* %out, i64 64
+  store double 0x3FF0000000000000, double* %v236, align 8
+  %v237 = getelementptr inbounds double, double* %w, i64 25
+  %v238 = load double, double* %v237, align 8
+  %v239 = fmul double 0x3FF0000000000000, %v165
+  %v240 = getelementptr inbounds double, double* %out, i64 65
+  store double %v239, double* %v240, align 8
+  %v241 = getelementptr inbounds double, double* %out, i64 66
+  store double 0x3FF0000000000000, double* %v241, align 8
+  %v242 = getelementptr inbounds double, double* %out, i64 67
+  store double 0x3FF0000000000000, double* %v242, align 8
+  %v243 = fmul double 0xBFEBB67AE858D58C, %v31
+  %v244 = fmul double %v243, %v33
+  %v245 = fmul double 0xBFEBB67AE858D58C, %v29
+  %v246 = fmul double %v245, %v33
+  %v247 = fmul double 0xBFEBB67AE858D58C, %v29
+  %v248 = fmul double %v247, %v31
   %v249 = fmul double 0x3FF0000000000000, %v244
   %v250 = fmul double 0x3FF0000000000000, %v246
   %v251 = fmul double 0x3FF0000000000000, %v248
-  %v252 = fmul double 0x3FDFFFFFFFFE25D6, %v11
-  %v253 = fmul double 0x3FDFFFFFFFFE25D6, %v3
+  %v252 = fmul double 0x3FEBB67AE858D58C, %v46
+  %v253 = fmul double 0x3FEBB67AE858D58C, %v44
   %v254 = fmul double 0x3FF0000000000000, %v252
   %v255 = fmul double 0x3FF0000000000000, %v253
-  %v256 = fmul double 0x3FEBB67AE858D58C, %v17
-  %v257 = fmul double 0x3FEBB67AE858D58C, %v15
+  %v256 = fmul double 0xBFDFFFFFFFFE25D6, %v31
+  %v257 = fmul double 0xBFDFFFFFFFFE25D6, %v52
   %v258 = fmul double 0x3FF0000000000000, %v256
   %v259 = fmul double 0x3FF0000000000000, %v257
   %v260 = fadd double %v250, %v259
-  %v261 = getelementptr inbounds double, double* %out, i64 6
+  %v261 = getelementptr inbounds double, double* %out, i64 68
   store double %v249, double* %v261, align 8
-  %v262 = getelementptr inbounds double, double* %out, i64 7
+  %v262 = getelementptr inbounds double, double* %out, i64 69
   store double %v258, double* %v262, align 8
-  %v263 = getelementptr inbounds double, double* %out, i64 8
+  %v263 = getelementptr inbounds double, double* %out, i64 70
   store double %v260, double* %v263, align 8
-  %v264 = getelementptr inbounds double, double* %out, i64 9
+  %v264 = getelementptr inbounds double, double* %out, i64 71
   store double %v254, double* %v264, align 8
-  %v265 = getelementptr inbounds double, double* %out, i64 10
+  %v265 = getelementptr inbounds double, double* %out, i64 72
   store double %v251, double* %v265, align 8
-  %v266 = getelementptr inbounds double, double* %out, i64 11
+  %v266 = getelementptr inbounds double, double* %out, i64 73
   store double %v255, double* %v266, align 8
-  %v267 = fmul double 0x3FDFFFFFFFFE25D6, %v15
-  %v268 = fmul double 0x3FDFFFFFFFFE25D6, %v13
+  %v267 = fmul double 0x3FEBB67AE858D58C, %v52
+  %v268 = fmul double 0x3FEBB67AE858D58C, %v29
   %v269 = fmul double 0x3FF0000000000000, %v267
   %v270 = fmul double 0x3FF0000000000000, %v268
-  %v271 = fmul double 0x3FF0000000000000, 0x3FEBB67AE858D58C
-  %v272 = getelementptr inbounds double, double* %out, i64 12
+  %v271 = fmul double 0x3FF0000000000000, 0xBFDFFFFFFFFE25D6
+  %v272 = getelementptr inbounds double, double* %out, i64 74
   store double %v269, double* %v272, align 8
-  %v273 = getelementptr inbounds double, double* %out, i64 13
+  %v273 = getelementptr inbounds double, double* %out, i64 75
   store double %v270, double* %v273, align 8
-  %v274 = getelementptr inbounds double, double* %out, i64 14
+  %v274 = getelementptr inbounds double, double* %out, i64 76
   store double %v271, double* %v274, align 8
-  %v275 = fmul double 0x3FF0000000000000, %v38
-  %v276 = fmul double %v275, 0x3DA5FD7F51AA09BB
-  %v277 = fmul double %v275, 0xBFB9999999AE2038
-  %v278 = getelementptr inbounds double, double* %out, i64 15
-  store double %v276, double* %v278, align 8
-  %v279 = getelementptr inbounds double, double* %out, i64 16
-  store double %v277, double* %v279, align 8
-  %v280 = getelementptr inbounds double, double* %out, i64 17
-  store double %v275, double* %v280, align 8
-  %v281 = fmul double 0x3FF0000000000000, 0x4049000000000000
-  %v282 = getelementptr inbounds double, double* %out, i64 18
-  store double %v281, double* %v282, align 8
-  %v283 = fmul double 0x3FF0000000000000, 0xBFB9999999AE2038
-  %v284 = getelementptr inbounds double, double* %out, i64 19
-  store double %v283, double* %v284, align 8
-  %v285 = fmul double 0x3FF0000000000000, 0x4049000000000000
-  %v286 = getelementptr inbounds double, double* %out, i64 20
-  store double %v285, double* %v286, align 8
-  %v287 = fmul double 0x3FF0000000000000, 0x4039000000000000
-  %v288 = getelementptr inbounds double, double* %out, i64 21
-  store double %v287, double* %v288, align 8
-  %v289 = fmul double 0x3FF0000000000000, 0x3DA5FD7F51AA09BB
-  %v290 = fmul double 0x3FF0000000000000, 0x3FB9999999AE2038
-  %v291 = getelementptr inbounds double, double* %out, i64 22
-  store double %v290, double* %v291, align 8
-  %v292 = getelementptr inbounds double, double* %out, i64 23
-  store double %v289, double* %v292, align 8
-  %v293 = fmul double 0x3FF0000000000000, 0xBDA5FD7F51AA09BB
-  %v294 = getelementptr inbounds double, double* %out, i64 24
-  store double %v293, double* %v294, align 8
-  %v295 = fmul double 0x3FDFFFFFFFFE25D6, %v7
-  %v296 = fmul double %v295, %v11
-  %v297 = fmul double 0x3FDFFFFFFFFE25D6, %v13
-  %v298 = fmul double %v297, %v11
-  %v299 = fmul double 0x3FDFFFFFFFFE25D6, %v13
-  %v300 = fmul double %v299, %v7
-  %v301 = fmul double 0x3FF0000000000000, %v296
-  %v302 = fmul double 0x3FF0000000000000, %v298
-  %v303 = fmul double 0x3FF0000000000000, %v300
-  %v304 = fmul double 0x3FDFFFFFFFFE25D6, %v3
-  %v305 = fmul double 0x3FDFFFFFFFFE25D6, %v17
-  %v306 = fmul double 0x3FF0000000000000, %v304
+  %v275 = getelementptr inbounds double, double* %x, i64 10
+  %v276 = load double, double* %v275, align 8
+  %v277 = getelementptr inbounds double, double* %w, i64 29
+  %v278 = load double, double* %v277, align 8
+  %v279 = fmul double 0xBFB9999999AE2038, %v278
+  %v280 = getelementptr inbounds double, double* %w, i64 28
+  %v281 = load double, double* %v280, align 8
+  %v282 = fmul double 0x3DA5FD7F51AA09BB, %v281
+  %v283 = fadd double %v276, %v279
+  %v284 = fadd double %v283, %v282
+  %v285 = fmul double 0x3FF0000000000000, %v73
+  %v286 = fmul double %v285, 0x3DA5FD7F51AA09BB
+  %v287 = fmul double %v285, 0xBFB9999999AE2038
+  %v288 = getelementptr inbounds double, double* %out, i64 77
+  store double %v286, double* %v288, align 8
+  %v289 = getelementptr inbounds double, double* %out, i64 78
+  store double %v287, double* %v289, align 8
+  %v290 = getelementptr inbounds double, double* %out, i64 79
+  store double %v285, double* %v290, align 8
+  %v291 = fmul double 0x3FEBB67AE858D58C, %v33
+  %v292 = fmul double %v291, %v46
+  %v293 = fmul double 0x3FEBB67AE858D58C, %v29
+  %v294 = fmul double %v293, %v46
+  %v295 = fmul double 0x3FEBB67AE858D58C, %v29
+  %v296 = fmul double %v295, %v33
+  %v297 = fmul double 0x3FF0000000000000, %v292
+  %v298 = fmul double 0x3FF0000000000000, %v294
+  %v299 = fmul double 0x3FF0000000000000, %v296
+  %v300 = fmul double 0x3FDFFFFFFFFE25D6, %v46
+  %v301 = fmul double 0x3FDFFFFFFFFE25D6, %v52
+  %v302 = fmul double 0x3FF0000000000000, %v300
+  %v303 = fmul double 0x3FF0000000000000, %v301
+  %v304 = fadd double %v299, %v303
+  %v305 = fmul double 0x3FEBB67AE858D58C, %v44
+  %v306 = fmul double 0x3FEBB67AE858D58C, %v31
   %v307 = fmul double 0x3FF0000000000000, %v305
-  %v308 = fmul double 0xBFEBB67AE858D58C, %v11
-  %v309 = fmul double 0xBFEBB67AE858D58C, %v15
-  %v310 = fmul double 0x3FF0000000000000, %v308
-  %v311 = fmul double 0x3FF0000000000000, %v309
-  %v312 = fadd double %v303, %v311
-  %v313 = getelementptr inbounds double, double* %out, i64 25
-  store double %v301, double* %v313, align 8
-  %v314 = getelementptr inbounds double, double* %out, i64 26
-  store double %v310, double* %v314, align 8
-  %v315 = getelementptr inbounds double, double* %out, i64 27
-  store double %v306, double* %v315, align 8
-  %v316 = getelementptr inbounds double, double* %out, i64 28
-  store double %v307, double* %v316, align 8
-  %v317 = getelementptr inbounds double, double* %out, i64 29
-  store double %v302, double* %v317, align 8
-  %v318 = getelementptr inbounds double, double* %out, i64 30
-  store double %v312, double* %v318, align 8
-  %v319 = fmul double 0x3FF0000000000000, %v32
-  %v320 = fmul double 0x3FF0000000000000, %v66
-  %v321 = fmul double 0x3FF0000000000000, %v76
-  %v322 = fmul double 0x3FF0000000000000, %v64
-  %v323 = fmul double 0x3FF0000000000000, %v27
-  %v324 = fmul double 0x3FF0000000000000, %v52
-  %v325 = getelementptr inbounds double, double* %out, i64 31
-  store double %v323, double* %v325, align 8
-  %v326 = getelementptr inbounds double, double* %out, i64 32
-  store double %v321, double* %v326, align 8
-  %v327 = getelementptr inbounds double, double* %out, i64 33
-  store double %v319, double* %v327, align 8
-  %v328 = getelementptr inbounds double, double* %out, i64 34
-  store double %v324, double* %v328, align 8
-  %v329 = getelementptr inbounds double, double* %out, i64 35
-  store double %v322, double* %v329, align 8
-  %v330 = getelementptr inbounds double, double* %out, i64 36
-  store double %v320, double* %v330, align 8
-  %v331 = getelementptr inbounds double, double* %out, i64 37
-  store double 0x3FF0000000000000, double* %v331, align 8
-  %v332 = getelementptr inbounds double, double* %out, i64 38
-  store double 0x3FF0000000000000, double* %v332, align 8
-  %v333 = fmul double 0x3FF0000000000000, %v89
-  %v334 = getelementptr inbounds double, double* %out, i64 39
+  %v308 = fmul double 0x3FF0000000000000, %v306
+  %v309 = getelementptr inbounds double, double* %out, i64 80
+  store double %v297, double* %v309, align 8
+  %v310 = getelementptr inbounds double, double* %out, i64 81
+  store double %v302, double* %v310, align 8
+  %v311 = getelementptr inbounds double, double* %out, i64 82
+  store double %v307, double* %v311, align 8
+  %v312 = getelementptr inbounds double, double* %out, i64 83
+  store double %v308, double* %v312, align 8
+  %v313 = getelementptr inbounds double, double* %out, i64 84
+  store double %v298, double* %v313, align 8
+  %v314 = getelementptr inbounds double, double* %out, i64 85
+  store double %v304, double* %v314, align 8
+  %v315 = fmul double 0x3FF0000000000000, %v278
+  %v316 = fmul double 0x3FF0000000000000, %v141
+  %v317 = getelementptr inbounds double, double* %w, i64 31
+  %v318 = load double, double* %v317, align 8
+  %v319 = fmul double 0x3FF0000000000000, %v318
+  %v320 = fmul double 0x3FF0000000000000, %v145
+  %v321 = fmul double 0x3FF0000000000000, %v281
+  %v322 = fmul double 0x3FF0000000000000, %v151
+  %v323 = getelementptr inbounds double, double* %out, i64 86
+  store double %v321, double* %v323, align 8
+  %v324 = getelementptr inbounds double, double* %out, i64 87
+  store double %v319, double* %v324, align 8
+  %v325 = getelementptr inbounds double, double* %out, i64 88
+  store double %v315, double* %v325, align 8
+  %v326 = getelementptr inbounds double, double* %out, i64 89
+  store double %v322, double* %v326, align 8
+  %v327 = getelementptr inbounds double, double* %out, i64 90
+  store double %v320, double* %v327, align 8
+  %v328 = getelementptr inbounds double, double* %out, i64 91
+  store double %v316, double* %v328, align 8
+  %v329 = getelementptr inbounds double, double* %out, i64 92
+  store double 0x3FF0000000000000, double* %v329, align 8
+  %v330 = getelementptr inbounds double, double* %out, i64 93
+  store double 0x3FF0000000000000, double* %v330, align 8
+  %v331 = getelementptr inbounds double, double* %w, i64 33
+  %v332 = load double, double* %v331, align 8
+  %v333 = fmul double 0x3FF0000000000000, %v165
+  %v334 = getelementptr inbounds double, double* %out, i64 94
   store double %v333, double* %v334, align 8
-  %v335 = getelementptr inbounds double, double* %out, i64 40
+  %v335 = getelementptr inbounds double, double* %out, i64 95
   store double 0x3FF0000000000000, double* %v335, align 8
-  %v336 = getelementptr inbounds double, double* %out, i64 41
+  %v336 = getelementptr inbounds double, double* %out, i64 96
   store double 0x3FF0000000000000, double* %v336, align 8
-  %v337 = fmul double %v3, %v7
-  %v338 = fmul double %v17, %v7
-  %v339 = fmul double %v17, %v3
-  %v340 = fmul double 0x3FF0000000000000, %v337
-  %v341 = fmul double 0x3FF0000000000000, %v338
-  %v342 = fmul double 0x3FF0000000000000, %v339
-  %v343 = fmul double 0x3FF0000000000000, %v11
-  %v344 = fmul double 0x3FF0000000000000, %v13
-  %v345 = getelementptr inbounds double, double* %out, i64 42
+  %v337 = getelementptr inbounds double, double* %w, i64 35
+  %v338 = load double, double* %v337, align 8
+  %v339 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v340 = getelementptr inbounds double, double* %out, i64 97
+  store double %v339, double* %v340, align 8
+  %v341 = fmul double 0x3F947AE147AE147B, %v107
+  %v342 = fmul double 0x3F947AE147AE147B, %v95
+  %v343 = fmul double 0x3FF0000000000000, %v341
+  %v344 = fmul double 0x3FF0000000000000, %v342
+  %v345 = getelementptr inbounds double, double* %out, i64 98
   store double %v343, double* %v345, align 8
-  %v346 = getelementptr inbounds double, double* %out, i64 43
-  store double %v340, double* %v346, align 8
-  %v347 = getelementptr inbounds double, double* %out, i64 44
-  store double %v341, double* %v347, align 8
-  %v348 = getelementptr inbounds double, double* %out, i64 45
-  store double %v342, double* %v348, align 8
-  %v349 = getelementptr inbounds double, double* %out, i64 46
-  store double %v344, double* %v349, align 8
-  %v350 = fmul double 0xBFF0000000000000, %v3
-  %v351 = fmul double 0xBFF0000000000000, %v15
+  %v346 = getelementptr inbounds double, double* %out, i64 99
+  store double %v344, double* %v346, align 8
+  %v347 = fmul double 0x3FF0000000000000, %v318
+  %v348 = fmul double 0x3FF0000000000000, %v338
+  %v349 = getelementptr inbounds double, double* %w, i64 27
+  %v350 = load double, double* %v349, align 8
+  %v351 = fmul double 0x3FF0000000000000, %v224
   %v352 = fmul double 0x3FF0000000000000, %v350
-  %v353 = fmul double 0x3FF0000000000000, %v351
-  %v354 = getelementptr inbounds double, double* %out, i64 47
-  store double %v352, double* %v354, align 8
-  %v355 = getelementptr inbounds double, double* %out, i64 48
-  store double %v353, double* %v355, align 8
-  %v356 = fmul double 0x3FF0000000000000, %v38
-  %v357 = fmul double %v356, 0x3DA5FD7F51AA09BB
-  %v358 = fmul double %v356, 0xBFB9999999AE2038
-  %v359 = getelementptr inbounds double, double* %out, i64 49
-  store double %v357, double* %v359, align 8
-  %v360 = getelementptr inbounds double, double* %out, i64 50
-  store double %v358, double* %v360, align 8
-  %v361 = getelementptr inbounds double, double* %out, i64 51
-  store double %v356, double* %v361, align 8
-  %v362 = fmul double 0xBFF0000000000000, %v7
-  %v363 = fmul double %v362, %v11
-  %v364 = fmul double 0xBFF0000000000000, %v3
-  %v365 = fmul double %v364, %v11
-  %v366 = fmul double 0xBFF0000000000000, %v3
-  %v367 = fmul double %v366, %v7
-  %v368 = fmul double 0x3FF0000000000000, %v363
-  %v369 = fmul double 0x3FF0000000000000, %v365
-  %v370 = fmul double 0x3FF0000000000000, %v367
-  %v371 = fmul double 0x3FF0000000000000, %v17
-  %v372 = fmul double 0x3FF0000000000000, %v13
-  %v373 = getelementptr inbounds double, double* %out, i64 52
-  store double %v371, double* %v373, align 8
-  %v374 = getelementptr inbounds double, double* %out, i64 53
-  store double %v372, double* %v374, align 8
-  %v375 = getelementptr inbounds double, double* %out, i64 54
-  store double %v368, double* %v375, align 8
-  %v376 = getelementptr inbounds double, double* %out, i64 55
-  store double %v369, double* %v376, align 8
-  %v377 = getelementptr inbounds double, double* %out, i64 56
-  store double %v370, double* %v377, align 8
-  %v378 = fmul double 0x3FF0000000000000, %v100
-  %v379 = fmul double 0x3FF0000000000000, %v66
-  %v380 = fmul double 0x3FF0000000000000, %v118
-  %v381 = fmul double 0x3FF0000000000000, %v64
-  %v382 = fmul double 0x3FF0000000000000, %v97
-  %v383 = fmul double 0x3FF0000000000000, %v52
-  %v384 = getelementptr inbounds double, double* %out, i64 57
-  store double %v382, double* %v384, align 8
-  %v385 = getelementptr inbounds double, double* %out, i64 58
-  store double %v380, double* %v385, align 8
-  %v386 = getelementptr inbounds double, double* %out, i64 59
-  store double %v378, double* %v386, align 8
-  %v387 = getelementptr inbounds double, double* %out, i64 60
-  store double %v383, double* %v387, align 8
-  %v388 = getelementptr inbounds double, double* %out, i64 61
-  store double %v381, double* %v388, align 8
-  %v389 = getelementptr inbounds double, double* %out, i64 62
-  store double %v379, double* %v389, align 8
-  %v390 = getelementptr inbounds double, double* %out, i64 63
-  store double 0x3FF0000000000000, double* %v390, align 8
-  %v391 = getelementptr inbounds double, double* %out, i64 64
-  store double 0x3FF0000000000000, double* %v391, align 8
-  %v392 = fmul double 0x3FF0000000000000, %v89
-  %v393 = getelementptr inbounds double, double* %out, i64 65
-  store double %v392, double* %v393, align 8
-  %v394 = getelementptr inbounds double, double* %out, i64 66
-  store double 0x3FF0000000000000, double* %v394, align 8
-  %v395 = getelementptr inbounds double, double* %out, i64 67
-  store double 0x3FF0000000000000, double* %v395, align 8
-  %v396 = fmul double 0xBFEBB67AE858D58C, %v17
-  %v397 = fmul double %v396, %v7
-  %v398 = fmul double 0xBFEBB67AE858D58C, %v13
-  %v399 = fmul double %v398, %v7
-  %v400 = fmul double 0xBFEBB67AE858D58C, %v13
-  %v401 = fmul double %v400, %v17
-  %v402 = fmul double 0x3FF0000000000000, %v397
-  %v403 = fmul double 0x3FF0000000000000, %v399
-  %v404 = fmul double 0x3FF0000000000000, %v401
-  %v405 = fmul double 0x3FEBB67AE858D58C, %v11
-  %v406 = fmul double 0x3FEBB67AE858D58C, %v3
-  %v407 = fmul double 0x3FF0000000000000, %v405
-  %v408 = fmul double 0x3FF0000000000000, %v406
-  %v409 = fmul double 0xBFDFFFFFFFFE25D6, %v17
-  %v410 = fmul double 0xBFDFFFFFFFFE25D6, %v15
-  %v411 = fmul double 0x3FF0000000000000, %v409
-  %v412 = fmul double 0x3FF0000000000000, %v410
-  %v413 = fadd double %v403, %v412
-  %v414 = getelementptr inbounds double, double* %out, i64 68
-  store double %v402, double* %v414, align 8
-  %v415 = getelementptr inbounds double, double* %out, i64 69
-  store double %v411, double* %v415, align 8
-  %v416 = getelementptr inbounds double, double* %out, i64 70
-  store double %v413, double* %v416, align 8
-  %v417 = getelementptr inbounds double, double* %out, i64 71
-  store double %v407, double* %v417, align 8
-  %v418 = getelementptr inbounds double, double* %out, i64 72
-  store double %v404, double* %v418, align 8
-  %v419 = getelementptr inbounds double, double* %out, i64 73
-  store double %v408, double* %v419, align 8
-  %v420 = fmul double 0x3FEBB67AE858D58C, %v15
-  %v421 = fmul double 0x3FEBB67AE858D58C, %v13
-  %v422 = fmul double 0x3FF0000000000000, %v420
-  %v423 = fmul double 0x3FF0000000000000, %v421
-  %v424 = fmul double 0x3FF0000000000000, 0xBFDFFFFFFFFE25D6
-  %v425 = getelementptr inbounds double, double* %out, i64 74
-  store double %v422, double* %v425, align 8
-  %v426 = getelementptr inbounds double, double* %out, i64 75
-  store double %v423, double* %v426, align 8
-  %v427 = getelementptr inbounds double, double* %out, i64 76
-  store double %v424, double* %v427, align 8
-  %v428 = fmul double 0x3FF0000000000000, %v38
-  %v429 = fmul double %v428, 0x3DA5FD7F51AA09BB
-  %v430 = fmul double %v428, 0xBFB9999999AE2038
-  %v431 = getelementptr inbounds double, double* %out, i64 77
-  store double %v429, double* %v431, align 8
-  %v432 = getelementptr inbounds double, double* %out, i64 78
-  store double %v430, double* %v432, align 8
-  %v433 = getelementptr inbounds double, double* %out, i64 79
-  store double %v428, double* %v433, align 8
-  %v434 = fmul double 0x3FEBB67AE858D58C, %v7
-  %v435 = fmul double %v434, %v11
-  %v436 = fmul double 0x3FEBB67AE858D58C, %v13
-  %v437 = fmul double %v436, %v11
-  %v438 = fmul double 0x3FEBB67AE858D58C, %v13
-  %v439 = fmul double %v438, %v7
-  %v440 = fmul double 0x3FF0000000000000, %v435
-  %v441 = fmul double 0x3FF0000000000000, %v437
-  %v442 = fmul double 0x3FF0000000000000, %v439
-  %v443 = fmul double 0x3FDFFFFFFFFE25D6, %v11
-  %v444 = fmul double 0x3FDFFFFFFFFE25D6, %v15
-  %v445 = fmul double 0x3FF0000000000000, %v443
-  %v446 = fmul double 0x3FF0000000000000, %v444
-  %v447 = fadd double %v442, %v446
-  %v448 = fmul double 0x3FEBB67AE858D58C, %v3
-  %v449 = fmul double 0x3FEBB67AE858D58C, %v17
-  %v450 = fmul double 0x3FF0000000000000, %v448
-  %v451 = fmul double 0x3FF0000000000000, %v449
-  %v452 = getelementptr inbounds double, double* %out, i64 80
-  store double %v440, double* %v452, align 8
-  %v453 = getelementptr inbounds double, double* %out, i64 81
-  store double %v445, double* %v453, align 8
-  %v454 = getelementptr inbounds double, double* %out, i64 82
-  store double %v450, double* %v454, align 8
-  %v455 = getelementptr inbounds double, double* %out, i64 83
-  store double %v451, double* %v455, align 8
-  %v456 = getelementptr inbounds double, double* %out, i64 84
-  store double %v441, double* %v456, align 8
-  %v457 = getelementptr inbounds double, double* %out, i64 85
-  store double %v447, double* %v457, align 8
-  %v458 = fmul double 0x3FF0000000000000, %v147
-  %v459 = fmul double 0x3FF0000000000000, %v66
-  %v460 = fmul double 0x3FF0000000000000, %v169
-  %v461 = fmul double 0x3FF0000000000000, %v64
-  %v462 = fmul double 0x3FF0000000000000, %v142
-  %v463 = fmul double 0x3FF0000000000000, %v52
-  %v464 = getelementptr inbounds double, double* %out, i64 86
-  store double %v462, double* %v464, align 8
-  %v465 = getelementptr inbounds double, double* %out, i64 87
-  store double %v460, double* %v465, align 8
-  %v466 = getelementptr inbounds double, double* %out, i64 88
-  store double %v458, double* %v466, align 8
-  %v467 = getelementptr inbounds double, double* %out, i64 89
-  store double %v463, double* %v467, align 8
-  %v468 = getelementptr inbounds double, double* %out, i64 90
-  store double %v461, double* %v468, align 8
-  %v469 = getelementptr inbounds double, double* %out, i64 91
-  store double %v459, double* %v469, align 8
-  %v470 = getelementptr inbounds double, double* %out, i64 92
-  store double 0x3FF0000000000000, double* %v470, align 8
-  %v471 = getelementptr inbounds double, double* %out, i64 93
-  store double 0x3FF0000000000000, double* %v471, align 8
-  %v472 = fmul double 0x3FF0000000000000, %v89
-  %v473 = getelementptr inbounds double, double* %out, i64 94
-  store double %v472, double* %v473, align 8
-  %v474 = getelementptr inbounds double, double* %out, i64 95
-  store double 0x3FF0000000000000, double* %v474, align 8
-  %v475 = getelementptr inbounds double, double* %out, i64 96
-  store double 0x3FF0000000000000, double* %v475, align 8
-  %v476 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v477 = getelementptr inbounds double, double* %out, i64 97
-  store double %v476, double* %v477, align 8
-  %v478 = fmul double 0x3F947AE147AE147B, %v60
-  %v479 = fmul double 0x3F947AE147AE147B, %v50
-  %v480 = fmul double 0x3FF0000000000000, %v478
-  %v481 = fmul double 0x3FF0000000000000, %v479
-  %v482 = getelementptr inbounds double, double* %out, i64 98
-  store double %v480, double* %v482, align 8
-  %v483 = getelementptr inbounds double, double* %out, i64 99
-  store double %v481, double* %v483, align 8
-  %v484 = fmul double 0x3FF0000000000000, %v169
-  %v485 = fmul double 0x3FF0000000000000, %v183
-  %v486 = fmul double 0x3FF0000000000000, %v118
-  %v487 = fmul double 0x3FF0000000000000, %v132
-  %v488 = fmul double 0x3FF0000000000000, %v76
-  %v489 = fmul double 0x3FF0000000000000, %v92
-  %v490 = getelementptr inbounds double, double* %out, i64 100
-  store double %v488, double* %v490, align 8
-  %v491 = getelementptr inbounds double, double* %out, i64 101
-  store double %v486, double* %v491, align 8
-  %v492 = getelementptr inbounds double, double* %out, i64 102
-  store double %v484, double* %v492, align 8
-  %v493 = getelementptr inbounds double, double* %out, i64 103
-  store double %v489, double* %v493, align 8
-  %v494 = getelementptr inbounds double, double* %out, i64 104
-  store double %v487, double* %v494, align 8
-  %v495 = getelementptr inbounds double, double* %out, i64 105
-  store double %v485, double* %v495, align 8
-  %v496 = fmul double 0x3FF0000000000000, 0x3FB9999999AE2038
-  %v497 = getelementptr inbounds double, double* %out, i64 106
-  store double %v496, double* %v497, align 8
-  %v498 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v499 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v500 = getelementptr inbounds double, double* %out, i64 107
-  store double %v499, double* %v500, align 8
-  %v501 = getelementptr inbounds double, double* %out, i64 108
-  store double %v498, double* %v501, align 8
-  %v502 = fmul double 0xBF947AE147AE147B, %v60
-  %v503 = fmul double 0xBF947AE147AE147B, %v56
-  %v504 = fmul double 0x3FF0000000000000, %v502
-  %v505 = fmul double 0x3FF0000000000000, %v503
-  %v506 = getelementptr inbounds double, double* %out, i64 109
-  store double %v504, double* %v506, align 8
-  %v507 = getelementptr inbounds double, double* %out, i64 110
-  store double %v505, double* %v507, align 8
-  %v508 = fmul double 0x3FF0000000000000, %v142
-  %v509 = fmul double 0x3FF0000000000000, %v183
-  %v510 = fmul double 0x3FF0000000000000, %v97
-  %v511 = fmul double 0x3FF0000000000000, %v132
-  %v512 = fmul double 0x3FF0000000000000, %v27
-  %v513 = fmul double 0x3FF0000000000000, %v92
-  %v514 = getelementptr inbounds double, double* %out, i64 111
-  store double %v512, double* %v514, align 8
-  %v515 = getelementptr inbounds double, double* %out, i64 112
-  store double %v510, double* %v515, align 8
-  %v516 = getelementptr inbounds double, double* %out, i64 113
-  store double %v508, double* %v516, align 8
-  %v517 = getelementptr inbounds double, double* %out, i64 114
-  store double %v513, double* %v517, align 8
-  %v518 = getelementptr inbounds double, double* %out, i64 115
-  store double %v511, double* %v518, align 8
-  %v519 = getelementptr inbounds double, double* %out, i64 116
-  store double %v509, double* %v519, align 8
-  %v520 = fmul double 0x3FF0000000000000, %v147
-  %v521 = fmul double 0x3FF0000000000000, %v183
-  %v522 = fmul double 0x3FF0000000000000, %v100
-  %v523 = fmul double 0x3FF0000000000000, %v132
-  %v524 = fmul double 0x3FF0000000000000, %v32
-  %v525 = fmul double 0x3FF0000000000000, %v92
-  %v526 = getelementptr inbounds double, double* %out, i64 117
-  store double %v524, double* %v526, align 8
-  %v527 = getelementptr inbounds double, double* %out, i64 118
-  store double %v522, double* %v527, align 8
-  %v528 = getelementptr inbounds double, double* %out, i64 119
-  store double %v520, double* %v528, align 8
-  %v529 = getelementptr inbounds double, double* %out, i64 120
-  store double %v525, double* %v529, align 8
-  %v530 = getelementptr inbounds double, double* %out, i64 121
-  store double %v523, double* %v530, align 8
-  %v531 = getelementptr inbounds double, double* %out, i64 122
-  store double %v521, double* %v531, align 8
-  %v532 = fmul double 0x3FF0000000000000, 0xBFB9999999AE2038
-  %v533 = fmul double 0x3FF0000000000000, 0xBDA5FD7F51AA09BB
-  %v534 = getelementptr inbounds double, double* %out, i64 123
-  store double %v532, double* %v534, align 8
-  %v535 = getelementptr inbounds double, double* %out, i64 124
-  store double %v533, double* %v535, align 8
-  %v536 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v537 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v538 = getelementptr inbounds double, double* %out, i64 125
-  store double %v537, double* %v538, align 8
-  %v539 = getelementptr inbounds double, double* %out, i64 126
-  store double %v536, double* %v539, align 8
-  %v540 = fmul double 0x3FF0000000000000, 0x3DA5FD7F51AA09BB
-  %v541 = getelementptr inbounds double, double* %out, i64 127
-  store double %v540, double* %v541, align 8
-  %v542 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v543 = getelementptr inbounds double, double* %out, i64 128
-  store double %v542, double* %v543, align 8
-  %v544 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v545 = getelementptr inbounds double, double* %out, i64 129
-  store double %v544, double* %v545, align 8
-  %v546 = getelementptr inbounds double, double* %out, i64 130
-  store double 0x3FF0000000000000, double* %v546, align 8
-  %v547 = getelementptr inbounds double, double* %out, i64 131
-  store double 0x3FF0000000000000, double* %v547, align 8
-  %v548 = getelementptr inbounds double, double* %out, i64 132
-  store double 0x3FF0000000000000, double* %v548, align 8
-  %v549 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v550 = getelementptr inbounds double, double* %out, i64 133
-  store double %v549, double* %v550, align 8
-  %v551 = getelementptr inbounds double, double* %out, i64 134
-  store double 0x3FF0000000000000, double* %v551, align 8
-  %v552 = fdiv double 0x3FF0000000000000, %v15
-  %v553 = fmul double %v17, %v56
-  %v554 = fmul double %v50, %v11
-  %v555 = fneg double %v554
-  %v556 = fadd double %v553, %v555
-  %v557 = fmul double 0x3FF0000000000000, %v556
-  %v558 = fmul double 0x3FF0000000000000, %v552
-  %v559 = fmul double 0xBFF0000000000000, %v11
-  %v560 = fmul double 0xBFF0000000000000, %v50
-  %v561 = fmul double %v558, %v559
-  %v562 = fmul double %v558, %v560
-  %v563 = fmul double %v558, %v56
-  %v564 = fmul double %v558, %v17
-  %v565 = fmul double %v15, %v15
-  %v566 = fdiv double 0x3FF0000000000000, %v565
-  %v567 = fmul double 0xBFF0000000000000, %v566
-  %v568 = fmul double %v557, %v567
-  %v569 = getelementptr inbounds double, double* %out, i64 135
-  store double %v568, double* %v569, align 8
-  %v570 = getelementptr inbounds double, double* %out, i64 136
-  store double %v563, double* %v570, align 8
-  %v571 = getelementptr inbounds double, double* %out, i64 137
-  store double %v564, double* %v571, align 8
-  %v572 = getelementptr inbounds double, double* %out, i64 138
-  store double %v561, double* %v572, align 8
-  %v573 = getelementptr inbounds double, double* %out, i64 139
-  store double %v562, double* %v573, align 8
-  %v574 = getelementptr inbounds double, double* %out, i64 140
-  store double 0x3FF0000000000000, double* %v574, align 8
-  %v575 = fmul double 0x3FF0000000000000, %v11
-  %v576 = fmul double 0x3FF0000000000000, %v56
-  %v577 = fmul double 0x3FF0000000000000, %v50
-  %v578 = fmul double 0x3FF0000000000000, %v17
-  %v579 = getelementptr inbounds double, double* %out, i64 141
-  store double %v577, double* %v579, align 8
-  %v580 = getelementptr inbounds double, double* %out, i64 142
-  store double %v575, double* %v580, align 8
-  %v581 = getelementptr inbounds double, double* %out, i64 143
-  store double %v578, double* %v581, align 8
-  %v582 = getelementptr inbounds double, double* %out, i64 144
-  store double %v576, double* %v582, align 8
-  %v583 = getelementptr inbounds double, double* %out, i64 145
-  store double 0x3FF0000000000000, double* %v583, align 8
-  %v584 = fmul double 0xBFF0000000000000, %v552
-  %v585 = fmul double %v584, %v556
-  %v586 = fmul double 0xBFF0000000000000, %v7
-  %v587 = fmul double %v586, %v556
-  %v588 = fmul double 0xBFF0000000000000, %v7
-  %v589 = fmul double %v588, %v552
-  %v590 = fmul double 0x3FF0000000000000, %v585
-  %v591 = fmul double 0x3FF0000000000000, %v587
-  %v592 = fmul double 0x3FF0000000000000, %v589
-  %v593 = fmul double 0xBFF0000000000000, %v11
-  %v594 = fmul double 0xBFF0000000000000, %v50
-  %v595 = fmul double %v592, %v593
-  %v596 = fmul double %v592, %v594
-  %v597 = fmul double %v592, %v56
-  %v598 = fmul double %v592, %v17
-  %v599 = fmul double 0xBFF0000000000000, %v566
-  %v600 = fmul double %v591, %v599
-  %v601 = getelementptr inbounds double, double* %out, i64 146
-  store double %v600, double* %v601, align 8
-  %v602 = getelementptr inbounds double, double* %out, i64 147
-  store double %v597, double* %v602, align 8
-  %v603 = getelementptr inbounds double, double* %out, i64 148
-  store double %v598, double* %v603, align 8
-  %v604 = getelementptr inbounds double, double* %out, i64 149
-  store double %v595, double* %v604, align 8
-  %v605 = getelementptr inbounds double, double* %out, i64 150
-  store double 0x3FF0000000000000, double* %v605, align 8
-  %v606 = getelementptr inbounds double, double* %out, i64 151
-  store double %v590, double* %v606, align 8
-  %v607 = getelementptr inbounds double, double* %out, i64 152
-  store double %v596, double* %v607, align 8
+  %v353 = getelementptr inbounds double, double* %w, i64 19
+  %v354 = load double, double* %v353, align 8
+  %v355 = fmul double 0x3FF0000000000000, %v147
+  %v356 = fmul double 0x3FF0000000000000, %v354
+  %v357 = getelementptr inbounds double, double* %out, i64 100
+  store double %v355, double* %v357, align 8
+  %v358 = getelementptr inbounds double, double* %out, i64 101
+  store double %v351, double* %v358, align 8
+  %v359 = getelementptr inbounds double, double* %out, i64 102
+  store double %v347, double* %v359, align 8
+  %v360 = getelementptr inbounds double, double* %out, i64 103
+  store double %v356, double* %v360, align 8
+  %v361 = getelementptr inbounds double, double* %out, i64 104
+  store double %v352, double* %v361, align 8
+  %v362 = getelementptr inbounds double, double* %out, i64 105
+  store double %v348, double* %v362, align 8
+  %v363 = getelementptr inbounds double, double* %w, i64 38
+  %v364 = load double, double* %v363, align 8
+  %v365 = fmul double 0x3FF0000000000000, 0x3FB9999999AE2038
+  %v366 = getelementptr inbounds double, double* %out, i64 106
+  store double %v365, double* %v366, align 8
+  %v367 = getelementptr inbounds double, double* %w, i64 39
+  %v368 = load double, double* %v367, align 8
+  %v369 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v370 = getelementptr inbounds double, double* %w, i64 37
+  %v371 = load double, double* %v370, align 8
+  %v372 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v373 = getelementptr inbounds double, double* %out, i64 107
+  store double %v372, double* %v373, align 8
+  %v374 = getelementptr inbounds double, double* %out, i64 108
+  store double %v369, double* %v374, align 8
+  %v375 = fmul double 0xBF947AE147AE147B, %v107
+  %v376 = fmul double 0xBF947AE147AE147B, %v110
+  %v377 = fmul double 0x3FF0000000000000, %v375
+  %v378 = fmul double 0x3FF0000000000000, %v376
+  %v379 = getelementptr inbounds double, double* %out, i64 109
+  store double %v377, double* %v379, align 8
+  %v380 = getelementptr inbounds double, double* %out, i64 110
+  store double %v378, double* %v380, align 8
+  %v381 = fmul double 0x3FF0000000000000, %v281
+  %v382 = fmul double 0x3FF0000000000000, %v338
+  %v383 = fmul double 0x3FF0000000000000, %v195
+  %v384 = fmul double 0x3FF0000000000000, %v350
+  %v385 = fmul double 0x3FF0000000000000, %v80
+  %v386 = fmul double 0x3FF0000000000000, %v354
+  %v387 = getelementptr inbounds double, double* %out, i64 111
+  store double %v385, double* %v387, align 8
+  %v388 = getelementptr inbounds double, double* %out, i64 112
+  store double %v383, double* %v388, align 8
+  %v389 = getelementptr inbounds double, double* %out, i64 113
+  store double %v381, double* %v389, align 8
+  %v390 = getelementptr inbounds double, double* %out, i64 114
+  store double %v386, double* %v390, align 8
+  %v391 = getelementptr inbounds double, double* %out, i64 115
+  store double %v384, double* %v391, align 8
+  %v392 = getelementptr inbounds double, double* %out, i64 116
+  store double %v382, double* %v392, align 8
+  %v393 = fmul double 0x3FF0000000000000, %v278
+  %v394 = fmul double 0x3FF0000000000000, %v338
+  %v395 = fmul double 0x3FF0000000000000, %v192
+  %v396 = fmul double 0x3FF0000000000000, %v350
+  %v397 = fmul double 0x3FF0000000000000, %v77
+  %v398 = fmul double 0x3FF0000000000000, %v354
+  %v399 = getelementptr inbounds double, double* %out, i64 117
+  store double %v397, double* %v399, align 8
+  %v400 = getelementptr inbounds double, double* %out, i64 118
+  store double %v395, double* %v400, align 8
+  %v401 = getelementptr inbounds double, double* %out, i64 119
+  store double %v393, double* %v401, align 8
+  %v402 = getelementptr inbounds double, double* %out, i64 120
+  store double %v398, double* %v402, align 8
+  %v403 = getelementptr inbounds double, double* %out, i64 121
+  store double %v396, double* %v403, align 8
+  %v404 = getelementptr inbounds double, double* %out, i64 122
+  store double %v394, double* %v404, align 8
+  %v405 = getelementptr inbounds double, double* %w, i64 42
+  %v406 = load double, double* %v405, align 8
+  %v407 = fmul double 0x3FF0000000000000, 0xBFB9999999AE2038
+  %v408 = getelementptr inbounds double, double* %w, i64 43
+  %v409 = load double, double* %v408, align 8
+  %v410 = fmul double 0x3FF0000000000000, 0xBDA5FD7F51AA09BB
+  %v411 = getelementptr inbounds double, double* %out, i64 123
+  store double %v407, double* %v411, align 8
+  %v412 = getelementptr inbounds double, double* %out, i64 124
+  store double %v410, double* %v412, align 8
+  %v413 = getelementptr inbounds double, double* %w, i64 44
+  %v414 = load double, double* %v413, align 8
+  %v415 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v416 = getelementptr inbounds double, double* %w, i64 41
+  %v417 = load double, double* %v416, align 8
+  %v418 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v419 = getelementptr inbounds double, double* %out, i64 125
+  store double %v418, double* %v419, align 8
+  %v420 = getelementptr inbounds double, double* %out, i64 126
+  store double %v415, double* %v420, align 8
+  %v421 = fmul double 0x3FF0000000000000, 0x3DA5FD7F51AA09BB
+  %v422 = getelementptr inbounds double, double* %out, i64 127
+  store double %v421, double* %v422, align 8
+  %v423 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v424 = getelementptr inbounds double, double* %out, i64 128
+  store double %v423, double* %v424, align 8
+  %v425 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v426 = getelementptr inbounds double, double* %out, i64 129
+  store double %v425, double* %v426, align 8
+  %v427 = getelementptr inbounds double, double* %out, i64 130
+  store double 0x3FF0000000000000, double* %v427, align 8
+  %v428 = getelementptr inbounds double, double* %out, i64 131
+  store double 0x3FF0000000000000, double* %v428, align 8
+  %v429 = getelementptr inbounds double, double* %out, i64 132
+  store double 0x3FF0000000000000, double* %v429, align 8
+  %v430 = getelementptr inbounds double, double* %w, i64 46
+  %v431 = load double, double* %v430, align 8
+  %v432 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v433 = getelementptr inbounds double, double* %out, i64 133
+  store double %v432, double* %v433, align 8
+  %v434 = getelementptr inbounds double, double* %out, i64 134
+  store double 0x3FF0000000000000, double* %v434, align 8
+  %v435 = fdiv double 0x3FF0000000000000, %v52
+  %v436 = fmul double %v31, %v110
+  %v437 = fmul double %v95, %v46
+  %v438 = fneg double %v437
+  %v439 = fadd double %v436, %v438
+  %v440 = fmul double 0x3FF0000000000000, %v439
+  %v441 = fmul double 0x3FF0000000000000, %v435
+  %v442 = fmul double 0xBFF0000000000000, %v46
+  %v443 = fmul double 0xBFF0000000000000, %v95
+  %v444 = fmul double %v441, %v442
+  %v445 = fmul double %v441, %v443
+  %v446 = fmul double %v441, %v110
+  %v447 = fmul double %v441, %v31
+  %v448 = fmul double %v52, %v52
+  %v449 = fdiv double 0x3FF0000000000000, %v448
+  %v450 = fmul double 0xBFF0000000000000, %v449
+  %v451 = fmul double %v440, %v450
+  %v452 = getelementptr inbounds double, double* %out, i64 135
+  store double %v451, double* %v452, align 8
+  %v453 = getelementptr inbounds double, double* %out, i64 136
+  store double %v446, double* %v453, align 8
+  %v454 = getelementptr inbounds double, double* %out, i64 137
+  store double %v447, double* %v454, align 8
+  %v455 = getelementptr inbounds double, double* %out, i64 138
+  store double %v444, double* %v455, align 8
+  %v456 = getelementptr inbounds double, double* %out, i64 139
+  store double %v445, double* %v456, align 8
+  %v457 = getelementptr inbounds double, double* %out, i64 140
+  store double 0x3FF0000000000000, double* %v457, align 8
+  %v458 = fmul double 0x3FF0000000000000, %v46
+  %v459 = fmul double 0x3FF0000000000000, %v110
+  %v460 = fmul double 0x3FF0000000000000, %v95
+  %v461 = fmul double 0x3FF0000000000000, %v31
+  %v462 = getelementptr inbounds double, double* %out, i64 141
+  store double %v460, double* %v462, align 8
+  %v463 = getelementptr inbounds double, double* %out, i64 142
+  store double %v458, double* %v463, align 8
+  %v464 = getelementptr inbounds double, double* %out, i64 143
+  store double %v461, double* %v464, align 8
+  %v465 = getelementptr inbounds double, double* %out, i64 144
+  store double %v459, double* %v465, align 8
+  %v466 = getelementptr inbounds double, double* %out, i64 145
+  store double 0x3FF0000000000000, double* %v466, align 8
+  %v467 = fmul double 0xBFF0000000000000, %v435
+  %v468 = fmul double %v467, %v439
+  %v469 = fmul double 0xBFF0000000000000, %v33
+  %v470 = fmul double %v469, %v439
+  %v471 = fmul double 0xBFF0000000000000, %v33
+  %v472 = fmul double %v471, %v435
+  %v473 = fmul double 0x3FF0000000000000, %v468
+  %v474 = fmul double 0x3FF0000000000000, %v470
+  %v475 = fmul double 0x3FF0000000000000, %v472
+  %v476 = fmul double 0xBFF0000000000000, %v46
+  %v477 = fmul double 0xBFF0000000000000, %v95
+  %v478 = fmul double %v475, %v476
+  %v479 = fmul double %v475, %v477
+  %v480 = fmul double %v475, %v110
+  %v481 = fmul double %v475, %v31
+  %v482 = fmul double 0xBFF0000000000000, %v449
+  %v483 = fmul double %v474, %v482
+  %v484 = getelementptr inbounds double, double* %out, i64 146
+  store double %v483, double* %v484, align 8
+  %v485 = getelementptr inbounds double, double* %out, i64 147
+  store double %v480, double* %v485, align 8
+  %v486 = getelementptr inbounds double, double* %out, i64 148
+  store double %v481, double* %v486, align 8
+  %v487 = getelementptr inbounds double, double* %out, i64 149
+  store double %v478, double* %v487, align 8
+  %v488 = getelementptr inbounds double, double* %out, i64 150
+  store double 0x3FF0000000000000, double* %v488, align 8
+  %v489 = getelementptr inbounds double, double* %out, i64 151
+  store double %v473, double* %v489, align 8
+  %v490 = getelementptr inbounds double, double* %out, i64 152
+  store double %v479, double* %v490, align 8
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1684,7 +1522,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1696,12 +1534,12 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_b6734ca431dcbe6c833865d8a7a9956c_f9b861dc8256_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_06af53f60f35c12806b8b9e6b5120690_5c134d9b8554_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 920, 59   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 932, 59   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 7, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_forced"
 MODEL_FILE = "msd_forced.yaml"
-MODEL_HASH = "c08537e10c20ac4fde288bb9e7184daf"
+MODEL_HASH = "a7852378ab4b13145af829f6c29ed8f6"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf", sys.modules[__name__])
-__name__ = "_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf"
+    sys.modules.setdefault("_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6", sys.modules[__name__])
+__name__ = "_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "F0", "f_drive", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22"
+_KERNEL_PREFIX = "_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.sin.f64(double)
@@ -116,53 +116,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 26
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -221,7 +223,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -252,7 +254,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -310,82 +312,82 @@ ends:
 }
 
 
-define internal void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_tape_src, i64 0, i64 0))
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 208)
+  %raw = call i8* @malloc(i64 224)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 208)
+  %raw = call i8* @malloc(i64 224)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.sin.f64(double)
@@ -396,29 +398,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 3
   %v2 = load double, double* %v1, align 8
@@ -467,68 +469,48 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 3
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 4
+  %v3 = getelementptr inbounds double, double* %p, i64 0
   %v4 = load double, double* %v3, align 8
-  %v5 = fmul double 0x4000000000000000, 0x400921FB54442D18
-  %v6 = fmul double %v5, %v4
-  %v7 = fmul double %v6, %t
-  %v8 = call double @llvm.sin.f64(double %v7)
-  %v9 = fmul double %v2, %v8
-  %v10 = getelementptr inbounds double, double* %w, i64 0
-  store double %v9, double* %v10, align 8
-  %v11 = getelementptr inbounds double, double* %x, i64 0
-  %v12 = load double, double* %v11, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 0
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v12, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 1
-  store double %v15, double* %v16, align 8
-  %v17 = getelementptr inbounds double, double* %p, i64 1
-  %v18 = load double, double* %v17, align 8
-  %v19 = getelementptr inbounds double, double* %x, i64 1
-  %v20 = load double, double* %v19, align 8
-  %v21 = fmul double %v18, %v20
-  %v22 = getelementptr inbounds double, double* %w, i64 2
-  store double %v21, double* %v22, align 8
-  %v23 = getelementptr inbounds double, double* %p, i64 2
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 1
+  %v9 = load double, double* %v8, align 8
+  %v10 = getelementptr inbounds double, double* %x, i64 1
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v9
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %w, i64 1
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 2
+  %v17 = load double, double* %v16, align 8
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 2
+  store double %v18, double* %v19, align 8
+  %v20 = getelementptr inbounds double, double* %w, i64 3
+  %v21 = load double, double* %v20, align 8
+  %v22 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v23 = getelementptr inbounds double, double* %w, i64 2
   %v24 = load double, double* %v23, align 8
-  %v25 = fmul double %v15, %v24
-  %v26 = getelementptr inbounds double, double* %w, i64 3
+  %v25 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v26 = getelementptr inbounds double, double* %out, i64 3
   store double %v25, double* %v26, align 8
-  %v27 = fneg double %v21
-  %v28 = fneg double %v25
-  %v29 = fadd double %v9, %v27
-  %v30 = fadd double %v29, %v28
-  %v31 = getelementptr inbounds double, double* %w, i64 4
-  store double %v30, double* %v31, align 8
-  %v32 = fdiv double 0x3FF0000000000000, %v14
-  %v33 = fmul double 0x3FF0000000000000, %v32
-  %v34 = getelementptr inbounds double, double* %out, i64 0
-  store double %v33, double* %v34, align 8
-  %v35 = fmul double 0x3FF0000000000000, %v18
-  %v36 = getelementptr inbounds double, double* %out, i64 1
-  store double %v35, double* %v36, align 8
-  %v37 = fmul double 0x3FF0000000000000, %v24
-  %v38 = getelementptr inbounds double, double* %out, i64 2
-  store double %v37, double* %v38, align 8
-  %v39 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v40 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v41 = getelementptr inbounds double, double* %out, i64 3
-  store double %v40, double* %v41, align 8
-  %v42 = getelementptr inbounds double, double* %out, i64 4
-  store double %v39, double* %v42, align 8
-  %v43 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v43, align 8
-  %v44 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v44, align 8
+  %v27 = getelementptr inbounds double, double* %out, i64 4
+  store double %v22, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v28, align 8
+  %v29 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v29, align 8
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 3
   %v2 = load double, double* %v1, align 8
@@ -560,17 +542,17 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_msd_forced_c08537e10c20ac4fde288bb9e7184daf_555871a50d22_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_forced_a7852378ab4b13145af829f6c29ed8f6_bc157594cb46_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 26, 7   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 28, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 5, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "6350a2fdc3eab618ff5ea48784b99f88"
+MODEL_HASH = "a194cc1b5f22e049630f13a8bb4d3cd2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88", sys.modules[__name__])
-__name__ = "_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88"
+    sys.modules.setdefault("_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2", sys.modules[__name__])
+__name__ = "_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61"
+_KERNEL_PREFIX = "_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -114,53 +114,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape_src = internal constant [7 x i64] [i64 -1, i64 -2, i64 0, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 25
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -219,7 +221,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -250,7 +252,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -308,82 +310,82 @@ ends:
 }
 
 
-define internal void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 6
   %v2 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 13
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_tape_src, i64 0, i64 0))
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 200)
+  %raw = call i8* @malloc(i64 216)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 200)
+  %raw = call i8* @malloc(i64 216)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -392,29 +394,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -451,56 +453,48 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
   %v3 = getelementptr inbounds double, double* %p, i64 0
   %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 1
-  %v10 = load double, double* %v9, align 8
-  %v11 = fmul double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %w, i64 1
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 2
-  %v14 = load double, double* %v13, align 8
-  %v15 = fmul double %v5, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 2
-  store double %v15, double* %v16, align 8
-  %v17 = fneg double %v11
-  %v18 = fneg double %v15
-  %v19 = fadd double %v17, %v18
-  %v20 = getelementptr inbounds double, double* %w, i64 3
-  store double %v19, double* %v20, align 8
-  %v21 = fdiv double 0x3FF0000000000000, %v4
-  %v22 = fmul double 0x3FF0000000000000, %v21
-  %v23 = getelementptr inbounds double, double* %out, i64 0
-  store double %v22, double* %v23, align 8
-  %v24 = fmul double 0x3FF0000000000000, %v8
-  %v25 = getelementptr inbounds double, double* %out, i64 1
-  store double %v24, double* %v25, align 8
-  %v26 = fmul double 0x3FF0000000000000, %v14
-  %v27 = getelementptr inbounds double, double* %out, i64 2
-  store double %v26, double* %v27, align 8
-  %v28 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v29 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v30 = getelementptr inbounds double, double* %out, i64 3
-  store double %v29, double* %v30, align 8
-  %v31 = getelementptr inbounds double, double* %out, i64 4
-  store double %v28, double* %v31, align 8
-  %v32 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v32, align 8
-  %v33 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v33, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 1
+  %v9 = load double, double* %v8, align 8
+  %v10 = getelementptr inbounds double, double* %x, i64 1
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v9
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %w, i64 0
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 2
+  %v17 = load double, double* %v16, align 8
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 2
+  store double %v18, double* %v19, align 8
+  %v20 = getelementptr inbounds double, double* %w, i64 2
+  %v21 = load double, double* %v20, align 8
+  %v22 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v23 = getelementptr inbounds double, double* %w, i64 1
+  %v24 = load double, double* %v23, align 8
+  %v25 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v26 = getelementptr inbounds double, double* %out, i64 3
+  store double %v25, double* %v26, align 8
+  %v27 = getelementptr inbounds double, double* %out, i64 4
+  store double %v22, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v28, align 8
+  %v29 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v29, align 8
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -525,17 +519,17 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_msd_free_6350a2fdc3eab618ff5ea48784b99f88_d6ef1a3cfb61_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_a194cc1b5f22e049630f13a8bb4d3cd2_fc6e12bfa0d2_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 25, 6   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 27, 6   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 4, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "45ce7b34020637eea9187f02fe1c17bf"
+MODEL_HASH = "c3d741ddd4c14f905d4991a009daac23"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 4.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf", sys.modules[__name__])
-__name__ = "_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf"
+    sys.modules.setdefault("_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23", sys.modules[__name__])
+__name__ = "_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f"
+_KERNEL_PREFIX = "_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -119,53 +119,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape_ptr = internal constant [83 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 14, i64 16, i64 19, i64 20, i64 21, i64 23, i64 24, i64 25, i64 26, i64 31, i64 37, i64 39, i64 40, i64 42, i64 44, i64 45, i64 48, i64 50, i64 56, i64 58, i64 59, i64 61, i64 66, i64 68, i64 71, i64 76, i64 82, i64 84, i64 85, i64 87, i64 88, i64 90, i64 91, i64 97, i64 103, i64 107, i64 108, i64 110, i64 112, i64 114, i64 115, i64 121, i64 125, i64 126, i64 128, i64 130, i64 132, i64 134, i64 140, i64 146, i64 152, i64 154, i64 157, i64 159, i64 165, i64 171, i64 172, i64 175, i64 181, i64 182, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 196, i64 197, i64 201, i64 202, i64 209]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape_ptr = internal constant [83 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 14, i64 16, i64 19, i64 20, i64 21, i64 23, i64 24, i64 25, i64 26, i64 31, i64 37, i64 39, i64 40, i64 42, i64 44, i64 45, i64 48, i64 50, i64 56, i64 58, i64 59, i64 61, i64 66, i64 68, i64 71, i64 76, i64 82, i64 84, i64 85, i64 87, i64 88, i64 90, i64 91, i64 97, i64 103, i64 107, i64 108, i64 110, i64 112, i64 114, i64 115, i64 121, i64 125, i64 126, i64 128, i64 130, i64 132, i64 134, i64 140, i64 146, i64 152, i64 154, i64 157, i64 159, i64 165, i64 171, i64 172, i64 175, i64 181, i64 182, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 196, i64 197, i64 201, i64 202, i64 209]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape_src = internal constant [209 x i64] [i64 -9, i64 -4, i64 -3, i64 -9, i64 -4, i64 -3, i64 -6, i64 -7, i64 -8, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 10, i64 -10, i64 -2, i64 -5, i64 12, i64 13, i64 -1, i64 15, i64 15, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 18, i64 9, i64 10, i64 19, i64 6, i64 20, i64 11, i64 21, i64 4, i64 2, i64 1, i64 23, i64 24, i64 -11, i64 4, i64 5, i64 14, i64 16, i64 17, i64 26, i64 23, i64 24, i64 27, i64 7, i64 28, i64 25, i64 29, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 31, i64 32, i64 -12, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 34, i64 31, i64 32, i64 35, i64 8, i64 36, i64 33, i64 37, i64 38, i64 12, i64 13, i64 34, i64 15, i64 12, i64 13, i64 18, i64 9, i64 10, i64 15, i64 12, i64 13, i64 26, i64 23, i64 24, i64 42, i64 43, i64 18, i64 26, i64 44, i64 41, i64 45, i64 46, i64 26, i64 46, i64 18, i64 18, i64 15, i64 12, i64 13, i64 34, i64 31, i64 32, i64 43, i64 50, i64 26, i64 34, i64 51, i64 49, i64 52, i64 53, i64 34, i64 48, i64 54, i64 53, i64 26, i64 55, i64 47, i64 56, i64 18, i64 26, i64 34, i64 22, i64 30, i64 38, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 10, i64 24, i64 32, i64 58, i64 59, i64 40, i64 57, i64 60, i64 15, i64 13, i64 55, i64 47, i64 56, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 18, i64 26, i64 34, i64 64, i64 62, i64 63, i64 65, i64 55, i64 47, i64 56, i64 10, i64 24, i64 32, i64 64, i64 67, i64 68, i64 22, i64 30, i64 39, i64 61, i64 66, i64 69, i64 6, i64 4, i64 5, i64 15, i64 12, i64 2, i64 7, i64 5, i64 15, i64 12, i64 2, i64 8, i64 4, i64 5, i64 15, i64 12, i64 13, i64 1, i64 2]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape_src = internal constant [209 x i64] [i64 -9, i64 -4, i64 -3, i64 -9, i64 -4, i64 -3, i64 -6, i64 -7, i64 -8, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 10, i64 -10, i64 -2, i64 -5, i64 12, i64 13, i64 -1, i64 15, i64 15, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 18, i64 9, i64 10, i64 19, i64 6, i64 20, i64 11, i64 21, i64 4, i64 2, i64 1, i64 23, i64 24, i64 -11, i64 4, i64 5, i64 14, i64 16, i64 17, i64 26, i64 23, i64 24, i64 27, i64 7, i64 28, i64 25, i64 29, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 31, i64 32, i64 -12, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 34, i64 31, i64 32, i64 35, i64 8, i64 36, i64 33, i64 37, i64 38, i64 12, i64 13, i64 34, i64 15, i64 12, i64 13, i64 18, i64 9, i64 10, i64 15, i64 12, i64 13, i64 26, i64 23, i64 24, i64 42, i64 43, i64 18, i64 26, i64 44, i64 41, i64 45, i64 46, i64 26, i64 46, i64 18, i64 18, i64 15, i64 12, i64 13, i64 34, i64 31, i64 32, i64 43, i64 50, i64 26, i64 34, i64 51, i64 49, i64 52, i64 53, i64 34, i64 48, i64 54, i64 53, i64 26, i64 55, i64 47, i64 56, i64 18, i64 26, i64 34, i64 22, i64 30, i64 38, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 10, i64 24, i64 32, i64 58, i64 59, i64 40, i64 57, i64 60, i64 15, i64 13, i64 55, i64 47, i64 56, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 18, i64 26, i64 34, i64 64, i64 62, i64 63, i64 65, i64 55, i64 47, i64 56, i64 10, i64 24, i64 32, i64 64, i64 67, i64 68, i64 22, i64 30, i64 39, i64 61, i64 66, i64 69, i64 6, i64 4, i64 5, i64 15, i64 12, i64 2, i64 7, i64 5, i64 15, i64 12, i64 2, i64 8, i64 4, i64 5, i64 15, i64 12, i64 13, i64 1, i64 2]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_row = internal constant [74 x i64] [i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 76, i64 77, i64 77, i64 77, i64 77, i64 78, i64 79, i64 79, i64 79, i64 80, i64 81, i64 81, i64 81, i64 81, i64 81]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_row = internal constant [74 x i64] [i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 76, i64 77, i64 77, i64 77, i64 77, i64 78, i64 79, i64 79, i64 79, i64 80, i64 81, i64 81, i64 81, i64 81, i64 81]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_col = internal constant [74 x i64] [i64 5, i64 0, i64 1, i64 4, i64 9, i64 8, i64 3, i64 2, i64 6, i64 0, i64 1, i64 4, i64 10, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 8, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 0, i64 1, i64 3, i64 2, i64 6, i64 0, i64 1, i64 2, i64 7, i64 0, i64 1, i64 4, i64 3, i64 2]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_col = internal constant [74 x i64] [i64 5, i64 0, i64 1, i64 4, i64 9, i64 8, i64 3, i64 2, i64 6, i64 0, i64 1, i64 4, i64 10, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 8, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 0, i64 1, i64 3, i64 2, i64 6, i64 0, i64 1, i64 2, i64 7, i64 0, i64 1, i64 4, i64 3, i64 2]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_zero = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_zero = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_k = internal constant [74 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_k = internal constant [74 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_i = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_i = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_j = internal constant [74 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_j = internal constant [74 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 1275
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -224,7 +226,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -255,7 +257,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -313,82 +315,82 @@ ends:
 }
 
 
-define internal void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 82
   %v2 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 291
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 7872, i1 false)
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_tape_src, i64 0, i64 0))
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 10200)
+  %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 10200)
+  %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -403,29 +405,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -854,1034 +856,818 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
-  %v3 = call double @llvm.sin.f64(double %v2)
-  %v4 = getelementptr inbounds double, double* %w, i64 0
-  store double %v3, double* %v4, align 8
-  %v5 = getelementptr inbounds double, double* %x, i64 9
-  %v6 = load double, double* %v5, align 8
-  %v7 = call double @llvm.sin.f64(double %v6)
-  %v8 = getelementptr inbounds double, double* %w, i64 1
-  store double %v7, double* %v8, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 11
-  %v10 = load double, double* %v9, align 8
-  %v11 = call double @llvm.sin.f64(double %v10)
-  %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = call double @llvm.cos.f64(double %v2)
-  %v14 = getelementptr inbounds double, double* %w, i64 3
-  store double %v13, double* %v14, align 8
-  %v15 = call double @llvm.cos.f64(double %v6)
-  %v16 = getelementptr inbounds double, double* %w, i64 4
-  store double %v15, double* %v16, align 8
-  %v17 = call double @llvm.cos.f64(double %v10)
-  %v18 = getelementptr inbounds double, double* %w, i64 5
-  store double %v17, double* %v18, align 8
-  %v19 = getelementptr inbounds double, double* %x, i64 0
-  %v20 = load double, double* %v19, align 8
-  %v21 = fmul double 0x3FE0000000000000, %v20
-  %v22 = getelementptr inbounds double, double* %w, i64 6
-  store double %v21, double* %v22, align 8
-  %v23 = getelementptr inbounds double, double* %x, i64 1
-  %v24 = load double, double* %v23, align 8
-  %v25 = fmul double 0x3FE0000000000000, %v24
-  %v26 = getelementptr inbounds double, double* %w, i64 7
-  store double %v25, double* %v26, align 8
-  %v27 = getelementptr inbounds double, double* %x, i64 2
-  %v28 = load double, double* %v27, align 8
-  %v29 = fmul double 0x3FE0000000000000, %v28
-  %v30 = getelementptr inbounds double, double* %w, i64 8
-  store double %v29, double* %v30, align 8
-  %v31 = fmul double %v17, %v3
-  %v32 = fmul double %v13, %v7
-  %v33 = fmul double %v32, %v11
-  %v34 = fadd double %v31, %v33
-  %v35 = getelementptr inbounds double, double* %w, i64 9
+  %v3 = call double @llvm.cos.f64(double %v2)
+  %v4 = fmul double 0x3FF0000000000000, %v3
+  %v5 = getelementptr inbounds double, double* %out, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 9
+  %v7 = load double, double* %v6, align 8
+  %v8 = call double @llvm.cos.f64(double %v7)
+  %v9 = fmul double 0x3FF0000000000000, %v8
+  %v10 = getelementptr inbounds double, double* %out, i64 1
+  store double %v9, double* %v10, align 8
+  %v11 = getelementptr inbounds double, double* %x, i64 11
+  %v12 = load double, double* %v11, align 8
+  %v13 = call double @llvm.cos.f64(double %v12)
+  %v14 = fmul double 0x3FF0000000000000, %v13
+  %v15 = getelementptr inbounds double, double* %out, i64 2
+  store double %v14, double* %v15, align 8
+  %v16 = call double @llvm.sin.f64(double %v2)
+  %v17 = fneg double %v16
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 3
+  store double %v18, double* %v19, align 8
+  %v20 = call double @llvm.sin.f64(double %v7)
+  %v21 = fneg double %v20
+  %v22 = fmul double 0x3FF0000000000000, %v21
+  %v23 = getelementptr inbounds double, double* %out, i64 4
+  store double %v22, double* %v23, align 8
+  %v24 = call double @llvm.sin.f64(double %v12)
+  %v25 = fneg double %v24
+  %v26 = fmul double 0x3FF0000000000000, %v25
+  %v27 = getelementptr inbounds double, double* %out, i64 5
+  store double %v26, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %x, i64 0
+  %v29 = load double, double* %v28, align 8
+  %v30 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v31 = getelementptr inbounds double, double* %out, i64 6
+  store double %v30, double* %v31, align 8
+  %v32 = getelementptr inbounds double, double* %x, i64 1
+  %v33 = load double, double* %v32, align 8
+  %v34 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v35 = getelementptr inbounds double, double* %out, i64 7
   store double %v34, double* %v35, align 8
-  %v36 = fmul double %v13, %v15
-  %v37 = getelementptr inbounds double, double* %w, i64 10
-  store double %v36, double* %v37, align 8
-  %v38 = getelementptr inbounds double, double* %p, i64 4
-  %v39 = load double, double* %v38, align 8
-  %v40 = fneg double %v39
-  %v41 = getelementptr inbounds double, double* %p, i64 0
-  %v42 = load double, double* %v41, align 8
-  %v43 = getelementptr inbounds double, double* %x, i64 6
-  %v44 = load double, double* %v43, align 8
-  %v45 = fmul double 0xBF91DE69AD42C3CA, %v36
-  %v46 = fmul double 0x3FDFFB00BCBE61D0, %v34
-  %v47 = fadd double %v44, %v45
-  %v48 = fadd double %v47, %v46
-  %v49 = fmul double %v42, %v48
-  %v50 = fadd double %v40, %v49
-  %v51 = getelementptr inbounds double, double* %w, i64 11
-  store double %v50, double* %v51, align 8
-  %v52 = getelementptr inbounds double, double* %x, i64 4
+  %v36 = getelementptr inbounds double, double* %x, i64 2
+  %v37 = load double, double* %v36, align 8
+  %v38 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v39 = getelementptr inbounds double, double* %out, i64 8
+  store double %v38, double* %v39, align 8
+  %v40 = getelementptr inbounds double, double* %w, i64 3
+  %v41 = load double, double* %v40, align 8
+  %v42 = getelementptr inbounds double, double* %w, i64 1
+  %v43 = load double, double* %v42, align 8
+  %v44 = getelementptr inbounds double, double* %w, i64 2
+  %v45 = load double, double* %v44, align 8
+  %v46 = fmul double %v43, %v45
+  %v47 = fmul double %v41, %v45
+  %v48 = fmul double %v41, %v43
+  %v49 = fmul double 0x3FF0000000000000, %v46
+  %v50 = fmul double 0x3FF0000000000000, %v47
+  %v51 = fmul double 0x3FF0000000000000, %v48
+  %v52 = getelementptr inbounds double, double* %w, i64 5
   %v53 = load double, double* %v52, align 8
-  %v54 = fmul double 0x4014000000000000, %v53
-  %v55 = getelementptr inbounds double, double* %w, i64 12
-  store double %v54, double* %v55, align 8
-  %v56 = getelementptr inbounds double, double* %x, i64 5
-  %v57 = load double, double* %v56, align 8
-  %v58 = fmul double 0x4059000000000000, %v57
-  %v59 = getelementptr inbounds double, double* %w, i64 13
-  store double %v58, double* %v59, align 8
-  %v60 = fmul double 0xBFDFFB00BCBE61D0, %v58
-  %v61 = fmul double 0xBF91DE69AD42C3CA, %v54
-  %v62 = fadd double %v60, %v61
-  %v63 = getelementptr inbounds double, double* %w, i64 14
-  store double %v62, double* %v63, align 8
-  %v64 = getelementptr inbounds double, double* %x, i64 3
-  %v65 = load double, double* %v64, align 8
-  %v66 = fmul double 0x4014000000000000, %v65
-  %v67 = getelementptr inbounds double, double* %w, i64 15
-  store double %v66, double* %v67, align 8
-  %v68 = fmul double 0x3F91DE69AD42C3CA, %v66
-  %v69 = getelementptr inbounds double, double* %w, i64 16
-  store double %v68, double* %v69, align 8
-  %v70 = fmul double 0x3FDFFB00BCBE61D0, %v66
-  %v71 = getelementptr inbounds double, double* %w, i64 17
-  store double %v70, double* %v71, align 8
-  %v72 = fmul double %v3, %v11
-  %v73 = fmul double %v13, %v17
-  %v74 = fmul double %v73, %v7
-  %v75 = fneg double %v74
-  %v76 = fadd double %v72, %v75
-  %v77 = getelementptr inbounds double, double* %w, i64 18
-  store double %v76, double* %v77, align 8
-  %v78 = fmul double %v62, %v76
-  %v79 = fmul double %v68, %v34
-  %v80 = fmul double %v70, %v36
-  %v81 = fadd double %v78, %v79
-  %v82 = fadd double %v81, %v80
-  %v83 = getelementptr inbounds double, double* %w, i64 19
-  store double %v82, double* %v83, align 8
-  %v84 = fadd double %v82, %v21
-  %v85 = getelementptr inbounds double, double* %w, i64 20
-  store double %v84, double* %v85, align 8
-  %v86 = getelementptr inbounds double, double* %p, i64 1
-  %v87 = load double, double* %v86, align 8
-  %v88 = fmul double %v84, %v87
-  %v89 = getelementptr inbounds double, double* %w, i64 21
-  store double %v88, double* %v89, align 8
-  %v90 = fadd double %v50, %v88
-  %v91 = getelementptr inbounds double, double* %w, i64 22
-  store double %v90, double* %v91, align 8
-  %v92 = fmul double %v15, %v11
-  %v93 = fneg double %v92
-  %v94 = getelementptr inbounds double, double* %w, i64 23
+  %v54 = getelementptr inbounds double, double* %w, i64 0
+  %v55 = load double, double* %v54, align 8
+  %v56 = fmul double 0x3FF0000000000000, %v55
+  %v57 = fmul double 0x3FF0000000000000, %v53
+  %v58 = getelementptr inbounds double, double* %out, i64 9
+  store double %v49, double* %v58, align 8
+  %v59 = getelementptr inbounds double, double* %out, i64 10
+  store double %v56, double* %v59, align 8
+  %v60 = getelementptr inbounds double, double* %out, i64 11
+  store double %v57, double* %v60, align 8
+  %v61 = getelementptr inbounds double, double* %out, i64 12
+  store double %v50, double* %v61, align 8
+  %v62 = getelementptr inbounds double, double* %out, i64 13
+  store double %v51, double* %v62, align 8
+  %v63 = getelementptr inbounds double, double* %w, i64 4
+  %v64 = load double, double* %v63, align 8
+  %v65 = fmul double 0x3FF0000000000000, %v64
+  %v66 = fmul double 0x3FF0000000000000, %v41
+  %v67 = getelementptr inbounds double, double* %out, i64 14
+  store double %v65, double* %v67, align 8
+  %v68 = getelementptr inbounds double, double* %out, i64 15
+  store double %v66, double* %v68, align 8
+  %v69 = getelementptr inbounds double, double* %p, i64 0
+  %v70 = load double, double* %v69, align 8
+  %v71 = getelementptr inbounds double, double* %x, i64 6
+  %v72 = load double, double* %v71, align 8
+  %v73 = getelementptr inbounds double, double* %w, i64 10
+  %v74 = load double, double* %v73, align 8
+  %v75 = fmul double 0xBF91DE69AD42C3CA, %v74
+  %v76 = getelementptr inbounds double, double* %w, i64 9
+  %v77 = load double, double* %v76, align 8
+  %v78 = fmul double 0x3FDFFB00BCBE61D0, %v77
+  %v79 = fadd double %v72, %v75
+  %v80 = fadd double %v79, %v78
+  %v81 = fmul double 0x3FF0000000000000, %v70
+  %v82 = fmul double %v81, 0x3FDFFB00BCBE61D0
+  %v83 = fmul double %v81, 0xBF91DE69AD42C3CA
+  %v84 = getelementptr inbounds double, double* %out, i64 16
+  store double %v82, double* %v84, align 8
+  %v85 = getelementptr inbounds double, double* %out, i64 17
+  store double %v83, double* %v85, align 8
+  %v86 = getelementptr inbounds double, double* %out, i64 18
+  store double %v81, double* %v86, align 8
+  %v87 = getelementptr inbounds double, double* %x, i64 4
+  %v88 = load double, double* %v87, align 8
+  %v89 = fmul double 0x3FF0000000000000, 0x4014000000000000
+  %v90 = getelementptr inbounds double, double* %out, i64 19
+  store double %v89, double* %v90, align 8
+  %v91 = getelementptr inbounds double, double* %x, i64 5
+  %v92 = load double, double* %v91, align 8
+  %v93 = fmul double 0x3FF0000000000000, 0x4059000000000000
+  %v94 = getelementptr inbounds double, double* %out, i64 20
   store double %v93, double* %v94, align 8
-  %v95 = getelementptr inbounds double, double* %w, i64 24
-  store double %v7, double* %v95, align 8
-  %v96 = getelementptr inbounds double, double* %p, i64 5
-  %v97 = load double, double* %v96, align 8
-  %v98 = fneg double %v97
-  %v99 = getelementptr inbounds double, double* %x, i64 8
-  %v100 = load double, double* %v99, align 8
-  %v101 = fmul double 0xBF91DE69AD42C3CA, %v7
-  %v102 = fmul double 0x3FDFFB00BCBE61D0, %v93
-  %v103 = fadd double %v100, %v101
-  %v104 = fadd double %v103, %v102
-  %v105 = fmul double %v42, %v104
-  %v106 = fadd double %v98, %v105
-  %v107 = getelementptr inbounds double, double* %w, i64 25
-  store double %v106, double* %v107, align 8
-  %v108 = fmul double %v15, %v17
-  %v109 = getelementptr inbounds double, double* %w, i64 26
-  store double %v108, double* %v109, align 8
-  %v110 = fmul double %v62, %v108
-  %v111 = fmul double %v68, %v93
-  %v112 = fmul double %v70, %v7
-  %v113 = fadd double %v110, %v111
-  %v114 = fadd double %v113, %v112
-  %v115 = getelementptr inbounds double, double* %w, i64 27
-  store double %v114, double* %v115, align 8
-  %v116 = fadd double %v114, %v25
-  %v117 = getelementptr inbounds double, double* %w, i64 28
-  store double %v116, double* %v117, align 8
-  %v118 = fmul double %v116, %v87
-  %v119 = getelementptr inbounds double, double* %w, i64 29
-  store double %v118, double* %v119, align 8
-  %v120 = fadd double %v106, %v118
-  %v121 = getelementptr inbounds double, double* %w, i64 30
-  store double %v120, double* %v121, align 8
-  %v122 = fmul double %v13, %v17
-  %v123 = fmul double %v3, %v7
-  %v124 = fmul double %v123, %v11
-  %v125 = fneg double %v124
-  %v126 = fadd double %v122, %v125
-  %v127 = getelementptr inbounds double, double* %w, i64 31
-  store double %v126, double* %v127, align 8
-  %v128 = fmul double %v15, %v3
-  %v129 = fneg double %v128
-  %v130 = getelementptr inbounds double, double* %w, i64 32
-  store double %v129, double* %v130, align 8
-  %v131 = getelementptr inbounds double, double* %p, i64 6
-  %v132 = load double, double* %v131, align 8
-  %v133 = fneg double %v132
-  %v134 = getelementptr inbounds double, double* %x, i64 10
-  %v135 = load double, double* %v134, align 8
-  %v136 = fmul double 0xBF91DE69AD42C3CA, %v129
-  %v137 = fmul double 0x3FDFFB00BCBE61D0, %v126
-  %v138 = fadd double %v135, %v136
-  %v139 = fadd double %v138, %v137
-  %v140 = fmul double %v42, %v139
-  %v141 = fadd double %v133, %v140
-  %v142 = getelementptr inbounds double, double* %w, i64 33
-  store double %v141, double* %v142, align 8
-  %v143 = fmul double %v13, %v11
-  %v144 = fmul double %v17, %v3
-  %v145 = fmul double %v144, %v7
-  %v146 = fadd double %v143, %v145
-  %v147 = getelementptr inbounds double, double* %w, i64 34
-  store double %v146, double* %v147, align 8
-  %v148 = fmul double %v62, %v146
-  %v149 = fmul double %v68, %v126
-  %v150 = fmul double %v70, %v129
-  %v151 = fadd double %v148, %v149
-  %v152 = fadd double %v151, %v150
-  %v153 = getelementptr inbounds double, double* %w, i64 35
-  store double %v152, double* %v153, align 8
-  %v154 = fadd double %v152, %v29
-  %v155 = getelementptr inbounds double, double* %w, i64 36
-  store double %v154, double* %v155, align 8
-  %v156 = fmul double %v154, %v87
-  %v157 = getelementptr inbounds double, double* %w, i64 37
-  store double %v156, double* %v157, align 8
-  %v158 = fadd double %v141, %v156
-  %v159 = getelementptr inbounds double, double* %w, i64 38
-  store double %v158, double* %v159, align 8
-  %v160 = fneg double %v158
-  %v161 = fadd double 0xC0339EB851EB851F, %v160
-  %v162 = getelementptr inbounds double, double* %w, i64 39
-  store double %v161, double* %v162, align 8
-  %v163 = fmul double 0xBFC851EB851EB852, %v54
-  %v164 = fmul double %v163, %v58
-  %v165 = getelementptr inbounds double, double* %w, i64 40
-  store double %v164, double* %v165, align 8
-  %v166 = getelementptr inbounds double, double* %p, i64 7
+  %v95 = getelementptr inbounds double, double* %w, i64 12
+  %v96 = load double, double* %v95, align 8
+  %v97 = fmul double 0x3FF0000000000000, 0xBF91DE69AD42C3CA
+  %v98 = getelementptr inbounds double, double* %w, i64 13
+  %v99 = load double, double* %v98, align 8
+  %v100 = fmul double 0x3FF0000000000000, 0xBFDFFB00BCBE61D0
+  %v101 = getelementptr inbounds double, double* %out, i64 21
+  store double %v97, double* %v101, align 8
+  %v102 = getelementptr inbounds double, double* %out, i64 22
+  store double %v100, double* %v102, align 8
+  %v103 = getelementptr inbounds double, double* %x, i64 3
+  %v104 = load double, double* %v103, align 8
+  %v105 = fmul double 0x3FF0000000000000, 0x4014000000000000
+  %v106 = getelementptr inbounds double, double* %out, i64 23
+  store double %v105, double* %v106, align 8
+  %v107 = getelementptr inbounds double, double* %w, i64 15
+  %v108 = load double, double* %v107, align 8
+  %v109 = fmul double 0x3FF0000000000000, 0x3F91DE69AD42C3CA
+  %v110 = getelementptr inbounds double, double* %out, i64 24
+  store double %v109, double* %v110, align 8
+  %v111 = fmul double 0x3FF0000000000000, 0x3FDFFB00BCBE61D0
+  %v112 = getelementptr inbounds double, double* %out, i64 25
+  store double %v111, double* %v112, align 8
+  %v113 = fmul double 0xBFF0000000000000, %v53
+  %v114 = fmul double %v113, %v43
+  %v115 = fmul double 0xBFF0000000000000, %v41
+  %v116 = fmul double %v115, %v43
+  %v117 = fmul double 0xBFF0000000000000, %v41
+  %v118 = fmul double %v117, %v53
+  %v119 = fmul double 0x3FF0000000000000, %v114
+  %v120 = fmul double 0x3FF0000000000000, %v116
+  %v121 = fmul double 0x3FF0000000000000, %v118
+  %v122 = fmul double 0x3FF0000000000000, %v45
+  %v123 = fmul double 0x3FF0000000000000, %v55
+  %v124 = getelementptr inbounds double, double* %out, i64 26
+  store double %v119, double* %v124, align 8
+  %v125 = getelementptr inbounds double, double* %out, i64 27
+  store double %v120, double* %v125, align 8
+  %v126 = getelementptr inbounds double, double* %out, i64 28
+  store double %v122, double* %v126, align 8
+  %v127 = getelementptr inbounds double, double* %out, i64 29
+  store double %v121, double* %v127, align 8
+  %v128 = getelementptr inbounds double, double* %out, i64 30
+  store double %v123, double* %v128, align 8
+  %v129 = getelementptr inbounds double, double* %w, i64 17
+  %v130 = load double, double* %v129, align 8
+  %v131 = fmul double 0x3FF0000000000000, %v74
+  %v132 = fmul double 0x3FF0000000000000, %v130
+  %v133 = getelementptr inbounds double, double* %w, i64 16
+  %v134 = load double, double* %v133, align 8
+  %v135 = fmul double 0x3FF0000000000000, %v77
+  %v136 = fmul double 0x3FF0000000000000, %v134
+  %v137 = getelementptr inbounds double, double* %w, i64 14
+  %v138 = load double, double* %v137, align 8
+  %v139 = getelementptr inbounds double, double* %w, i64 18
+  %v140 = load double, double* %v139, align 8
+  %v141 = fmul double 0x3FF0000000000000, %v140
+  %v142 = fmul double 0x3FF0000000000000, %v138
+  %v143 = getelementptr inbounds double, double* %out, i64 31
+  store double %v141, double* %v143, align 8
+  %v144 = getelementptr inbounds double, double* %out, i64 32
+  store double %v135, double* %v144, align 8
+  %v145 = getelementptr inbounds double, double* %out, i64 33
+  store double %v131, double* %v145, align 8
+  %v146 = getelementptr inbounds double, double* %out, i64 34
+  store double %v142, double* %v146, align 8
+  %v147 = getelementptr inbounds double, double* %out, i64 35
+  store double %v136, double* %v147, align 8
+  %v148 = getelementptr inbounds double, double* %out, i64 36
+  store double %v132, double* %v148, align 8
+  %v149 = getelementptr inbounds double, double* %out, i64 37
+  store double 0x3FF0000000000000, double* %v149, align 8
+  %v150 = getelementptr inbounds double, double* %out, i64 38
+  store double 0x3FF0000000000000, double* %v150, align 8
+  %v151 = getelementptr inbounds double, double* %w, i64 20
+  %v152 = load double, double* %v151, align 8
+  %v153 = getelementptr inbounds double, double* %p, i64 1
+  %v154 = load double, double* %v153, align 8
+  %v155 = fmul double 0x3FF0000000000000, %v154
+  %v156 = getelementptr inbounds double, double* %out, i64 39
+  store double %v155, double* %v156, align 8
+  %v157 = getelementptr inbounds double, double* %out, i64 40
+  store double 0x3FF0000000000000, double* %v157, align 8
+  %v158 = getelementptr inbounds double, double* %out, i64 41
+  store double 0x3FF0000000000000, double* %v158, align 8
+  %v159 = fmul double 0xBFF0000000000000, %v45
+  %v160 = fmul double 0xBFF0000000000000, %v64
+  %v161 = fmul double 0x3FF0000000000000, %v159
+  %v162 = fmul double 0x3FF0000000000000, %v160
+  %v163 = getelementptr inbounds double, double* %out, i64 42
+  store double %v161, double* %v163, align 8
+  %v164 = getelementptr inbounds double, double* %out, i64 43
+  store double %v162, double* %v164, align 8
+  %v165 = getelementptr inbounds double, double* %out, i64 44
+  store double 0x3FF0000000000000, double* %v165, align 8
+  %v166 = getelementptr inbounds double, double* %x, i64 8
   %v167 = load double, double* %v166, align 8
-  %v168 = fneg double %v167
-  %v169 = getelementptr inbounds double, double* %p, i64 2
-  %v170 = load double, double* %v169, align 8
-  %v171 = fmul double %v170, %v146
-  %v172 = fadd double %v168, %v171
-  %v173 = getelementptr inbounds double, double* %w, i64 41
-  store double %v172, double* %v173, align 8
-  %v174 = fmul double %v66, %v76
-  %v175 = fmul double %v54, %v34
-  %v176 = fmul double %v58, %v36
-  %v177 = fadd double %v174, %v175
-  %v178 = fadd double %v177, %v176
-  %v179 = getelementptr inbounds double, double* %w, i64 42
-  store double %v178, double* %v179, align 8
-  %v180 = fmul double %v66, %v108
-  %v181 = fmul double %v54, %v93
-  %v182 = fmul double %v58, %v7
-  %v183 = fadd double %v180, %v181
-  %v184 = fadd double %v183, %v182
-  %v185 = getelementptr inbounds double, double* %w, i64 43
-  store double %v184, double* %v185, align 8
-  %v186 = fmul double %v178, %v108
-  %v187 = fmul double %v184, %v76
-  %v188 = fneg double %v187
-  %v189 = fadd double %v186, %v188
-  %v190 = getelementptr inbounds double, double* %w, i64 44
-  store double %v189, double* %v190, align 8
-  %v191 = getelementptr inbounds double, double* %p, i64 3
-  %v192 = load double, double* %v191, align 8
-  %v193 = fmul double %v189, %v192
-  %v194 = getelementptr inbounds double, double* %w, i64 45
-  store double %v193, double* %v194, align 8
-  %v195 = fadd double %v172, %v193
-  %v196 = getelementptr inbounds double, double* %w, i64 46
-  store double %v195, double* %v196, align 8
-  %v197 = fmul double %v195, %v108
-  %v198 = getelementptr inbounds double, double* %w, i64 47
-  store double %v197, double* %v198, align 8
-  %v199 = fmul double %v195, %v76
-  %v200 = fneg double %v199
-  %v201 = getelementptr inbounds double, double* %w, i64 48
-  store double %v200, double* %v201, align 8
-  %v202 = getelementptr inbounds double, double* %p, i64 8
+  %v168 = getelementptr inbounds double, double* %w, i64 24
+  %v169 = load double, double* %v168, align 8
+  %v170 = fmul double 0xBF91DE69AD42C3CA, %v169
+  %v171 = getelementptr inbounds double, double* %w, i64 23
+  %v172 = load double, double* %v171, align 8
+  %v173 = fmul double 0x3FDFFB00BCBE61D0, %v172
+  %v174 = fadd double %v167, %v170
+  %v175 = fadd double %v174, %v173
+  %v176 = fmul double 0x3FF0000000000000, %v70
+  %v177 = fmul double %v176, 0x3FDFFB00BCBE61D0
+  %v178 = fmul double %v176, 0xBF91DE69AD42C3CA
+  %v179 = getelementptr inbounds double, double* %out, i64 45
+  store double %v177, double* %v179, align 8
+  %v180 = getelementptr inbounds double, double* %out, i64 46
+  store double %v178, double* %v180, align 8
+  %v181 = getelementptr inbounds double, double* %out, i64 47
+  store double %v176, double* %v181, align 8
+  %v182 = fmul double 0x3FF0000000000000, %v53
+  %v183 = fmul double 0x3FF0000000000000, %v64
+  %v184 = getelementptr inbounds double, double* %out, i64 48
+  store double %v182, double* %v184, align 8
+  %v185 = getelementptr inbounds double, double* %out, i64 49
+  store double %v183, double* %v185, align 8
+  %v186 = fmul double 0x3FF0000000000000, %v169
+  %v187 = fmul double 0x3FF0000000000000, %v130
+  %v188 = fmul double 0x3FF0000000000000, %v172
+  %v189 = fmul double 0x3FF0000000000000, %v134
+  %v190 = getelementptr inbounds double, double* %w, i64 26
+  %v191 = load double, double* %v190, align 8
+  %v192 = fmul double 0x3FF0000000000000, %v191
+  %v193 = fmul double 0x3FF0000000000000, %v138
+  %v194 = getelementptr inbounds double, double* %out, i64 50
+  store double %v192, double* %v194, align 8
+  %v195 = getelementptr inbounds double, double* %out, i64 51
+  store double %v188, double* %v195, align 8
+  %v196 = getelementptr inbounds double, double* %out, i64 52
+  store double %v186, double* %v196, align 8
+  %v197 = getelementptr inbounds double, double* %out, i64 53
+  store double %v193, double* %v197, align 8
+  %v198 = getelementptr inbounds double, double* %out, i64 54
+  store double %v189, double* %v198, align 8
+  %v199 = getelementptr inbounds double, double* %out, i64 55
+  store double %v187, double* %v199, align 8
+  %v200 = getelementptr inbounds double, double* %out, i64 56
+  store double 0x3FF0000000000000, double* %v200, align 8
+  %v201 = getelementptr inbounds double, double* %out, i64 57
+  store double 0x3FF0000000000000, double* %v201, align 8
+  %v202 = getelementptr inbounds double, double* %w, i64 28
   %v203 = load double, double* %v202, align 8
-  %v204 = fneg double %v203
-  %v205 = fmul double %v170, %v76
-  %v206 = fadd double %v204, %v205
-  %v207 = getelementptr inbounds double, double* %w, i64 49
-  store double %v206, double* %v207, align 8
-  %v208 = fmul double %v66, %v146
-  %v209 = fmul double %v54, %v126
-  %v210 = fmul double %v58, %v129
-  %v211 = fadd double %v208, %v209
-  %v212 = fadd double %v211, %v210
-  %v213 = getelementptr inbounds double, double* %w, i64 50
-  store double %v212, double* %v213, align 8
-  %v214 = fmul double %v184, %v146
-  %v215 = fmul double %v212, %v108
-  %v216 = fneg double %v215
-  %v217 = fadd double %v214, %v216
-  %v218 = getelementptr inbounds double, double* %w, i64 51
-  store double %v217, double* %v218, align 8
-  %v219 = fmul double %v217, %v192
-  %v220 = getelementptr inbounds double, double* %w, i64 52
-  store double %v219, double* %v220, align 8
-  %v221 = fadd double %v206, %v219
-  %v222 = getelementptr inbounds double, double* %w, i64 53
-  store double %v221, double* %v222, align 8
-  %v223 = fmul double %v221, %v146
-  %v224 = getelementptr inbounds double, double* %w, i64 54
-  store double %v223, double* %v224, align 8
-  %v225 = fadd double %v200, %v223
-  %v226 = getelementptr inbounds double, double* %w, i64 55
-  store double %v225, double* %v226, align 8
-  %v227 = fmul double %v221, %v108
-  %v228 = fneg double %v227
-  %v229 = getelementptr inbounds double, double* %w, i64 56
-  store double %v228, double* %v229, align 8
-  %v230 = fmul double %v225, %v108
-  %v231 = fmul double %v197, %v76
-  %v232 = fmul double %v228, %v146
-  %v233 = fadd double %v230, %v231
-  %v234 = fadd double %v233, %v232
-  %v235 = getelementptr inbounds double, double* %w, i64 57
-  store double %v234, double* %v235, align 8
-  %v236 = fmul double %v90, %v34
-  %v237 = fmul double %v120, %v93
-  %v238 = fmul double %v158, %v126
-  %v239 = fadd double %v236, %v237
-  %v240 = fadd double %v239, %v238
-  %v241 = getelementptr inbounds double, double* %w, i64 58
-  store double %v240, double* %v241, align 8
-  %v242 = fmul double %v90, %v36
-  %v243 = fmul double %v120, %v7
-  %v244 = fmul double %v158, %v129
-  %v245 = fadd double %v242, %v243
-  %v246 = fadd double %v245, %v244
-  %v247 = getelementptr inbounds double, double* %w, i64 59
-  store double %v246, double* %v247, align 8
-  %v248 = fmul double 0x3F91DE69AD42C3CA, %v240
-  %v249 = fmul double 0x3FDFFB00BCBE61D0, %v246
-  %v250 = fadd double %v248, %v249
-  %v251 = getelementptr inbounds double, double* %w, i64 60
-  store double %v250, double* %v251, align 8
-  %v252 = fneg double %v164
-  %v253 = fneg double %v234
-  %v254 = fneg double %v250
-  %v255 = fadd double %v252, %v253
-  %v256 = fadd double %v255, %v254
-  %v257 = getelementptr inbounds double, double* %w, i64 61
-  store double %v256, double* %v257, align 8
-  %v258 = fmul double 0x3FC851EB851EB852, %v66
-  %v259 = fmul double %v258, %v58
-  %v260 = getelementptr inbounds double, double* %w, i64 62
-  store double %v259, double* %v260, align 8
-  %v261 = fmul double %v225, %v93
-  %v262 = fmul double %v197, %v34
-  %v263 = fmul double %v228, %v126
-  %v264 = fadd double %v261, %v262
-  %v265 = fadd double %v264, %v263
-  %v266 = getelementptr inbounds double, double* %w, i64 63
-  store double %v265, double* %v266, align 8
-  %v267 = fmul double %v90, %v76
-  %v268 = fmul double %v120, %v108
-  %v269 = fmul double %v158, %v146
-  %v270 = fadd double %v267, %v268
-  %v271 = fadd double %v270, %v269
-  %v272 = getelementptr inbounds double, double* %w, i64 64
-  store double %v271, double* %v272, align 8
-  %v273 = fmul double 0xBF91DE69AD42C3CA, %v271
-  %v274 = getelementptr inbounds double, double* %w, i64 65
-  store double %v273, double* %v274, align 8
-  %v275 = fneg double %v259
-  %v276 = fneg double %v265
-  %v277 = fneg double %v273
-  %v278 = fadd double %v275, %v276
-  %v279 = fadd double %v278, %v277
-  %v280 = getelementptr inbounds double, double* %w, i64 66
-  store double %v279, double* %v280, align 8
-  %v281 = fmul double %v225, %v7
-  %v282 = fmul double %v197, %v36
-  %v283 = fmul double %v228, %v129
-  %v284 = fadd double %v281, %v282
-  %v285 = fadd double %v284, %v283
-  %v286 = getelementptr inbounds double, double* %w, i64 67
-  store double %v285, double* %v286, align 8
-  %v287 = fmul double 0xBFDFFB00BCBE61D0, %v271
-  %v288 = getelementptr inbounds double, double* %w, i64 68
-  store double %v287, double* %v288, align 8
-  %v289 = fneg double %v285
-  %v290 = fneg double %v287
-  %v291 = fadd double %v289, %v290
-  %v292 = getelementptr inbounds double, double* %w, i64 69
-  store double %v291, double* %v292, align 8
-  %v293 = fmul double 0x3FF0000000000000, %v13
-  %v294 = getelementptr inbounds double, double* %out, i64 0
+  %v204 = fmul double 0x3FF0000000000000, %v154
+  %v205 = getelementptr inbounds double, double* %out, i64 58
+  store double %v204, double* %v205, align 8
+  %v206 = getelementptr inbounds double, double* %out, i64 59
+  store double 0x3FF0000000000000, double* %v206, align 8
+  %v207 = getelementptr inbounds double, double* %out, i64 60
+  store double 0x3FF0000000000000, double* %v207, align 8
+  %v208 = fmul double 0xBFF0000000000000, %v43
+  %v209 = fmul double %v208, %v45
+  %v210 = fmul double 0xBFF0000000000000, %v55
+  %v211 = fmul double %v210, %v45
+  %v212 = fmul double 0xBFF0000000000000, %v55
+  %v213 = fmul double %v212, %v43
+  %v214 = fmul double 0x3FF0000000000000, %v209
+  %v215 = fmul double 0x3FF0000000000000, %v211
+  %v216 = fmul double 0x3FF0000000000000, %v213
+  %v217 = fmul double 0x3FF0000000000000, %v53
+  %v218 = fmul double 0x3FF0000000000000, %v41
+  %v219 = getelementptr inbounds double, double* %out, i64 61
+  store double %v217, double* %v219, align 8
+  %v220 = getelementptr inbounds double, double* %out, i64 62
+  store double %v218, double* %v220, align 8
+  %v221 = getelementptr inbounds double, double* %out, i64 63
+  store double %v214, double* %v221, align 8
+  %v222 = getelementptr inbounds double, double* %out, i64 64
+  store double %v215, double* %v222, align 8
+  %v223 = getelementptr inbounds double, double* %out, i64 65
+  store double %v216, double* %v223, align 8
+  %v224 = fmul double 0xBFF0000000000000, %v55
+  %v225 = fmul double 0xBFF0000000000000, %v64
+  %v226 = fmul double 0x3FF0000000000000, %v224
+  %v227 = fmul double 0x3FF0000000000000, %v225
+  %v228 = getelementptr inbounds double, double* %out, i64 66
+  store double %v226, double* %v228, align 8
+  %v229 = getelementptr inbounds double, double* %out, i64 67
+  store double %v227, double* %v229, align 8
+  %v230 = getelementptr inbounds double, double* %x, i64 10
+  %v231 = load double, double* %v230, align 8
+  %v232 = getelementptr inbounds double, double* %w, i64 32
+  %v233 = load double, double* %v232, align 8
+  %v234 = fmul double 0xBF91DE69AD42C3CA, %v233
+  %v235 = getelementptr inbounds double, double* %w, i64 31
+  %v236 = load double, double* %v235, align 8
+  %v237 = fmul double 0x3FDFFB00BCBE61D0, %v236
+  %v238 = fadd double %v231, %v234
+  %v239 = fadd double %v238, %v237
+  %v240 = fmul double 0x3FF0000000000000, %v70
+  %v241 = fmul double %v240, 0x3FDFFB00BCBE61D0
+  %v242 = fmul double %v240, 0xBF91DE69AD42C3CA
+  %v243 = getelementptr inbounds double, double* %out, i64 68
+  store double %v241, double* %v243, align 8
+  %v244 = getelementptr inbounds double, double* %out, i64 69
+  store double %v242, double* %v244, align 8
+  %v245 = getelementptr inbounds double, double* %out, i64 70
+  store double %v240, double* %v245, align 8
+  %v246 = fmul double %v55, %v43
+  %v247 = fmul double %v53, %v43
+  %v248 = fmul double %v53, %v55
+  %v249 = fmul double 0x3FF0000000000000, %v246
+  %v250 = fmul double 0x3FF0000000000000, %v247
+  %v251 = fmul double 0x3FF0000000000000, %v248
+  %v252 = fmul double 0x3FF0000000000000, %v45
+  %v253 = fmul double 0x3FF0000000000000, %v41
+  %v254 = getelementptr inbounds double, double* %out, i64 71
+  store double %v252, double* %v254, align 8
+  %v255 = getelementptr inbounds double, double* %out, i64 72
+  store double %v249, double* %v255, align 8
+  %v256 = getelementptr inbounds double, double* %out, i64 73
+  store double %v250, double* %v256, align 8
+  %v257 = getelementptr inbounds double, double* %out, i64 74
+  store double %v251, double* %v257, align 8
+  %v258 = getelementptr inbounds double, double* %out, i64 75
+  store double %v253, double* %v258, align 8
+  %v259 = fmul double 0x3FF0000000000000, %v233
+  %v260 = fmul double 0x3FF0000000000000, %v130
+  %v261 = fmul double 0x3FF0000000000000, %v236
+  %v262 = fmul double 0x3FF0000000000000, %v134
+  %v263 = getelementptr inbounds double, double* %w, i64 34
+  %v264 = load double, double* %v263, align 8
+  %v265 = fmul double 0x3FF0000000000000, %v264
+  %v266 = fmul double 0x3FF0000000000000, %v138
+  %v267 = getelementptr inbounds double, double* %out, i64 76
+  store double %v265, double* %v267, align 8
+  %v268 = getelementptr inbounds double, double* %out, i64 77
+  store double %v261, double* %v268, align 8
+  %v269 = getelementptr inbounds double, double* %out, i64 78
+  store double %v259, double* %v269, align 8
+  %v270 = getelementptr inbounds double, double* %out, i64 79
+  store double %v266, double* %v270, align 8
+  %v271 = getelementptr inbounds double, double* %out, i64 80
+  store double %v262, double* %v271, align 8
+  %v272 = getelementptr inbounds double, double* %out, i64 81
+  store double %v260, double* %v272, align 8
+  %v273 = getelementptr inbounds double, double* %out, i64 82
+  store double 0x3FF0000000000000, double* %v273, align 8
+  %v274 = getelementptr inbounds double, double* %out, i64 83
+  store double 0x3FF0000000000000, double* %v274, align 8
+  %v275 = getelementptr inbounds double, double* %w, i64 36
+  %v276 = load double, double* %v275, align 8
+  %v277 = fmul double 0x3FF0000000000000, %v154
+  %v278 = getelementptr inbounds double, double* %out, i64 84
+  store double %v277, double* %v278, align 8
+  %v279 = getelementptr inbounds double, double* %out, i64 85
+  store double 0x3FF0000000000000, double* %v279, align 8
+  %v280 = getelementptr inbounds double, double* %out, i64 86
+  store double 0x3FF0000000000000, double* %v280, align 8
+  %v281 = getelementptr inbounds double, double* %w, i64 38
+  %v282 = load double, double* %v281, align 8
+  %v283 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v284 = getelementptr inbounds double, double* %out, i64 87
+  store double %v283, double* %v284, align 8
+  %v285 = fmul double 0xBFC851EB851EB852, %v99
+  %v286 = fmul double 0xBFC851EB851EB852, %v96
+  %v287 = fmul double 0x3FF0000000000000, %v285
+  %v288 = fmul double 0x3FF0000000000000, %v286
+  %v289 = getelementptr inbounds double, double* %out, i64 88
+  store double %v287, double* %v289, align 8
+  %v290 = getelementptr inbounds double, double* %out, i64 89
+  store double %v288, double* %v290, align 8
+  %v291 = getelementptr inbounds double, double* %p, i64 2
+  %v292 = load double, double* %v291, align 8
+  %v293 = fmul double 0x3FF0000000000000, %v292
+  %v294 = getelementptr inbounds double, double* %out, i64 90
   store double %v293, double* %v294, align 8
-  %v295 = fmul double 0x3FF0000000000000, %v15
-  %v296 = getelementptr inbounds double, double* %out, i64 1
-  store double %v295, double* %v296, align 8
-  %v297 = fmul double 0x3FF0000000000000, %v17
-  %v298 = getelementptr inbounds double, double* %out, i64 2
-  store double %v297, double* %v298, align 8
-  %v299 = fneg double %v3
-  %v300 = fmul double 0x3FF0000000000000, %v299
-  %v301 = getelementptr inbounds double, double* %out, i64 3
-  store double %v300, double* %v301, align 8
-  %v302 = fneg double %v7
-  %v303 = fmul double 0x3FF0000000000000, %v302
-  %v304 = getelementptr inbounds double, double* %out, i64 4
-  store double %v303, double* %v304, align 8
-  %v305 = fneg double %v11
-  %v306 = fmul double 0x3FF0000000000000, %v305
-  %v307 = getelementptr inbounds double, double* %out, i64 5
-  store double %v306, double* %v307, align 8
-  %v308 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v309 = getelementptr inbounds double, double* %out, i64 6
-  store double %v308, double* %v309, align 8
-  %v310 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v311 = getelementptr inbounds double, double* %out, i64 7
-  store double %v310, double* %v311, align 8
-  %v312 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v313 = getelementptr inbounds double, double* %out, i64 8
-  store double %v312, double* %v313, align 8
-  %v314 = fmul double %v7, %v11
-  %v315 = fmul double %v13, %v11
-  %v316 = fmul double %v13, %v7
-  %v317 = fmul double 0x3FF0000000000000, %v314
-  %v318 = fmul double 0x3FF0000000000000, %v315
-  %v319 = fmul double 0x3FF0000000000000, %v316
-  %v320 = fmul double 0x3FF0000000000000, %v3
-  %v321 = fmul double 0x3FF0000000000000, %v17
-  %v322 = getelementptr inbounds double, double* %out, i64 9
-  store double %v317, double* %v322, align 8
-  %v323 = getelementptr inbounds double, double* %out, i64 10
-  store double %v320, double* %v323, align 8
-  %v324 = getelementptr inbounds double, double* %out, i64 11
-  store double %v321, double* %v324, align 8
-  %v325 = getelementptr inbounds double, double* %out, i64 12
-  store double %v318, double* %v325, align 8
-  %v326 = getelementptr inbounds double, double* %out, i64 13
-  store double %v319, double* %v326, align 8
-  %v327 = fmul double 0x3FF0000000000000, %v15
-  %v328 = fmul double 0x3FF0000000000000, %v13
-  %v329 = getelementptr inbounds double, double* %out, i64 14
+  %v295 = fmul double 0x3FF0000000000000, %v74
+  %v296 = fmul double 0x3FF0000000000000, %v99
+  %v297 = fmul double 0x3FF0000000000000, %v77
+  %v298 = fmul double 0x3FF0000000000000, %v96
+  %v299 = fmul double 0x3FF0000000000000, %v140
+  %v300 = fmul double 0x3FF0000000000000, %v108
+  %v301 = getelementptr inbounds double, double* %out, i64 91
+  store double %v299, double* %v301, align 8
+  %v302 = getelementptr inbounds double, double* %out, i64 92
+  store double %v297, double* %v302, align 8
+  %v303 = getelementptr inbounds double, double* %out, i64 93
+  store double %v295, double* %v303, align 8
+  %v304 = getelementptr inbounds double, double* %out, i64 94
+  store double %v300, double* %v304, align 8
+  %v305 = getelementptr inbounds double, double* %out, i64 95
+  store double %v298, double* %v305, align 8
+  %v306 = getelementptr inbounds double, double* %out, i64 96
+  store double %v296, double* %v306, align 8
+  %v307 = fmul double 0x3FF0000000000000, %v169
+  %v308 = fmul double 0x3FF0000000000000, %v99
+  %v309 = fmul double 0x3FF0000000000000, %v172
+  %v310 = fmul double 0x3FF0000000000000, %v96
+  %v311 = fmul double 0x3FF0000000000000, %v191
+  %v312 = fmul double 0x3FF0000000000000, %v108
+  %v313 = getelementptr inbounds double, double* %out, i64 97
+  store double %v311, double* %v313, align 8
+  %v314 = getelementptr inbounds double, double* %out, i64 98
+  store double %v309, double* %v314, align 8
+  %v315 = getelementptr inbounds double, double* %out, i64 99
+  store double %v307, double* %v315, align 8
+  %v316 = getelementptr inbounds double, double* %out, i64 100
+  store double %v312, double* %v316, align 8
+  %v317 = getelementptr inbounds double, double* %out, i64 101
+  store double %v310, double* %v317, align 8
+  %v318 = getelementptr inbounds double, double* %out, i64 102
+  store double %v308, double* %v318, align 8
+  %v319 = getelementptr inbounds double, double* %w, i64 43
+  %v320 = load double, double* %v319, align 8
+  %v321 = fmul double 0xBFF0000000000000, %v140
+  %v322 = fmul double 0xBFF0000000000000, %v320
+  %v323 = fmul double 0x3FF0000000000000, %v321
+  %v324 = fmul double 0x3FF0000000000000, %v322
+  %v325 = getelementptr inbounds double, double* %w, i64 42
+  %v326 = load double, double* %v325, align 8
+  %v327 = fmul double 0x3FF0000000000000, %v191
+  %v328 = fmul double 0x3FF0000000000000, %v326
+  %v329 = getelementptr inbounds double, double* %out, i64 103
   store double %v327, double* %v329, align 8
-  %v330 = getelementptr inbounds double, double* %out, i64 15
-  store double %v328, double* %v330, align 8
-  %v331 = fmul double 0x3FF0000000000000, %v42
-  %v332 = fmul double %v331, 0x3FDFFB00BCBE61D0
-  %v333 = fmul double %v331, 0xBF91DE69AD42C3CA
-  %v334 = getelementptr inbounds double, double* %out, i64 16
-  store double %v332, double* %v334, align 8
-  %v335 = getelementptr inbounds double, double* %out, i64 17
-  store double %v333, double* %v335, align 8
-  %v336 = getelementptr inbounds double, double* %out, i64 18
-  store double %v331, double* %v336, align 8
-  %v337 = fmul double 0x3FF0000000000000, 0x4014000000000000
-  %v338 = getelementptr inbounds double, double* %out, i64 19
+  %v330 = getelementptr inbounds double, double* %out, i64 104
+  store double %v323, double* %v330, align 8
+  %v331 = getelementptr inbounds double, double* %out, i64 105
+  store double %v324, double* %v331, align 8
+  %v332 = getelementptr inbounds double, double* %out, i64 106
+  store double %v328, double* %v332, align 8
+  %v333 = getelementptr inbounds double, double* %w, i64 44
+  %v334 = load double, double* %v333, align 8
+  %v335 = getelementptr inbounds double, double* %p, i64 3
+  %v336 = load double, double* %v335, align 8
+  %v337 = fmul double 0x3FF0000000000000, %v336
+  %v338 = getelementptr inbounds double, double* %out, i64 107
   store double %v337, double* %v338, align 8
-  %v339 = fmul double 0x3FF0000000000000, 0x4059000000000000
-  %v340 = getelementptr inbounds double, double* %out, i64 20
-  store double %v339, double* %v340, align 8
-  %v341 = fmul double 0x3FF0000000000000, 0xBF91DE69AD42C3CA
-  %v342 = fmul double 0x3FF0000000000000, 0xBFDFFB00BCBE61D0
-  %v343 = getelementptr inbounds double, double* %out, i64 21
-  store double %v341, double* %v343, align 8
-  %v344 = getelementptr inbounds double, double* %out, i64 22
-  store double %v342, double* %v344, align 8
-  %v345 = fmul double 0x3FF0000000000000, 0x4014000000000000
-  %v346 = getelementptr inbounds double, double* %out, i64 23
-  store double %v345, double* %v346, align 8
-  %v347 = fmul double 0x3FF0000000000000, 0x3F91DE69AD42C3CA
-  %v348 = getelementptr inbounds double, double* %out, i64 24
-  store double %v347, double* %v348, align 8
-  %v349 = fmul double 0x3FF0000000000000, 0x3FDFFB00BCBE61D0
-  %v350 = getelementptr inbounds double, double* %out, i64 25
-  store double %v349, double* %v350, align 8
-  %v351 = fmul double 0xBFF0000000000000, %v17
-  %v352 = fmul double %v351, %v7
-  %v353 = fmul double 0xBFF0000000000000, %v13
-  %v354 = fmul double %v353, %v7
-  %v355 = fmul double 0xBFF0000000000000, %v13
-  %v356 = fmul double %v355, %v17
-  %v357 = fmul double 0x3FF0000000000000, %v352
-  %v358 = fmul double 0x3FF0000000000000, %v354
-  %v359 = fmul double 0x3FF0000000000000, %v356
-  %v360 = fmul double 0x3FF0000000000000, %v11
-  %v361 = fmul double 0x3FF0000000000000, %v3
-  %v362 = getelementptr inbounds double, double* %out, i64 26
+  %v339 = getelementptr inbounds double, double* %out, i64 108
+  store double 0x3FF0000000000000, double* %v339, align 8
+  %v340 = getelementptr inbounds double, double* %out, i64 109
+  store double 0x3FF0000000000000, double* %v340, align 8
+  %v341 = getelementptr inbounds double, double* %w, i64 46
+  %v342 = load double, double* %v341, align 8
+  %v343 = fmul double 0x3FF0000000000000, %v191
+  %v344 = fmul double 0x3FF0000000000000, %v342
+  %v345 = getelementptr inbounds double, double* %out, i64 110
+  store double %v343, double* %v345, align 8
+  %v346 = getelementptr inbounds double, double* %out, i64 111
+  store double %v344, double* %v346, align 8
+  %v347 = fmul double 0xBFF0000000000000, %v140
+  %v348 = fmul double 0xBFF0000000000000, %v342
+  %v349 = fmul double 0x3FF0000000000000, %v347
+  %v350 = fmul double 0x3FF0000000000000, %v348
+  %v351 = getelementptr inbounds double, double* %out, i64 112
+  store double %v349, double* %v351, align 8
+  %v352 = getelementptr inbounds double, double* %out, i64 113
+  store double %v350, double* %v352, align 8
+  %v353 = fmul double 0x3FF0000000000000, %v292
+  %v354 = getelementptr inbounds double, double* %out, i64 114
+  store double %v353, double* %v354, align 8
+  %v355 = fmul double 0x3FF0000000000000, %v233
+  %v356 = fmul double 0x3FF0000000000000, %v99
+  %v357 = fmul double 0x3FF0000000000000, %v236
+  %v358 = fmul double 0x3FF0000000000000, %v96
+  %v359 = fmul double 0x3FF0000000000000, %v264
+  %v360 = fmul double 0x3FF0000000000000, %v108
+  %v361 = getelementptr inbounds double, double* %out, i64 115
+  store double %v359, double* %v361, align 8
+  %v362 = getelementptr inbounds double, double* %out, i64 116
   store double %v357, double* %v362, align 8
-  %v363 = getelementptr inbounds double, double* %out, i64 27
-  store double %v358, double* %v363, align 8
-  %v364 = getelementptr inbounds double, double* %out, i64 28
+  %v363 = getelementptr inbounds double, double* %out, i64 117
+  store double %v355, double* %v363, align 8
+  %v364 = getelementptr inbounds double, double* %out, i64 118
   store double %v360, double* %v364, align 8
-  %v365 = getelementptr inbounds double, double* %out, i64 29
-  store double %v359, double* %v365, align 8
-  %v366 = getelementptr inbounds double, double* %out, i64 30
-  store double %v361, double* %v366, align 8
-  %v367 = fmul double 0x3FF0000000000000, %v36
-  %v368 = fmul double 0x3FF0000000000000, %v70
-  %v369 = fmul double 0x3FF0000000000000, %v34
-  %v370 = fmul double 0x3FF0000000000000, %v68
-  %v371 = fmul double 0x3FF0000000000000, %v76
-  %v372 = fmul double 0x3FF0000000000000, %v62
-  %v373 = getelementptr inbounds double, double* %out, i64 31
-  store double %v371, double* %v373, align 8
-  %v374 = getelementptr inbounds double, double* %out, i64 32
-  store double %v369, double* %v374, align 8
-  %v375 = getelementptr inbounds double, double* %out, i64 33
-  store double %v367, double* %v375, align 8
-  %v376 = getelementptr inbounds double, double* %out, i64 34
-  store double %v372, double* %v376, align 8
-  %v377 = getelementptr inbounds double, double* %out, i64 35
-  store double %v370, double* %v377, align 8
-  %v378 = getelementptr inbounds double, double* %out, i64 36
-  store double %v368, double* %v378, align 8
-  %v379 = getelementptr inbounds double, double* %out, i64 37
-  store double 0x3FF0000000000000, double* %v379, align 8
-  %v380 = getelementptr inbounds double, double* %out, i64 38
-  store double 0x3FF0000000000000, double* %v380, align 8
-  %v381 = fmul double 0x3FF0000000000000, %v87
-  %v382 = getelementptr inbounds double, double* %out, i64 39
+  %v365 = getelementptr inbounds double, double* %out, i64 119
+  store double %v358, double* %v365, align 8
+  %v366 = getelementptr inbounds double, double* %out, i64 120
+  store double %v356, double* %v366, align 8
+  %v367 = getelementptr inbounds double, double* %w, i64 50
+  %v368 = load double, double* %v367, align 8
+  %v369 = fmul double 0xBFF0000000000000, %v191
+  %v370 = fmul double 0xBFF0000000000000, %v368
+  %v371 = fmul double 0x3FF0000000000000, %v369
+  %v372 = fmul double 0x3FF0000000000000, %v370
+  %v373 = fmul double 0x3FF0000000000000, %v264
+  %v374 = fmul double 0x3FF0000000000000, %v320
+  %v375 = getelementptr inbounds double, double* %out, i64 121
+  store double %v373, double* %v375, align 8
+  %v376 = getelementptr inbounds double, double* %out, i64 122
+  store double %v371, double* %v376, align 8
+  %v377 = getelementptr inbounds double, double* %out, i64 123
+  store double %v372, double* %v377, align 8
+  %v378 = getelementptr inbounds double, double* %out, i64 124
+  store double %v374, double* %v378, align 8
+  %v379 = getelementptr inbounds double, double* %w, i64 51
+  %v380 = load double, double* %v379, align 8
+  %v381 = fmul double 0x3FF0000000000000, %v336
+  %v382 = getelementptr inbounds double, double* %out, i64 125
   store double %v381, double* %v382, align 8
-  %v383 = getelementptr inbounds double, double* %out, i64 40
+  %v383 = getelementptr inbounds double, double* %out, i64 126
   store double 0x3FF0000000000000, double* %v383, align 8
-  %v384 = getelementptr inbounds double, double* %out, i64 41
+  %v384 = getelementptr inbounds double, double* %out, i64 127
   store double 0x3FF0000000000000, double* %v384, align 8
-  %v385 = fmul double 0xBFF0000000000000, %v11
-  %v386 = fmul double 0xBFF0000000000000, %v15
-  %v387 = fmul double 0x3FF0000000000000, %v385
+  %v385 = getelementptr inbounds double, double* %w, i64 53
+  %v386 = load double, double* %v385, align 8
+  %v387 = fmul double 0x3FF0000000000000, %v264
   %v388 = fmul double 0x3FF0000000000000, %v386
-  %v389 = getelementptr inbounds double, double* %out, i64 42
+  %v389 = getelementptr inbounds double, double* %out, i64 128
   store double %v387, double* %v389, align 8
-  %v390 = getelementptr inbounds double, double* %out, i64 43
+  %v390 = getelementptr inbounds double, double* %out, i64 129
   store double %v388, double* %v390, align 8
-  %v391 = getelementptr inbounds double, double* %out, i64 44
+  %v391 = getelementptr inbounds double, double* %out, i64 130
   store double 0x3FF0000000000000, double* %v391, align 8
-  %v392 = fmul double 0x3FF0000000000000, %v42
-  %v393 = fmul double %v392, 0x3FDFFB00BCBE61D0
-  %v394 = fmul double %v392, 0xBF91DE69AD42C3CA
-  %v395 = getelementptr inbounds double, double* %out, i64 45
-  store double %v393, double* %v395, align 8
-  %v396 = getelementptr inbounds double, double* %out, i64 46
-  store double %v394, double* %v396, align 8
-  %v397 = getelementptr inbounds double, double* %out, i64 47
-  store double %v392, double* %v397, align 8
-  %v398 = fmul double 0x3FF0000000000000, %v17
-  %v399 = fmul double 0x3FF0000000000000, %v15
-  %v400 = getelementptr inbounds double, double* %out, i64 48
-  store double %v398, double* %v400, align 8
-  %v401 = getelementptr inbounds double, double* %out, i64 49
-  store double %v399, double* %v401, align 8
-  %v402 = fmul double 0x3FF0000000000000, %v7
-  %v403 = fmul double 0x3FF0000000000000, %v70
-  %v404 = fmul double 0x3FF0000000000000, %v93
-  %v405 = fmul double 0x3FF0000000000000, %v68
-  %v406 = fmul double 0x3FF0000000000000, %v108
-  %v407 = fmul double 0x3FF0000000000000, %v62
-  %v408 = getelementptr inbounds double, double* %out, i64 50
-  store double %v406, double* %v408, align 8
-  %v409 = getelementptr inbounds double, double* %out, i64 51
-  store double %v404, double* %v409, align 8
-  %v410 = getelementptr inbounds double, double* %out, i64 52
-  store double %v402, double* %v410, align 8
-  %v411 = getelementptr inbounds double, double* %out, i64 53
-  store double %v407, double* %v411, align 8
-  %v412 = getelementptr inbounds double, double* %out, i64 54
+  %v392 = getelementptr inbounds double, double* %out, i64 131
+  store double 0x3FF0000000000000, double* %v392, align 8
+  %v393 = fmul double 0xBFF0000000000000, %v191
+  %v394 = fmul double 0xBFF0000000000000, %v386
+  %v395 = fmul double 0x3FF0000000000000, %v393
+  %v396 = fmul double 0x3FF0000000000000, %v394
+  %v397 = getelementptr inbounds double, double* %out, i64 132
+  store double %v395, double* %v397, align 8
+  %v398 = getelementptr inbounds double, double* %out, i64 133
+  store double %v396, double* %v398, align 8
+  %v399 = getelementptr inbounds double, double* %w, i64 56
+  %v400 = load double, double* %v399, align 8
+  %v401 = fmul double 0x3FF0000000000000, %v264
+  %v402 = fmul double 0x3FF0000000000000, %v400
+  %v403 = getelementptr inbounds double, double* %w, i64 47
+  %v404 = load double, double* %v403, align 8
+  %v405 = fmul double 0x3FF0000000000000, %v140
+  %v406 = fmul double 0x3FF0000000000000, %v404
+  %v407 = getelementptr inbounds double, double* %w, i64 55
+  %v408 = load double, double* %v407, align 8
+  %v409 = fmul double 0x3FF0000000000000, %v191
+  %v410 = fmul double 0x3FF0000000000000, %v408
+  %v411 = getelementptr inbounds double, double* %out, i64 134
+  store double %v409, double* %v411, align 8
+  %v412 = getelementptr inbounds double, double* %out, i64 135
   store double %v405, double* %v412, align 8
-  %v413 = getelementptr inbounds double, double* %out, i64 55
-  store double %v403, double* %v413, align 8
-  %v414 = getelementptr inbounds double, double* %out, i64 56
-  store double 0x3FF0000000000000, double* %v414, align 8
-  %v415 = getelementptr inbounds double, double* %out, i64 57
-  store double 0x3FF0000000000000, double* %v415, align 8
-  %v416 = fmul double 0x3FF0000000000000, %v87
-  %v417 = getelementptr inbounds double, double* %out, i64 58
-  store double %v416, double* %v417, align 8
-  %v418 = getelementptr inbounds double, double* %out, i64 59
-  store double 0x3FF0000000000000, double* %v418, align 8
-  %v419 = getelementptr inbounds double, double* %out, i64 60
-  store double 0x3FF0000000000000, double* %v419, align 8
-  %v420 = fmul double 0xBFF0000000000000, %v7
-  %v421 = fmul double %v420, %v11
-  %v422 = fmul double 0xBFF0000000000000, %v3
-  %v423 = fmul double %v422, %v11
-  %v424 = fmul double 0xBFF0000000000000, %v3
-  %v425 = fmul double %v424, %v7
-  %v426 = fmul double 0x3FF0000000000000, %v421
-  %v427 = fmul double 0x3FF0000000000000, %v423
-  %v428 = fmul double 0x3FF0000000000000, %v425
-  %v429 = fmul double 0x3FF0000000000000, %v17
-  %v430 = fmul double 0x3FF0000000000000, %v13
-  %v431 = getelementptr inbounds double, double* %out, i64 61
-  store double %v429, double* %v431, align 8
-  %v432 = getelementptr inbounds double, double* %out, i64 62
-  store double %v430, double* %v432, align 8
-  %v433 = getelementptr inbounds double, double* %out, i64 63
-  store double %v426, double* %v433, align 8
-  %v434 = getelementptr inbounds double, double* %out, i64 64
-  store double %v427, double* %v434, align 8
-  %v435 = getelementptr inbounds double, double* %out, i64 65
-  store double %v428, double* %v435, align 8
-  %v436 = fmul double 0xBFF0000000000000, %v3
-  %v437 = fmul double 0xBFF0000000000000, %v15
-  %v438 = fmul double 0x3FF0000000000000, %v436
-  %v439 = fmul double 0x3FF0000000000000, %v437
-  %v440 = getelementptr inbounds double, double* %out, i64 66
-  store double %v438, double* %v440, align 8
-  %v441 = getelementptr inbounds double, double* %out, i64 67
-  store double %v439, double* %v441, align 8
-  %v442 = fmul double 0x3FF0000000000000, %v42
-  %v443 = fmul double %v442, 0x3FDFFB00BCBE61D0
-  %v444 = fmul double %v442, 0xBF91DE69AD42C3CA
-  %v445 = getelementptr inbounds double, double* %out, i64 68
-  store double %v443, double* %v445, align 8
-  %v446 = getelementptr inbounds double, double* %out, i64 69
-  store double %v444, double* %v446, align 8
-  %v447 = getelementptr inbounds double, double* %out, i64 70
-  store double %v442, double* %v447, align 8
-  %v448 = fmul double %v3, %v7
-  %v449 = fmul double %v17, %v7
-  %v450 = fmul double %v17, %v3
-  %v451 = fmul double 0x3FF0000000000000, %v448
-  %v452 = fmul double 0x3FF0000000000000, %v449
-  %v453 = fmul double 0x3FF0000000000000, %v450
-  %v454 = fmul double 0x3FF0000000000000, %v11
-  %v455 = fmul double 0x3FF0000000000000, %v13
-  %v456 = getelementptr inbounds double, double* %out, i64 71
-  store double %v454, double* %v456, align 8
-  %v457 = getelementptr inbounds double, double* %out, i64 72
-  store double %v451, double* %v457, align 8
-  %v458 = getelementptr inbounds double, double* %out, i64 73
-  store double %v452, double* %v458, align 8
-  %v459 = getelementptr inbounds double, double* %out, i64 74
-  store double %v453, double* %v459, align 8
-  %v460 = getelementptr inbounds double, double* %out, i64 75
-  store double %v455, double* %v460, align 8
-  %v461 = fmul double 0x3FF0000000000000, %v129
-  %v462 = fmul double 0x3FF0000000000000, %v70
-  %v463 = fmul double 0x3FF0000000000000, %v126
-  %v464 = fmul double 0x3FF0000000000000, %v68
-  %v465 = fmul double 0x3FF0000000000000, %v146
-  %v466 = fmul double 0x3FF0000000000000, %v62
-  %v467 = getelementptr inbounds double, double* %out, i64 76
-  store double %v465, double* %v467, align 8
-  %v468 = getelementptr inbounds double, double* %out, i64 77
-  store double %v463, double* %v468, align 8
-  %v469 = getelementptr inbounds double, double* %out, i64 78
-  store double %v461, double* %v469, align 8
-  %v470 = getelementptr inbounds double, double* %out, i64 79
-  store double %v466, double* %v470, align 8
-  %v471 = getelementptr inbounds double, double* %out, i64 80
-  store double %v464, double* %v471, align 8
-  %v472 = getelementptr inbounds double, double* %out, i64 81
-  store double %v462, double* %v472, align 8
-  %v473 = getelementptr inbounds double, double* %out, i64 82
-  store double 0x3FF0000000000000, double* %v473, align 8
-  %v474 = getelementptr inbounds double, double* %out, i64 83
-  store double 0x3FF0000000000000, double* %v474, align 8
-  %v475 = fmul double 0x3FF0000000000000, %v87
-  %v476 = getelementptr inbounds double, double* %out, i64 84
-  store double %v475, double* %v476, align 8
-  %v477 = getelementptr inbounds double, double* %out, i64 85
-  store double 0x3FF0000000000000, double* %v477, align 8
-  %v478 = getelementptr inbounds double, double* %out, i64 86
-  store double 0x3FF0000000000000, double* %v478, align 8
-  %v479 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v480 = getelementptr inbounds double, double* %out, i64 87
-  store double %v479, double* %v480, align 8
-  %v481 = fmul double 0xBFC851EB851EB852, %v58
-  %v482 = fmul double 0xBFC851EB851EB852, %v54
-  %v483 = fmul double 0x3FF0000000000000, %v481
-  %v484 = fmul double 0x3FF0000000000000, %v482
-  %v485 = getelementptr inbounds double, double* %out, i64 88
-  store double %v483, double* %v485, align 8
-  %v486 = getelementptr inbounds double, double* %out, i64 89
-  store double %v484, double* %v486, align 8
-  %v487 = fmul double 0x3FF0000000000000, %v170
-  %v488 = getelementptr inbounds double, double* %out, i64 90
-  store double %v487, double* %v488, align 8
-  %v489 = fmul double 0x3FF0000000000000, %v36
-  %v490 = fmul double 0x3FF0000000000000, %v58
-  %v491 = fmul double 0x3FF0000000000000, %v34
-  %v492 = fmul double 0x3FF0000000000000, %v54
-  %v493 = fmul double 0x3FF0000000000000, %v76
-  %v494 = fmul double 0x3FF0000000000000, %v66
-  %v495 = getelementptr inbounds double, double* %out, i64 91
-  store double %v493, double* %v495, align 8
-  %v496 = getelementptr inbounds double, double* %out, i64 92
-  store double %v491, double* %v496, align 8
-  %v497 = getelementptr inbounds double, double* %out, i64 93
-  store double %v489, double* %v497, align 8
-  %v498 = getelementptr inbounds double, double* %out, i64 94
-  store double %v494, double* %v498, align 8
-  %v499 = getelementptr inbounds double, double* %out, i64 95
-  store double %v492, double* %v499, align 8
-  %v500 = getelementptr inbounds double, double* %out, i64 96
-  store double %v490, double* %v500, align 8
-  %v501 = fmul double 0x3FF0000000000000, %v7
-  %v502 = fmul double 0x3FF0000000000000, %v58
-  %v503 = fmul double 0x3FF0000000000000, %v93
-  %v504 = fmul double 0x3FF0000000000000, %v54
-  %v505 = fmul double 0x3FF0000000000000, %v108
-  %v506 = fmul double 0x3FF0000000000000, %v66
-  %v507 = getelementptr inbounds double, double* %out, i64 97
-  store double %v505, double* %v507, align 8
-  %v508 = getelementptr inbounds double, double* %out, i64 98
-  store double %v503, double* %v508, align 8
-  %v509 = getelementptr inbounds double, double* %out, i64 99
-  store double %v501, double* %v509, align 8
-  %v510 = getelementptr inbounds double, double* %out, i64 100
-  store double %v506, double* %v510, align 8
-  %v511 = getelementptr inbounds double, double* %out, i64 101
-  store double %v504, double* %v511, align 8
-  %v512 = getelementptr inbounds double, double* %out, i64 102
-  store double %v502, double* %v512, align 8
-  %v513 = fmul double 0xBFF0000000000000, %v76
-  %v514 = fmul double 0xBFF0000000000000, %v184
-  %v515 = fmul double 0x3FF0000000000000, %v513
-  %v516 = fmul double 0x3FF0000000000000, %v514
-  %v517 = fmul double 0x3FF0000000000000, %v108
-  %v518 = fmul double 0x3FF0000000000000, %v178
-  %v519 = getelementptr inbounds double, double* %out, i64 103
-  store double %v517, double* %v519, align 8
-  %v520 = getelementptr inbounds double, double* %out, i64 104
-  store double %v515, double* %v520, align 8
-  %v521 = getelementptr inbounds double, double* %out, i64 105
+  %v413 = getelementptr inbounds double, double* %out, i64 136
+  store double %v401, double* %v413, align 8
+  %v414 = getelementptr inbounds double, double* %out, i64 137
+  store double %v406, double* %v414, align 8
+  %v415 = getelementptr inbounds double, double* %out, i64 138
+  store double %v410, double* %v415, align 8
+  %v416 = getelementptr inbounds double, double* %out, i64 139
+  store double %v402, double* %v416, align 8
+  %v417 = fmul double 0x3FF0000000000000, %v236
+  %v418 = fmul double 0x3FF0000000000000, %v282
+  %v419 = getelementptr inbounds double, double* %w, i64 30
+  %v420 = load double, double* %v419, align 8
+  %v421 = fmul double 0x3FF0000000000000, %v172
+  %v422 = fmul double 0x3FF0000000000000, %v420
+  %v423 = getelementptr inbounds double, double* %w, i64 22
+  %v424 = load double, double* %v423, align 8
+  %v425 = fmul double 0x3FF0000000000000, %v77
+  %v426 = fmul double 0x3FF0000000000000, %v424
+  %v427 = getelementptr inbounds double, double* %out, i64 140
+  store double %v425, double* %v427, align 8
+  %v428 = getelementptr inbounds double, double* %out, i64 141
+  store double %v421, double* %v428, align 8
+  %v429 = getelementptr inbounds double, double* %out, i64 142
+  store double %v417, double* %v429, align 8
+  %v430 = getelementptr inbounds double, double* %out, i64 143
+  store double %v426, double* %v430, align 8
+  %v431 = getelementptr inbounds double, double* %out, i64 144
+  store double %v422, double* %v431, align 8
+  %v432 = getelementptr inbounds double, double* %out, i64 145
+  store double %v418, double* %v432, align 8
+  %v433 = fmul double 0x3FF0000000000000, %v233
+  %v434 = fmul double 0x3FF0000000000000, %v282
+  %v435 = fmul double 0x3FF0000000000000, %v169
+  %v436 = fmul double 0x3FF0000000000000, %v420
+  %v437 = fmul double 0x3FF0000000000000, %v74
+  %v438 = fmul double 0x3FF0000000000000, %v424
+  %v439 = getelementptr inbounds double, double* %out, i64 146
+  store double %v437, double* %v439, align 8
+  %v440 = getelementptr inbounds double, double* %out, i64 147
+  store double %v435, double* %v440, align 8
+  %v441 = getelementptr inbounds double, double* %out, i64 148
+  store double %v433, double* %v441, align 8
+  %v442 = getelementptr inbounds double, double* %out, i64 149
+  store double %v438, double* %v442, align 8
+  %v443 = getelementptr inbounds double, double* %out, i64 150
+  store double %v436, double* %v443, align 8
+  %v444 = getelementptr inbounds double, double* %out, i64 151
+  store double %v434, double* %v444, align 8
+  %v445 = getelementptr inbounds double, double* %w, i64 59
+  %v446 = load double, double* %v445, align 8
+  %v447 = fmul double 0x3FF0000000000000, 0x3FDFFB00BCBE61D0
+  %v448 = getelementptr inbounds double, double* %w, i64 58
+  %v449 = load double, double* %v448, align 8
+  %v450 = fmul double 0x3FF0000000000000, 0x3F91DE69AD42C3CA
+  %v451 = getelementptr inbounds double, double* %out, i64 152
+  store double %v450, double* %v451, align 8
+  %v452 = getelementptr inbounds double, double* %out, i64 153
+  store double %v447, double* %v452, align 8
+  %v453 = getelementptr inbounds double, double* %w, i64 60
+  %v454 = load double, double* %v453, align 8
+  %v455 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v456 = getelementptr inbounds double, double* %w, i64 57
+  %v457 = load double, double* %v456, align 8
+  %v458 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v459 = getelementptr inbounds double, double* %w, i64 40
+  %v460 = load double, double* %v459, align 8
+  %v461 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v462 = getelementptr inbounds double, double* %out, i64 154
+  store double %v461, double* %v462, align 8
+  %v463 = getelementptr inbounds double, double* %out, i64 155
+  store double %v458, double* %v463, align 8
+  %v464 = getelementptr inbounds double, double* %out, i64 156
+  store double %v455, double* %v464, align 8
+  %v465 = fmul double 0x3FC851EB851EB852, %v99
+  %v466 = fmul double 0x3FC851EB851EB852, %v108
+  %v467 = fmul double 0x3FF0000000000000, %v465
+  %v468 = fmul double 0x3FF0000000000000, %v466
+  %v469 = getelementptr inbounds double, double* %out, i64 157
+  store double %v467, double* %v469, align 8
+  %v470 = getelementptr inbounds double, double* %out, i64 158
+  store double %v468, double* %v470, align 8
+  %v471 = fmul double 0x3FF0000000000000, %v236
+  %v472 = fmul double 0x3FF0000000000000, %v400
+  %v473 = fmul double 0x3FF0000000000000, %v77
+  %v474 = fmul double 0x3FF0000000000000, %v404
+  %v475 = fmul double 0x3FF0000000000000, %v172
+  %v476 = fmul double 0x3FF0000000000000, %v408
+  %v477 = getelementptr inbounds double, double* %out, i64 159
+  store double %v475, double* %v477, align 8
+  %v478 = getelementptr inbounds double, double* %out, i64 160
+  store double %v473, double* %v478, align 8
+  %v479 = getelementptr inbounds double, double* %out, i64 161
+  store double %v471, double* %v479, align 8
+  %v480 = getelementptr inbounds double, double* %out, i64 162
+  store double %v474, double* %v480, align 8
+  %v481 = getelementptr inbounds double, double* %out, i64 163
+  store double %v476, double* %v481, align 8
+  %v482 = getelementptr inbounds double, double* %out, i64 164
+  store double %v472, double* %v482, align 8
+  %v483 = fmul double 0x3FF0000000000000, %v264
+  %v484 = fmul double 0x3FF0000000000000, %v282
+  %v485 = fmul double 0x3FF0000000000000, %v191
+  %v486 = fmul double 0x3FF0000000000000, %v420
+  %v487 = fmul double 0x3FF0000000000000, %v140
+  %v488 = fmul double 0x3FF0000000000000, %v424
+  %v489 = getelementptr inbounds double, double* %out, i64 165
+  store double %v487, double* %v489, align 8
+  %v490 = getelementptr inbounds double, double* %out, i64 166
+  store double %v485, double* %v490, align 8
+  %v491 = getelementptr inbounds double, double* %out, i64 167
+  store double %v483, double* %v491, align 8
+  %v492 = getelementptr inbounds double, double* %out, i64 168
+  store double %v488, double* %v492, align 8
+  %v493 = getelementptr inbounds double, double* %out, i64 169
+  store double %v486, double* %v493, align 8
+  %v494 = getelementptr inbounds double, double* %out, i64 170
+  store double %v484, double* %v494, align 8
+  %v495 = getelementptr inbounds double, double* %w, i64 64
+  %v496 = load double, double* %v495, align 8
+  %v497 = fmul double 0x3FF0000000000000, 0xBF91DE69AD42C3CA
+  %v498 = getelementptr inbounds double, double* %out, i64 171
+  store double %v497, double* %v498, align 8
+  %v499 = getelementptr inbounds double, double* %w, i64 65
+  %v500 = load double, double* %v499, align 8
+  %v501 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v502 = getelementptr inbounds double, double* %w, i64 63
+  %v503 = load double, double* %v502, align 8
+  %v504 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v505 = getelementptr inbounds double, double* %w, i64 62
+  %v506 = load double, double* %v505, align 8
+  %v507 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v508 = getelementptr inbounds double, double* %out, i64 172
+  store double %v507, double* %v508, align 8
+  %v509 = getelementptr inbounds double, double* %out, i64 173
+  store double %v504, double* %v509, align 8
+  %v510 = getelementptr inbounds double, double* %out, i64 174
+  store double %v501, double* %v510, align 8
+  %v511 = fmul double 0x3FF0000000000000, %v233
+  %v512 = fmul double 0x3FF0000000000000, %v400
+  %v513 = fmul double 0x3FF0000000000000, %v74
+  %v514 = fmul double 0x3FF0000000000000, %v404
+  %v515 = fmul double 0x3FF0000000000000, %v169
+  %v516 = fmul double 0x3FF0000000000000, %v408
+  %v517 = getelementptr inbounds double, double* %out, i64 175
+  store double %v515, double* %v517, align 8
+  %v518 = getelementptr inbounds double, double* %out, i64 176
+  store double %v513, double* %v518, align 8
+  %v519 = getelementptr inbounds double, double* %out, i64 177
+  store double %v511, double* %v519, align 8
+  %v520 = getelementptr inbounds double, double* %out, i64 178
+  store double %v514, double* %v520, align 8
+  %v521 = getelementptr inbounds double, double* %out, i64 179
   store double %v516, double* %v521, align 8
-  %v522 = getelementptr inbounds double, double* %out, i64 106
-  store double %v518, double* %v522, align 8
-  %v523 = fmul double 0x3FF0000000000000, %v192
-  %v524 = getelementptr inbounds double, double* %out, i64 107
+  %v522 = getelementptr inbounds double, double* %out, i64 180
+  store double %v512, double* %v522, align 8
+  %v523 = fmul double 0x3FF0000000000000, 0xBFDFFB00BCBE61D0
+  %v524 = getelementptr inbounds double, double* %out, i64 181
   store double %v523, double* %v524, align 8
-  %v525 = getelementptr inbounds double, double* %out, i64 108
-  store double 0x3FF0000000000000, double* %v525, align 8
-  %v526 = getelementptr inbounds double, double* %out, i64 109
-  store double 0x3FF0000000000000, double* %v526, align 8
-  %v527 = fmul double 0x3FF0000000000000, %v108
-  %v528 = fmul double 0x3FF0000000000000, %v195
-  %v529 = getelementptr inbounds double, double* %out, i64 110
-  store double %v527, double* %v529, align 8
-  %v530 = getelementptr inbounds double, double* %out, i64 111
-  store double %v528, double* %v530, align 8
-  %v531 = fmul double 0xBFF0000000000000, %v76
-  %v532 = fmul double 0xBFF0000000000000, %v195
-  %v533 = fmul double 0x3FF0000000000000, %v531
-  %v534 = fmul double 0x3FF0000000000000, %v532
-  %v535 = getelementptr inbounds double, double* %out, i64 112
-  store double %v533, double* %v535, align 8
-  %v536 = getelementptr inbounds double, double* %out, i64 113
-  store double %v534, double* %v536, align 8
-  %v537 = fmul double 0x3FF0000000000000, %v170
-  %v538 = getelementptr inbounds double, double* %out, i64 114
-  store double %v537, double* %v538, align 8
-  %v539 = fmul double 0x3FF0000000000000, %v129
-  %v540 = fmul double 0x3FF0000000000000, %v58
-  %v541 = fmul double 0x3FF0000000000000, %v126
-  %v542 = fmul double 0x3FF0000000000000, %v54
-  %v543 = fmul double 0x3FF0000000000000, %v146
-  %v544 = fmul double 0x3FF0000000000000, %v66
-  %v545 = getelementptr inbounds double, double* %out, i64 115
-  store double %v543, double* %v545, align 8
-  %v546 = getelementptr inbounds double, double* %out, i64 116
-  store double %v541, double* %v546, align 8
-  %v547 = getelementptr inbounds double, double* %out, i64 117
-  store double %v539, double* %v547, align 8
-  %v548 = getelementptr inbounds double, double* %out, i64 118
-  store double %v544, double* %v548, align 8
-  %v549 = getelementptr inbounds double, double* %out, i64 119
-  store double %v542, double* %v549, align 8
-  %v550 = getelementptr inbounds double, double* %out, i64 120
-  store double %v540, double* %v550, align 8
-  %v551 = fmul double 0xBFF0000000000000, %v108
-  %v552 = fmul double 0xBFF0000000000000, %v212
-  %v553 = fmul double 0x3FF0000000000000, %v551
-  %v554 = fmul double 0x3FF0000000000000, %v552
-  %v555 = fmul double 0x3FF0000000000000, %v146
-  %v556 = fmul double 0x3FF0000000000000, %v184
-  %v557 = getelementptr inbounds double, double* %out, i64 121
-  store double %v555, double* %v557, align 8
-  %v558 = getelementptr inbounds double, double* %out, i64 122
-  store double %v553, double* %v558, align 8
-  %v559 = getelementptr inbounds double, double* %out, i64 123
-  store double %v554, double* %v559, align 8
-  %v560 = getelementptr inbounds double, double* %out, i64 124
-  store double %v556, double* %v560, align 8
-  %v561 = fmul double 0x3FF0000000000000, %v192
-  %v562 = getelementptr inbounds double, double* %out, i64 125
-  store double %v561, double* %v562, align 8
-  %v563 = getelementptr inbounds double, double* %out, i64 126
-  store double 0x3FF0000000000000, double* %v563, align 8
-  %v564 = getelementptr inbounds double, double* %out, i64 127
+  %v525 = getelementptr inbounds double, double* %w, i64 68
+  %v526 = load double, double* %v525, align 8
+  %v527 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v528 = getelementptr inbounds double, double* %w, i64 67
+  %v529 = load double, double* %v528, align 8
+  %v530 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v531 = getelementptr inbounds double, double* %out, i64 182
+  store double %v530, double* %v531, align 8
+  %v532 = getelementptr inbounds double, double* %out, i64 183
+  store double %v527, double* %v532, align 8
+  %v533 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v534 = getelementptr inbounds double, double* %out, i64 184
+  store double %v533, double* %v534, align 8
+  %v535 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v536 = getelementptr inbounds double, double* %out, i64 185
+  store double %v535, double* %v536, align 8
+  %v537 = getelementptr inbounds double, double* %out, i64 186
+  store double 0x3FF0000000000000, double* %v537, align 8
+  %v538 = getelementptr inbounds double, double* %out, i64 187
+  store double 0x3FF0000000000000, double* %v538, align 8
+  %v539 = getelementptr inbounds double, double* %out, i64 188
+  store double 0x3FF0000000000000, double* %v539, align 8
+  %v540 = getelementptr inbounds double, double* %out, i64 189
+  store double 0x3FF0000000000000, double* %v540, align 8
+  %v541 = getelementptr inbounds double, double* %out, i64 190
+  store double 0x3FF0000000000000, double* %v541, align 8
+  %v542 = fdiv double 0x3FF0000000000000, %v64
+  %v543 = fmul double %v53, %v108
+  %v544 = fmul double %v96, %v45
+  %v545 = fneg double %v544
+  %v546 = fadd double %v543, %v545
+  %v547 = fmul double 0x3FF0000000000000, %v546
+  %v548 = fmul double 0x3FF0000000000000, %v542
+  %v549 = fmul double 0xBFF0000000000000, %v45
+  %v550 = fmul double 0xBFF0000000000000, %v96
+  %v551 = fmul double %v548, %v549
+  %v552 = fmul double %v548, %v550
+  %v553 = fmul double %v548, %v108
+  %v554 = fmul double %v548, %v53
+  %v555 = fmul double %v64, %v64
+  %v556 = fdiv double 0x3FF0000000000000, %v555
+  %v557 = fmul double 0xBFF0000000000000, %v556
+  %v558 = fmul double %v547, %v557
+  %v559 = getelementptr inbounds double, double* %out, i64 191
+  store double %v558, double* %v559, align 8
+  %v560 = getelementptr inbounds double, double* %out, i64 192
+  store double %v553, double* %v560, align 8
+  %v561 = getelementptr inbounds double, double* %out, i64 193
+  store double %v554, double* %v561, align 8
+  %v562 = getelementptr inbounds double, double* %out, i64 194
+  store double %v551, double* %v562, align 8
+  %v563 = getelementptr inbounds double, double* %out, i64 195
+  store double %v552, double* %v563, align 8
+  %v564 = getelementptr inbounds double, double* %out, i64 196
   store double 0x3FF0000000000000, double* %v564, align 8
-  %v565 = fmul double 0x3FF0000000000000, %v146
-  %v566 = fmul double 0x3FF0000000000000, %v221
-  %v567 = getelementptr inbounds double, double* %out, i64 128
-  store double %v565, double* %v567, align 8
-  %v568 = getelementptr inbounds double, double* %out, i64 129
-  store double %v566, double* %v568, align 8
-  %v569 = getelementptr inbounds double, double* %out, i64 130
-  store double 0x3FF0000000000000, double* %v569, align 8
-  %v570 = getelementptr inbounds double, double* %out, i64 131
-  store double 0x3FF0000000000000, double* %v570, align 8
-  %v571 = fmul double 0xBFF0000000000000, %v108
-  %v572 = fmul double 0xBFF0000000000000, %v221
-  %v573 = fmul double 0x3FF0000000000000, %v571
-  %v574 = fmul double 0x3FF0000000000000, %v572
-  %v575 = getelementptr inbounds double, double* %out, i64 132
-  store double %v573, double* %v575, align 8
-  %v576 = getelementptr inbounds double, double* %out, i64 133
-  store double %v574, double* %v576, align 8
-  %v577 = fmul double 0x3FF0000000000000, %v146
-  %v578 = fmul double 0x3FF0000000000000, %v228
-  %v579 = fmul double 0x3FF0000000000000, %v76
-  %v580 = fmul double 0x3FF0000000000000, %v197
-  %v581 = fmul double 0x3FF0000000000000, %v108
-  %v582 = fmul double 0x3FF0000000000000, %v225
-  %v583 = getelementptr inbounds double, double* %out, i64 134
-  store double %v581, double* %v583, align 8
-  %v584 = getelementptr inbounds double, double* %out, i64 135
-  store double %v579, double* %v584, align 8
-  %v585 = getelementptr inbounds double, double* %out, i64 136
-  store double %v577, double* %v585, align 8
-  %v586 = getelementptr inbounds double, double* %out, i64 137
-  store double %v580, double* %v586, align 8
-  %v587 = getelementptr inbounds double, double* %out, i64 138
-  store double %v582, double* %v587, align 8
-  %v588 = getelementptr inbounds double, double* %out, i64 139
-  store double %v578, double* %v588, align 8
-  %v589 = fmul double 0x3FF0000000000000, %v126
-  %v590 = fmul double 0x3FF0000000000000, %v158
-  %v591 = fmul double 0x3FF0000000000000, %v93
-  %v592 = fmul double 0x3FF0000000000000, %v120
-  %v593 = fmul double 0x3FF0000000000000, %v34
-  %v594 = fmul double 0x3FF0000000000000, %v90
-  %v595 = getelementptr inbounds double, double* %out, i64 140
-  store double %v593, double* %v595, align 8
-  %v596 = getelementptr inbounds double, double* %out, i64 141
-  store double %v591, double* %v596, align 8
-  %v597 = getelementptr inbounds double, double* %out, i64 142
-  store double %v589, double* %v597, align 8
-  %v598 = getelementptr inbounds double, double* %out, i64 143
-  store double %v594, double* %v598, align 8
-  %v599 = getelementptr inbounds double, double* %out, i64 144
-  store double %v592, double* %v599, align 8
-  %v600 = getelementptr inbounds double, double* %out, i64 145
-  store double %v590, double* %v600, align 8
-  %v601 = fmul double 0x3FF0000000000000, %v129
-  %v602 = fmul double 0x3FF0000000000000, %v158
-  %v603 = fmul double 0x3FF0000000000000, %v7
-  %v604 = fmul double 0x3FF0000000000000, %v120
-  %v605 = fmul double 0x3FF0000000000000, %v36
-  %v606 = fmul double 0x3FF0000000000000, %v90
-  %v607 = getelementptr inbounds double, double* %out, i64 146
-  store double %v605, double* %v607, align 8
-  %v608 = getelementptr inbounds double, double* %out, i64 147
-  store double %v603, double* %v608, align 8
-  %v609 = getelementptr inbounds double, double* %out, i64 148
-  store double %v601, double* %v609, align 8
-  %v610 = getelementptr inbounds double, double* %out, i64 149
-  store double %v606, double* %v610, align 8
-  %v611 = getelementptr inbounds double, double* %out, i64 150
-  store double %v604, double* %v611, align 8
-  %v612 = getelementptr inbounds double, double* %out, i64 151
-  store double %v602, double* %v612, align 8
-  %v613 = fmul double 0x3FF0000000000000, 0x3FDFFB00BCBE61D0
-  %v614 = fmul double 0x3FF0000000000000, 0x3F91DE69AD42C3CA
-  %v615 = getelementptr inbounds double, double* %out, i64 152
-  store double %v614, double* %v615, align 8
-  %v616 = getelementptr inbounds double, double* %out, i64 153
-  store double %v613, double* %v616, align 8
-  %v617 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v618 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v619 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v620 = getelementptr inbounds double, double* %out, i64 154
-  store double %v619, double* %v620, align 8
-  %v621 = getelementptr inbounds double, double* %out, i64 155
-  store double %v618, double* %v621, align 8
-  %v622 = getelementptr inbounds double, double* %out, i64 156
-  store double %v617, double* %v622, align 8
-  %v623 = fmul double 0x3FC851EB851EB852, %v58
-  %v624 = fmul double 0x3FC851EB851EB852, %v66
-  %v625 = fmul double 0x3FF0000000000000, %v623
-  %v626 = fmul double 0x3FF0000000000000, %v624
-  %v627 = getelementptr inbounds double, double* %out, i64 157
-  store double %v625, double* %v627, align 8
-  %v628 = getelementptr inbounds double, double* %out, i64 158
-  store double %v626, double* %v628, align 8
-  %v629 = fmul double 0x3FF0000000000000, %v126
-  %v630 = fmul double 0x3FF0000000000000, %v228
-  %v631 = fmul double 0x3FF0000000000000, %v34
-  %v632 = fmul double 0x3FF0000000000000, %v197
-  %v633 = fmul double 0x3FF0000000000000, %v93
-  %v634 = fmul double 0x3FF0000000000000, %v225
-  %v635 = getelementptr inbounds double, double* %out, i64 159
-  store double %v633, double* %v635, align 8
-  %v636 = getelementptr inbounds double, double* %out, i64 160
-  store double %v631, double* %v636, align 8
-  %v637 = getelementptr inbounds double, double* %out, i64 161
-  store double %v629, double* %v637, align 8
-  %v638 = getelementptr inbounds double, double* %out, i64 162
-  store double %v632, double* %v638, align 8
-  %v639 = getelementptr inbounds double, double* %out, i64 163
-  store double %v634, double* %v639, align 8
-  %v640 = getelementptr inbounds double, double* %out, i64 164
-  store double %v630, double* %v640, align 8
-  %v641 = fmul double 0x3FF0000000000000, %v146
-  %v642 = fmul double 0x3FF0000000000000, %v158
-  %v643 = fmul double 0x3FF0000000000000, %v108
-  %v644 = fmul double 0x3FF0000000000000, %v120
-  %v645 = fmul double 0x3FF0000000000000, %v76
-  %v646 = fmul double 0x3FF0000000000000, %v90
-  %v647 = getelementptr inbounds double, double* %out, i64 165
-  store double %v645, double* %v647, align 8
-  %v648 = getelementptr inbounds double, double* %out, i64 166
-  store double %v643, double* %v648, align 8
-  %v649 = getelementptr inbounds double, double* %out, i64 167
-  store double %v641, double* %v649, align 8
-  %v650 = getelementptr inbounds double, double* %out, i64 168
-  store double %v646, double* %v650, align 8
-  %v651 = getelementptr inbounds double, double* %out, i64 169
-  store double %v644, double* %v651, align 8
-  %v652 = getelementptr inbounds double, double* %out, i64 170
-  store double %v642, double* %v652, align 8
-  %v653 = fmul double 0x3FF0000000000000, 0xBF91DE69AD42C3CA
-  %v654 = getelementptr inbounds double, double* %out, i64 171
-  store double %v653, double* %v654, align 8
-  %v655 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v656 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v657 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v658 = getelementptr inbounds double, double* %out, i64 172
-  store double %v657, double* %v658, align 8
-  %v659 = getelementptr inbounds double, double* %out, i64 173
-  store double %v656, double* %v659, align 8
-  %v660 = getelementptr inbounds double, double* %out, i64 174
-  store double %v655, double* %v660, align 8
-  %v661 = fmul double 0x3FF0000000000000, %v129
-  %v662 = fmul double 0x3FF0000000000000, %v228
-  %v663 = fmul double 0x3FF0000000000000, %v36
-  %v664 = fmul double 0x3FF0000000000000, %v197
-  %v665 = fmul double 0x3FF0000000000000, %v7
-  %v666 = fmul double 0x3FF0000000000000, %v225
-  %v667 = getelementptr inbounds double, double* %out, i64 175
-  store double %v665, double* %v667, align 8
-  %v668 = getelementptr inbounds double, double* %out, i64 176
-  store double %v663, double* %v668, align 8
-  %v669 = getelementptr inbounds double, double* %out, i64 177
-  store double %v661, double* %v669, align 8
-  %v670 = getelementptr inbounds double, double* %out, i64 178
-  store double %v664, double* %v670, align 8
-  %v671 = getelementptr inbounds double, double* %out, i64 179
-  store double %v666, double* %v671, align 8
-  %v672 = getelementptr inbounds double, double* %out, i64 180
-  store double %v662, double* %v672, align 8
-  %v673 = fmul double 0x3FF0000000000000, 0xBFDFFB00BCBE61D0
-  %v674 = getelementptr inbounds double, double* %out, i64 181
-  store double %v673, double* %v674, align 8
-  %v675 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v676 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v677 = getelementptr inbounds double, double* %out, i64 182
-  store double %v676, double* %v677, align 8
-  %v678 = getelementptr inbounds double, double* %out, i64 183
-  store double %v675, double* %v678, align 8
-  %v679 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v680 = getelementptr inbounds double, double* %out, i64 184
-  store double %v679, double* %v680, align 8
-  %v681 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v682 = getelementptr inbounds double, double* %out, i64 185
-  store double %v681, double* %v682, align 8
-  %v683 = getelementptr inbounds double, double* %out, i64 186
-  store double 0x3FF0000000000000, double* %v683, align 8
-  %v684 = getelementptr inbounds double, double* %out, i64 187
-  store double 0x3FF0000000000000, double* %v684, align 8
-  %v685 = getelementptr inbounds double, double* %out, i64 188
-  store double 0x3FF0000000000000, double* %v685, align 8
-  %v686 = getelementptr inbounds double, double* %out, i64 189
-  store double 0x3FF0000000000000, double* %v686, align 8
-  %v687 = getelementptr inbounds double, double* %out, i64 190
-  store double 0x3FF0000000000000, double* %v687, align 8
-  %v688 = fdiv double 0x3FF0000000000000, %v15
-  %v689 = fmul double %v17, %v66
-  %v690 = fmul double %v54, %v11
-  %v691 = fneg double %v690
-  %v692 = fadd double %v689, %v691
-  %v693 = fmul double 0x3FF0000000000000, %v692
-  %v694 = fmul double 0x3FF0000000000000, %v688
-  %v695 = fmul double 0xBFF0000000000000, %v11
-  %v696 = fmul double 0xBFF0000000000000, %v54
-  %v697 = fmul double %v694, %v695
-  %v698 = fmul double %v694, %v696
-  %v699 = fmul double %v694, %v66
-  %v700 = fmul double %v694, %v17
-  %v701 = fmul double %v15, %v15
-  %v702 = fdiv double 0x3FF0000000000000, %v701
-  %v703 = fmul double 0xBFF0000000000000, %v702
-  %v704 = fmul double %v693, %v703
-  %v705 = getelementptr inbounds double, double* %out, i64 191
-  store double %v704, double* %v705, align 8
-  %v706 = getelementptr inbounds double, double* %out, i64 192
-  store double %v699, double* %v706, align 8
-  %v707 = getelementptr inbounds double, double* %out, i64 193
-  store double %v700, double* %v707, align 8
-  %v708 = getelementptr inbounds double, double* %out, i64 194
-  store double %v697, double* %v708, align 8
-  %v709 = getelementptr inbounds double, double* %out, i64 195
-  store double %v698, double* %v709, align 8
-  %v710 = getelementptr inbounds double, double* %out, i64 196
-  store double 0x3FF0000000000000, double* %v710, align 8
-  %v711 = fmul double 0x3FF0000000000000, %v11
-  %v712 = fmul double 0x3FF0000000000000, %v66
-  %v713 = fmul double 0x3FF0000000000000, %v54
-  %v714 = fmul double 0x3FF0000000000000, %v17
-  %v715 = getelementptr inbounds double, double* %out, i64 197
-  store double %v713, double* %v715, align 8
-  %v716 = getelementptr inbounds double, double* %out, i64 198
-  store double %v711, double* %v716, align 8
-  %v717 = getelementptr inbounds double, double* %out, i64 199
-  store double %v714, double* %v717, align 8
-  %v718 = getelementptr inbounds double, double* %out, i64 200
-  store double %v712, double* %v718, align 8
-  %v719 = getelementptr inbounds double, double* %out, i64 201
-  store double 0x3FF0000000000000, double* %v719, align 8
-  %v720 = fmul double 0xBFF0000000000000, %v688
-  %v721 = fmul double %v720, %v692
-  %v722 = fmul double 0xBFF0000000000000, %v7
-  %v723 = fmul double %v722, %v692
-  %v724 = fmul double 0xBFF0000000000000, %v7
-  %v725 = fmul double %v724, %v688
-  %v726 = fmul double 0x3FF0000000000000, %v721
-  %v727 = fmul double 0x3FF0000000000000, %v723
-  %v728 = fmul double 0x3FF0000000000000, %v725
-  %v729 = fmul double 0xBFF0000000000000, %v11
-  %v730 = fmul double 0xBFF0000000000000, %v54
-  %v731 = fmul double %v728, %v729
-  %v732 = fmul double %v728, %v730
-  %v733 = fmul double %v728, %v66
-  %v734 = fmul double %v728, %v17
-  %v735 = fmul double 0xBFF0000000000000, %v702
-  %v736 = fmul double %v727, %v735
-  %v737 = getelementptr inbounds double, double* %out, i64 202
-  store double %v736, double* %v737, align 8
-  %v738 = getelementptr inbounds double, double* %out, i64 203
-  store double %v733, double* %v738, align 8
-  %v739 = getelementptr inbounds double, double* %out, i64 204
-  store double %v734, double* %v739, align 8
-  %v740 = getelementptr inbounds double, double* %out, i64 205
-  store double %v731, double* %v740, align 8
-  %v741 = getelementptr inbounds double, double* %out, i64 206
-  store double 0x3FF0000000000000, double* %v741, align 8
-  %v742 = getelementptr inbounds double, double* %out, i64 207
-  store double %v726, double* %v742, align 8
-  %v743 = getelementptr inbounds double, double* %out, i64 208
-  store double %v732, double* %v743, align 8
+  %v565 = fmul double 0x3FF0000000000000, %v45
+  %v566 = fmul double 0x3FF0000000000000, %v108
+  %v567 = fmul double 0x3FF0000000000000, %v96
+  %v568 = fmul double 0x3FF0000000000000, %v53
+  %v569 = getelementptr inbounds double, double* %out, i64 197
+  store double %v567, double* %v569, align 8
+  %v570 = getelementptr inbounds double, double* %out, i64 198
+  store double %v565, double* %v570, align 8
+  %v571 = getelementptr inbounds double, double* %out, i64 199
+  store double %v568, double* %v571, align 8
+  %v572 = getelementptr inbounds double, double* %out, i64 200
+  store double %v566, double* %v572, align 8
+  %v573 = getelementptr inbounds double, double* %out, i64 201
+  store double 0x3FF0000000000000, double* %v573, align 8
+  %v574 = fmul double 0xBFF0000000000000, %v542
+  %v575 = fmul double %v574, %v546
+  %v576 = fmul double 0xBFF0000000000000, %v43
+  %v577 = fmul double %v576, %v546
+  %v578 = fmul double 0xBFF0000000000000, %v43
+  %v579 = fmul double %v578, %v542
+  %v580 = fmul double 0x3FF0000000000000, %v575
+  %v581 = fmul double 0x3FF0000000000000, %v577
+  %v582 = fmul double 0x3FF0000000000000, %v579
+  %v583 = fmul double 0xBFF0000000000000, %v45
+  %v584 = fmul double 0xBFF0000000000000, %v96
+  %v585 = fmul double %v582, %v583
+  %v586 = fmul double %v582, %v584
+  %v587 = fmul double %v582, %v108
+  %v588 = fmul double %v582, %v53
+  %v589 = fmul double 0xBFF0000000000000, %v556
+  %v590 = fmul double %v581, %v589
+  %v591 = getelementptr inbounds double, double* %out, i64 202
+  store double %v590, double* %v591, align 8
+  %v592 = getelementptr inbounds double, double* %out, i64 203
+  store double %v587, double* %v592, align 8
+  %v593 = getelementptr inbounds double, double* %out, i64 204
+  store double %v588, double* %v593, align 8
+  %v594 = getelementptr inbounds double, double* %out, i64 205
+  store double %v585, double* %v594, align 8
+  %v595 = getelementptr inbounds double, double* %out, i64 206
+  store double 0x3FF0000000000000, double* %v595, align 8
+  %v596 = getelementptr inbounds double, double* %out, i64 207
+  store double %v580, double* %v596, align 8
+  %v597 = getelementptr inbounds double, double* %out, i64 208
+  store double %v586, double* %v597, align 8
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -2329,7 +2115,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -2341,12 +2127,12 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_45ce7b34020637eea9187f02fe1c17bf_d09f9bfa1e2f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_c3d741ddd4c14f905d4991a009daac23_a8220daa2919_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 1275, 82   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 1287, 82   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 9, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "2029d5a76df8049bdbc43d432dfad895"
+MODEL_HASH = "da997910e0e513d1a025f6b5a82793c2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.03, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895", sys.modules[__name__])
-__name__ = "_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895"
+    sys.modules.setdefault("_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2", sys.modules[__name__])
+__name__ = "_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
@@ -106,7 +106,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109"
+_KERNEL_PREFIX = "_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a"
 KERNEL_FUNCTIONS = 21
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -115,73 +115,74 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape_ptr = internal constant [5 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape_src = internal constant [4 x i64] [i64 -1, i64 0, i64 1, i64 2]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_row = internal constant [1 x i64] [i64 3]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_row = internal constant [1 x i64] [i64 3]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_col = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_zero = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_zero = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_k = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_k = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_i = internal constant [1 x i64] [i64 0]
 
-@_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_j = internal constant [1 x i64] [i64 0]
 
-define internal void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w) nounwind {
+define internal void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tables(double %t, double* %w) nounwind {
 entry:
-  %v5 = call double @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_y0, i64 0, i64 0), i64 3, i1 false)
+  %v5 = call double @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_y0, i64 0, i64 0), i64 3, i1 false)
   %p5 = getelementptr inbounds double, double* %w, i64 5
   store double %v5, double* %p5, align 8
-  %v6 = call double @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_table_y0, i64 0, i64 0), i64 3, i1 true)
+  %v6 = call double @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_table_y0, i64 0, i64 0), i64 3, i1 true)
   %p6 = getelementptr inbounds double, double* %w, i64 6
   store double %v6, double* %p6, align 8
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tables(double %t, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 15
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tables(double %t, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tables(double %t, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tables(double %t, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tables(double %t, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -240,7 +241,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -271,7 +272,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -329,82 +330,82 @@ ends:
 }
 
 
-define internal void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 11
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_tape_src, i64 0, i64 0))
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 120)
+  %raw = call i8* @malloc(i64 128)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 120)
+  %raw = call i8* @malloc(i64 128)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -413,29 +414,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -464,45 +465,35 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %w, i64 5
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %w, i64 0
-  store double %v2, double* %v3, align 8
-  %v4 = getelementptr inbounds double, double* %x, i64 0
-  %v5 = load double, double* %v4, align 8
-  %v6 = getelementptr inbounds double, double* %p, i64 1
-  %v7 = load double, double* %v6, align 8
-  %v8 = fdiv double %v5, %v7
-  %v9 = getelementptr inbounds double, double* %w, i64 1
-  store double %v8, double* %v9, align 8
-  %v10 = fneg double %v8
-  %v11 = fadd double %v2, %v10
+  %v3 = getelementptr inbounds double, double* %p, i64 1
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %w, i64 1
+  %v9 = load double, double* %v8, align 8
+  %v10 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v11 = getelementptr inbounds double, double* %out, i64 1
+  store double %v10, double* %v11, align 8
   %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 0
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v11, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 3
-  store double %v15, double* %v16, align 8
-  %v17 = fdiv double 0x3FF0000000000000, %v7
-  %v18 = fmul double 0x3FF0000000000000, %v17
-  %v19 = getelementptr inbounds double, double* %out, i64 0
-  store double %v18, double* %v19, align 8
-  %v20 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v21 = getelementptr inbounds double, double* %out, i64 1
-  store double %v20, double* %v21, align 8
-  %v22 = fdiv double 0x3FF0000000000000, %v14
-  %v23 = fmul double 0x3FF0000000000000, %v22
-  %v24 = getelementptr inbounds double, double* %out, i64 2
-  store double %v23, double* %v24, align 8
-  %v25 = getelementptr inbounds double, double* %out, i64 3
-  store double 0x3FF0000000000000, double* %v25, align 8
+  %v13 = load double, double* %v12, align 8
+  %v14 = getelementptr inbounds double, double* %p, i64 0
+  %v15 = load double, double* %v14, align 8
+  %v16 = fdiv double 0x3FF0000000000000, %v15
+  %v17 = fmul double 0x3FF0000000000000, %v16
+  %v18 = getelementptr inbounds double, double* %out, i64 2
+  store double %v17, double* %v18, align 8
+  %v19 = getelementptr inbounds double, double* %out, i64 3
+  store double 0x3FF0000000000000, double* %v19, align 8
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -522,17 +513,17 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rc_table_2029d5a76df8049bdbc43d432dfad895_465c15194109_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_da997910e0e513d1a025f6b5a82793c2_09e88d7ebe4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 15, 7   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 16, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 1, 2, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rectifier"
 MODEL_FILE = "rectifier.yaml"
-MODEL_HASH = "00d34257cf73db6181beac86722a13b0"
+MODEL_HASH = "84ed43a9ded0c762ee08084ec08df8f5"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.1, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rectifier_00d34257cf73db6181beac86722a13b0", sys.modules[__name__])
-__name__ = "_bgc_rectifier_00d34257cf73db6181beac86722a13b0"
+    sys.modules.setdefault("_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5", sys.modules[__name__])
+__name__ = "_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("Vpk", "f_line", "Is", "Vt", "C", "R_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073"
+_KERNEL_PREFIX = "_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.exp.f64(double)
@@ -118,53 +118,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3, i64 4]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3, i64 4]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_row = internal constant [1 x i64] [i64 5]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_row = internal constant [1 x i64] [i64 5]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_col = internal constant [1 x i64] [i64 0]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_zero = internal constant [1 x i64] [i64 0]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_zero = internal constant [1 x i64] [i64 0]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_k = internal constant [1 x i64] [i64 0]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_k = internal constant [1 x i64] [i64 0]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_i = internal constant [1 x i64] [i64 0]
 
-@_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_j = internal constant [1 x i64] [i64 0]
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 20
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -223,7 +225,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -254,7 +256,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -312,82 +314,82 @@ ends:
 }
 
 
-define internal void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 48, i1 false)
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape(double* %v2, double* %v1, i64 0, i64 6, i64 1, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_tape_src, i64 0, i64 0))
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape(double* %v2, double* %v1, i64 0, i64 6, i64 1, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_col, i64 0, i64 0))
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_col, i64 0, i64 0))
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 160)
+  %raw = call i8* @malloc(i64 168)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 160)
+  %raw = call i8* @malloc(i64 168)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.exp.f64(double)
@@ -400,29 +402,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -472,77 +474,55 @@ entry:
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 0
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = getelementptr inbounds double, double* %p, i64 1
+  %v3 = getelementptr inbounds double, double* %p, i64 4
   %v4 = load double, double* %v3, align 8
-  %v5 = fmul double 0x4000000000000000, 0x400921FB54442D18
-  %v6 = fmul double %v5, %v4
-  %v7 = fmul double %v6, %t
-  %v8 = call double @llvm.sin.f64(double %v7)
-  %v9 = fmul double %v2, %v8
-  %v10 = getelementptr inbounds double, double* %w, i64 0
-  store double %v9, double* %v10, align 8
-  %v11 = getelementptr inbounds double, double* %x, i64 0
-  %v12 = load double, double* %v11, align 8
-  %v13 = getelementptr inbounds double, double* %p, i64 4
-  %v14 = load double, double* %v13, align 8
-  %v15 = fdiv double %v12, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 1
-  store double %v15, double* %v16, align 8
-  %v17 = fneg double %v15
-  %v18 = fadd double %v9, %v17
-  %v19 = getelementptr inbounds double, double* %w, i64 2
-  store double %v18, double* %v19, align 8
-  %v20 = getelementptr inbounds double, double* %p, i64 2
-  %v21 = load double, double* %v20, align 8
-  %v22 = getelementptr inbounds double, double* %p, i64 3
-  %v23 = load double, double* %v22, align 8
-  %v24 = fdiv double %v18, %v23
-  %v25 = call double @llvm.exp.f64(double %v24)
-  %v26 = fadd double 0xBFF0000000000000, %v25
-  %v27 = fmul double %v21, %v26
-  %v28 = getelementptr inbounds double, double* %w, i64 3
-  store double %v27, double* %v28, align 8
-  %v29 = getelementptr inbounds double, double* %p, i64 5
-  %v30 = load double, double* %v29, align 8
-  %v31 = fdiv double %v15, %v30
-  %v32 = getelementptr inbounds double, double* %w, i64 4
-  store double %v31, double* %v32, align 8
-  %v33 = fneg double %v31
-  %v34 = fadd double %v27, %v33
-  %v35 = getelementptr inbounds double, double* %w, i64 5
-  store double %v34, double* %v35, align 8
-  %v36 = fdiv double 0x3FF0000000000000, %v14
-  %v37 = fmul double 0x3FF0000000000000, %v36
-  %v38 = getelementptr inbounds double, double* %out, i64 0
-  store double %v37, double* %v38, align 8
-  %v39 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v40 = getelementptr inbounds double, double* %out, i64 1
-  store double %v39, double* %v40, align 8
-  %v41 = fmul double 0x3FF0000000000000, %v21
-  %v42 = fmul double %v41, %v25
-  %v43 = fdiv double 0x3FF0000000000000, %v23
-  %v44 = fmul double %v42, %v43
-  %v45 = getelementptr inbounds double, double* %out, i64 2
-  store double %v44, double* %v45, align 8
-  %v46 = fdiv double 0x3FF0000000000000, %v30
-  %v47 = fmul double 0x3FF0000000000000, %v46
-  %v48 = getelementptr inbounds double, double* %out, i64 3
-  store double %v47, double* %v48, align 8
-  %v49 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v50 = getelementptr inbounds double, double* %out, i64 4
-  store double 0x3FF0000000000000, double* %v50, align 8
-  %v51 = getelementptr inbounds double, double* %out, i64 5
-  store double %v49, double* %v51, align 8
-  %v52 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v52, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %w, i64 1
+  %v9 = load double, double* %v8, align 8
+  %v10 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v11 = getelementptr inbounds double, double* %out, i64 1
+  store double %v10, double* %v11, align 8
+  %v12 = getelementptr inbounds double, double* %p, i64 2
+  %v13 = load double, double* %v12, align 8
+  %v14 = getelementptr inbounds double, double* %w, i64 2
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 3
+  %v17 = load double, double* %v16, align 8
+  %v18 = fdiv double %v15, %v17
+  %v19 = call double @llvm.exp.f64(double %v18)
+  %v20 = fadd double 0xBFF0000000000000, %v19
+  %v21 = fmul double 0x3FF0000000000000, %v13
+  %v22 = fmul double %v21, %v19
+  %v23 = fdiv double 0x3FF0000000000000, %v17
+  %v24 = fmul double %v22, %v23
+  %v25 = getelementptr inbounds double, double* %out, i64 2
+  store double %v24, double* %v25, align 8
+  %v26 = getelementptr inbounds double, double* %p, i64 5
+  %v27 = load double, double* %v26, align 8
+  %v28 = fdiv double 0x3FF0000000000000, %v27
+  %v29 = fmul double 0x3FF0000000000000, %v28
+  %v30 = getelementptr inbounds double, double* %out, i64 3
+  store double %v29, double* %v30, align 8
+  %v31 = getelementptr inbounds double, double* %w, i64 4
+  %v32 = load double, double* %v31, align 8
+  %v33 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v34 = getelementptr inbounds double, double* %out, i64 4
+  store double 0x3FF0000000000000, double* %v34, align 8
+  %v35 = getelementptr inbounds double, double* %out, i64 5
+  store double %v33, double* %v35, align 8
+  %v36 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v36, align 8
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -583,17 +563,17 @@ entry:
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rectifier_00d34257cf73db6181beac86722a13b0_bc8a1aeb5073_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rectifier_84ed43a9ded0c762ee08084ec08df8f5_30d4637b895d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 20, 7   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 21, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 1, 6, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rlc"
 MODEL_FILE = "rlc.yaml"
-MODEL_HASH = "20351e670d1a75fef81c81cc97698e04"
+MODEL_HASH = "72d7725446892887c9f5760d7305a861"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.05, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rlc_20351e670d1a75fef81c81cc97698e04", sys.modules[__name__])
-__name__ = "_bgc_rlc_20351e670d1a75fef81c81cc97698e04"
+    sys.modules.setdefault("_bgc_rlc_72d7725446892887c9f5760d7305a861", sys.modules[__name__])
+__name__ = "_bgc_rlc_72d7725446892887c9f5760d7305a861"
 
 STATE_NAMES = ("inductor.p", "capacitor.q", )
 PARAM_NAMES = ("V", "R", "L", "C", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883"
+_KERNEL_PREFIX = "_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -113,53 +113,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape_ptr = internal constant [7 x i64] [i64 0, i64 1, i64 2, i64 3, i64 5, i64 6, i64 7]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 -2, i64 1, i64 2, i64 3, i64 0]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape_src = internal constant [7 x i64] [i64 -1, i64 0, i64 -2, i64 1, i64 2, i64 3, i64 0]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_row = internal constant [3 x i64] [i64 4, i64 4, i64 5]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 26
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -218,7 +220,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -249,7 +251,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -307,82 +309,82 @@ ends:
 }
 
 
-define internal void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_tape_src, i64 0, i64 0))
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_col, i64 0, i64 0))
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_col, i64 0, i64 0))
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 208)
+  %raw = call i8* @malloc(i64 224)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 208)
+  %raw = call i8* @malloc(i64 224)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -391,29 +393,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -457,64 +459,49 @@ entry:
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 0
+  %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x3F50624DD2F1A9FC
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 0
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 2
+  %v3 = getelementptr inbounds double, double* %p, i64 2
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %w, i64 1
   %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 1
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v13
-  %v15 = getelementptr inbounds double, double* %w, i64 2
-  store double %v14, double* %v15, align 8
-  %v16 = getelementptr inbounds double, double* %x, i64 1
+  %v10 = getelementptr inbounds double, double* %p, i64 1
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v11
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %x, i64 1
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 3
   %v17 = load double, double* %v16, align 8
-  %v18 = getelementptr inbounds double, double* %p, i64 3
-  %v19 = load double, double* %v18, align 8
-  %v20 = fdiv double %v17, %v19
+  %v18 = fdiv double 0x3FF0000000000000, %v17
+  %v19 = fmul double 0x3FF0000000000000, %v18
+  %v20 = getelementptr inbounds double, double* %out, i64 2
+  store double %v19, double* %v20, align 8
   %v21 = getelementptr inbounds double, double* %w, i64 3
-  store double %v20, double* %v21, align 8
-  %v22 = fneg double %v14
-  %v23 = fneg double %v20
-  %v24 = fadd double %v4, %v22
-  %v25 = fadd double %v24, %v23
-  %v26 = getelementptr inbounds double, double* %w, i64 4
-  store double %v25, double* %v26, align 8
-  %v27 = fdiv double 0x3FF0000000000000, %v9
-  %v28 = fmul double 0x3FF0000000000000, %v27
-  %v29 = getelementptr inbounds double, double* %out, i64 0
-  store double %v28, double* %v29, align 8
-  %v30 = fmul double 0x3FF0000000000000, %v13
-  %v31 = getelementptr inbounds double, double* %out, i64 1
-  store double %v30, double* %v31, align 8
-  %v32 = fdiv double 0x3FF0000000000000, %v19
-  %v33 = fmul double 0x3FF0000000000000, %v32
-  %v34 = getelementptr inbounds double, double* %out, i64 2
-  store double %v33, double* %v34, align 8
-  %v35 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v36 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v37 = getelementptr inbounds double, double* %out, i64 3
-  store double %v36, double* %v37, align 8
-  %v38 = getelementptr inbounds double, double* %out, i64 4
-  store double %v35, double* %v38, align 8
-  %v39 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v39, align 8
-  %v40 = getelementptr inbounds double, double* %out, i64 6
-  store double 0x3FF0000000000000, double* %v40, align 8
+  %v22 = load double, double* %v21, align 8
+  %v23 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v24 = getelementptr inbounds double, double* %w, i64 2
+  %v25 = load double, double* %v24, align 8
+  %v26 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v27 = getelementptr inbounds double, double* %out, i64 3
+  store double %v26, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %out, i64 4
+  store double %v23, double* %v28, align 8
+  %v29 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v29, align 8
+  %v30 = getelementptr inbounds double, double* %out, i64 6
+  store double 0x3FF0000000000000, double* %v30, align 8
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -544,17 +531,17 @@ entry:
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rlc_20351e670d1a75fef81c81cc97698e04_3b4b60c54883_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rlc_72d7725446892887c9f5760d7305a861_77463772c64f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 26, 7   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 28, 7   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 2, 4, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rr_loop"
 MODEL_FILE = "rr_loop.yaml"
-MODEL_HASH = "57412db5fc0f5161d73c2482516598ee"
+MODEL_HASH = "8e91e2b49a32549fc6abefd67089f43a"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 0.01, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee", sys.modules[__name__])
-__name__ = "_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee"
+    sys.modules.setdefault("_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a", sys.modules[__name__])
+__name__ = "_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("E", "R1", "R2", "R3", "C", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521"
+_KERNEL_PREFIX = "_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -113,53 +113,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape_ptr = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape_src = internal constant [6 x i64] [i64 -1, i64 0, i64 1, i64 0, i64 2, i64 3]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_row = internal constant [1 x i64] [i64 4]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_row = internal constant [1 x i64] [i64 4]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_col = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_col = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_zero = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_zero = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_k = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_k = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_i = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_i = internal constant [1 x i64] [i64 0]
 
-@_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_j = internal constant [1 x i64] [i64 0]
+@_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_j = internal constant [1 x i64] [i64 0]
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 19
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -218,7 +220,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -249,7 +251,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -307,82 +309,82 @@ ends:
 }
 
 
-define internal void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8
   %v2 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 14
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 40, i1 false)
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_tape_src, i64 0, i64 0))
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape(double* %v2, double* %v1, i64 0, i64 5, i64 1, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_col, i64 0, i64 0))
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 14
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_col, i64 0, i64 0))
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 152)
+  %raw = call i8* @malloc(i64 160)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 64)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 152)
+  %raw = call i8* @malloc(i64 160)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -391,29 +393,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -454,65 +456,56 @@ entry:
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
   %v3 = getelementptr inbounds double, double* %p, i64 4
   %v4 = load double, double* %v3, align 8
-  %v5 = fdiv double %v2, %v4
-  %v6 = getelementptr inbounds double, double* %w, i64 0
-  store double %v5, double* %v6, align 8
-  %v7 = getelementptr inbounds double, double* %p, i64 1
-  %v8 = load double, double* %v7, align 8
-  %v9 = getelementptr inbounds double, double* %p, i64 2
-  %v10 = load double, double* %v9, align 8
-  %v11 = fdiv double %v8, %v10
-  %v12 = getelementptr inbounds double, double* %p, i64 3
-  %v13 = load double, double* %v12, align 8
-  %v14 = fdiv double %v8, %v13
-  %v15 = fadd double 0x3FF0000000000000, %v11
-  %v16 = fadd double %v15, %v14
-  %v17 = getelementptr inbounds double, double* %p, i64 0
-  %v18 = load double, double* %v17, align 8
-  %v19 = fmul double %v5, %v8
-  %v20 = fdiv double %v19, %v13
-  %v21 = fadd double %v18, %v20
-  %v22 = fdiv double %v21, %v16
-  %v23 = getelementptr inbounds double, double* %w, i64 1
-  store double %v22, double* %v23, align 8
-  %v24 = fneg double %v5
-  %v25 = fadd double %v22, %v24
-  %v26 = getelementptr inbounds double, double* %w, i64 3
-  store double %v25, double* %v26, align 8
-  %v27 = fdiv double %v25, %v13
-  %v28 = getelementptr inbounds double, double* %w, i64 4
-  store double %v27, double* %v28, align 8
-  %v29 = fdiv double 0x3FF0000000000000, %v4
-  %v30 = fmul double 0x3FF0000000000000, %v29
-  %v31 = getelementptr inbounds double, double* %out, i64 0
-  store double %v30, double* %v31, align 8
-  %v32 = fdiv double 0x3FF0000000000000, %v16
-  %v33 = fmul double 0x3FF0000000000000, %v32
-  %v34 = fdiv double 0x3FF0000000000000, %v13
-  %v35 = fmul double %v8, %v34
-  %v36 = fmul double %v33, %v35
-  %v37 = getelementptr inbounds double, double* %out, i64 1
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %p, i64 1
+  %v9 = load double, double* %v8, align 8
+  %v10 = getelementptr inbounds double, double* %p, i64 2
+  %v11 = load double, double* %v10, align 8
+  %v12 = fdiv double %v9, %v11
+  %v13 = getelementptr inbounds double, double* %p, i64 3
+  %v14 = load double, double* %v13, align 8
+  %v15 = fdiv double %v9, %v14
+  %v16 = fadd double 0x3FF0000000000000, %v12
+  %v17 = fadd double %v16, %v15
+  %v18 = fdiv double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %p, i64 0
+  %v20 = load double, double* %v19, align 8
+  %v21 = getelementptr inbounds double, double* %w, i64 0
+  %v22 = load double, double* %v21, align 8
+  %v23 = fmul double %v22, %v9
+  %v24 = fdiv double %v23, %v14
+  %v25 = fadd double %v20, %v24
+  %v26 = fmul double 0x3FF0000000000000, %v18
+  %v27 = fdiv double 0x3FF0000000000000, %v14
+  %v28 = fmul double %v9, %v27
+  %v29 = fmul double %v26, %v28
+  %v30 = getelementptr inbounds double, double* %out, i64 1
+  store double %v29, double* %v30, align 8
+  %v31 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v32 = getelementptr inbounds double, double* %out, i64 2
+  store double 0x3FF0000000000000, double* %v32, align 8
+  %v33 = getelementptr inbounds double, double* %out, i64 3
+  store double %v31, double* %v33, align 8
+  %v34 = getelementptr inbounds double, double* %w, i64 3
+  %v35 = load double, double* %v34, align 8
+  %v36 = fmul double 0x3FF0000000000000, %v27
+  %v37 = getelementptr inbounds double, double* %out, i64 4
   store double %v36, double* %v37, align 8
-  %v38 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v39 = getelementptr inbounds double, double* %out, i64 2
-  store double 0x3FF0000000000000, double* %v39, align 8
-  %v40 = getelementptr inbounds double, double* %out, i64 3
-  store double %v38, double* %v40, align 8
-  %v41 = fmul double 0x3FF0000000000000, %v34
-  %v42 = getelementptr inbounds double, double* %out, i64 4
-  store double %v41, double* %v42, align 8
-  %v43 = getelementptr inbounds double, double* %out, i64 5
-  store double 0x3FF0000000000000, double* %v43, align 8
+  %v38 = getelementptr inbounds double, double* %out, i64 5
+  store double 0x3FF0000000000000, double* %v38, align 8
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -561,17 +554,17 @@ entry:
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rr_loop_57412db5fc0f5161d73c2482516598ee_27bcf28c1521_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rr_loop_8e91e2b49a32549fc6abefd67089f43a_233d44482bf0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 19, 8   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 20, 8   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 1, 5, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

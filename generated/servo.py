@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "servo"
 MODEL_FILE = "servo.yaml"
-MODEL_HASH = "2b945d64cc687f89cddb7176a049eb01"
+MODEL_HASH = "33274c65e8b856e26660e59e5fa9c4f4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_servo_2b945d64cc687f89cddb7176a049eb01", sys.modules[__name__])
-__name__ = "_bgc_servo_2b945d64cc687f89cddb7176a049eb01"
+    sys.modules.setdefault("_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4", sys.modules[__name__])
+__name__ = "_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4"
 
 STATE_NAMES = ("L_a.p", "J_rotor.p", "angle.q", )
 PARAM_NAMES = ("Ra", "La", "km", "J_m", "ratio", "J_load", "b_load", "Kp", "Kd", "target", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179"
+_KERNEL_PREFIX = "_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -113,53 +113,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape_ptr = internal constant [14 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6, i64 7, i64 10, i64 11, i64 12, i64 13, i64 15, i64 16, i64 17]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape_ptr = internal constant [14 x i64] [i64 0, i64 1, i64 2, i64 4, i64 5, i64 6, i64 7, i64 10, i64 11, i64 12, i64 13, i64 15, i64 16, i64 17]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape_src = internal constant [17 x i64] [i64 -1, i64 0, i64 1, i64 -3, i64 -2, i64 3, i64 0, i64 2, i64 4, i64 5, i64 6, i64 3, i64 1, i64 9, i64 8, i64 10, i64 1]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape_src = internal constant [17 x i64] [i64 -1, i64 0, i64 1, i64 -3, i64 -2, i64 3, i64 0, i64 2, i64 4, i64 5, i64 6, i64 3, i64 1, i64 9, i64 8, i64 10, i64 1]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_row = internal constant [6 x i64] [i64 7, i64 7, i64 7, i64 11, i64 11, i64 12]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_row = internal constant [6 x i64] [i64 7, i64 7, i64 7, i64 11, i64 11, i64 12]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_col = internal constant [6 x i64] [i64 1, i64 0, i64 2, i64 1, i64 0, i64 0]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_col = internal constant [6 x i64] [i64 1, i64 0, i64 2, i64 1, i64 0, i64 0]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_zero = internal constant [6 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_zero = internal constant [6 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_k = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_k = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_i = internal constant [6 x i64] [i64 0, i64 0, i64 0, i64 1, i64 1, i64 2]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_i = internal constant [6 x i64] [i64 0, i64 0, i64 0, i64 1, i64 1, i64 2]
 
-@_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_j = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 0, i64 1, i64 1]
+@_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_j = internal constant [6 x i64] [i64 0, i64 1, i64 2, i64 0, i64 1, i64 1]
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 74
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -218,7 +220,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -249,7 +251,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -307,82 +309,82 @@ ends:
 }
 
 
-define internal void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 18
   %v2 = getelementptr inbounds double, double* %w, i64 35
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 35
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 312, i1 false)
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape(double* %v2, double* %v1, i64 0, i64 13, i64 3, i64* getelementptr inbounds ([14 x i64], [14 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([17 x i64], [17 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_tape_src, i64 0, i64 0))
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape(double* %v2, double* %v1, i64 0, i64 13, i64 3, i64* getelementptr inbounds ([14 x i64], [14 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([17 x i64], [17 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 35
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 72, i1 false)
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_scatter(double* %J, double* %v1, i64 6, i64 3, i64 3, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_col, i64 0, i64 0))
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_scatter(double* %J, double* %v1, i64 6, i64 3, i64 3, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 35
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_scatter(double* %J, double* %v1, i64 6, i64 0, i64 3, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_col, i64 0, i64 0))
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_scatter(double* %J, double* %v1, i64 6, i64 0, i64 3, i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([6 x i64], [6 x i64]* @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 144)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 592)
+  %raw = call i8* @malloc(i64 616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 144)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 592)
+  %raw = call i8* @malloc(i64 616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -391,29 +393,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 9
   %v2 = load double, double* %v1, align 8
@@ -505,140 +507,114 @@ entry:
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
-  %v1 = getelementptr inbounds double, double* %p, i64 9
+  %v1 = getelementptr inbounds double, double* %x, i64 1
   %v2 = load double, double* %v1, align 8
-  %v3 = fcmp olt double %t, 0x3FA999999999999A
-  %v4 = select i1 %v3, double 0x0000000000000000, double %v2
-  %v5 = getelementptr inbounds double, double* %w, i64 0
-  store double %v4, double* %v5, align 8
-  %v6 = getelementptr inbounds double, double* %x, i64 1
-  %v7 = load double, double* %v6, align 8
-  %v8 = getelementptr inbounds double, double* %p, i64 3
+  %v3 = getelementptr inbounds double, double* %p, i64 3
+  %v4 = load double, double* %v3, align 8
+  %v5 = fdiv double 0x3FF0000000000000, %v4
+  %v6 = fmul double 0x3FF0000000000000, %v5
+  %v7 = getelementptr inbounds double, double* %out, i64 0
+  store double %v6, double* %v7, align 8
+  %v8 = getelementptr inbounds double, double* %w, i64 1
   %v9 = load double, double* %v8, align 8
-  %v10 = fdiv double %v7, %v9
-  %v11 = getelementptr inbounds double, double* %w, i64 1
-  store double %v10, double* %v11, align 8
-  %v12 = getelementptr inbounds double, double* %p, i64 4
-  %v13 = load double, double* %v12, align 8
-  %v14 = fmul double %v10, %v13
-  %v15 = getelementptr inbounds double, double* %w, i64 2
-  store double %v14, double* %v15, align 8
-  %v16 = getelementptr inbounds double, double* %p, i64 7
+  %v10 = getelementptr inbounds double, double* %p, i64 4
+  %v11 = load double, double* %v10, align 8
+  %v12 = fmul double 0x3FF0000000000000, %v11
+  %v13 = getelementptr inbounds double, double* %out, i64 1
+  store double %v12, double* %v13, align 8
+  %v14 = getelementptr inbounds double, double* %w, i64 2
+  %v15 = load double, double* %v14, align 8
+  %v16 = getelementptr inbounds double, double* %p, i64 8
   %v17 = load double, double* %v16, align 8
-  %v18 = getelementptr inbounds double, double* %x, i64 2
-  %v19 = load double, double* %v18, align 8
-  %v20 = fneg double %v19
-  %v21 = fadd double %v4, %v20
-  %v22 = fmul double %v17, %v21
-  %v23 = getelementptr inbounds double, double* %p, i64 8
-  %v24 = load double, double* %v23, align 8
-  %v25 = fmul double %v14, %v24
+  %v18 = fmul double 0xBFF0000000000000, %v17
+  %v19 = fmul double 0x3FF0000000000000, %v18
+  %v20 = getelementptr inbounds double, double* %p, i64 7
+  %v21 = load double, double* %v20, align 8
+  %v22 = getelementptr inbounds double, double* %w, i64 0
+  %v23 = load double, double* %v22, align 8
+  %v24 = getelementptr inbounds double, double* %x, i64 2
+  %v25 = load double, double* %v24, align 8
   %v26 = fneg double %v25
-  %v27 = fadd double %v22, %v26
-  %v28 = getelementptr inbounds double, double* %w, i64 3
-  store double %v27, double* %v28, align 8
-  %v29 = getelementptr inbounds double, double* %x, i64 0
-  %v30 = load double, double* %v29, align 8
-  %v31 = getelementptr inbounds double, double* %p, i64 1
-  %v32 = load double, double* %v31, align 8
-  %v33 = fdiv double %v30, %v32
-  %v34 = getelementptr inbounds double, double* %w, i64 4
-  store double %v33, double* %v34, align 8
-  %v35 = getelementptr inbounds double, double* %p, i64 0
-  %v36 = load double, double* %v35, align 8
-  %v37 = fmul double %v33, %v36
-  %v38 = getelementptr inbounds double, double* %w, i64 5
+  %v27 = fadd double %v23, %v26
+  %v28 = fmul double 0x3FF0000000000000, %v21
+  %v29 = fmul double %v28, 0xBFF0000000000000
+  %v30 = getelementptr inbounds double, double* %out, i64 2
+  store double %v19, double* %v30, align 8
+  %v31 = getelementptr inbounds double, double* %out, i64 3
+  store double %v29, double* %v31, align 8
+  %v32 = getelementptr inbounds double, double* %x, i64 0
+  %v33 = load double, double* %v32, align 8
+  %v34 = getelementptr inbounds double, double* %p, i64 1
+  %v35 = load double, double* %v34, align 8
+  %v36 = fdiv double 0x3FF0000000000000, %v35
+  %v37 = fmul double 0x3FF0000000000000, %v36
+  %v38 = getelementptr inbounds double, double* %out, i64 4
   store double %v37, double* %v38, align 8
-  %v39 = getelementptr inbounds double, double* %p, i64 2
+  %v39 = getelementptr inbounds double, double* %w, i64 4
   %v40 = load double, double* %v39, align 8
-  %v41 = fmul double %v10, %v40
-  %v42 = getelementptr inbounds double, double* %w, i64 6
-  store double %v41, double* %v42, align 8
-  %v43 = fneg double %v37
-  %v44 = fneg double %v41
-  %v45 = fadd double %v27, %v43
-  %v46 = fadd double %v45, %v44
-  %v47 = getelementptr inbounds double, double* %w, i64 7
-  store double %v46, double* %v47, align 8
-  %v48 = fmul double %v33, %v40
-  %v49 = getelementptr inbounds double, double* %w, i64 9
-  store double %v48, double* %v49, align 8
-  %v50 = getelementptr inbounds double, double* %p, i64 6
-  %v51 = load double, double* %v50, align 8
-  %v52 = fmul double %v14, %v51
-  %v53 = getelementptr inbounds double, double* %w, i64 10
-  store double %v52, double* %v53, align 8
-  %v54 = getelementptr inbounds double, double* %p, i64 5
-  %v55 = load double, double* %v54, align 8
-  %v56 = fmul double %v13, %v13
-  %v57 = fmul double %v55, %v56
-  %v58 = fdiv double %v57, %v9
-  %v59 = fadd double 0x3FF0000000000000, %v58
-  %v60 = fmul double %v52, %v13
-  %v61 = fneg double %v60
-  %v62 = fadd double %v48, %v61
-  %v63 = fdiv double %v62, %v59
-  %v64 = getelementptr inbounds double, double* %w, i64 11
+  %v41 = getelementptr inbounds double, double* %p, i64 0
+  %v42 = load double, double* %v41, align 8
+  %v43 = fmul double 0x3FF0000000000000, %v42
+  %v44 = getelementptr inbounds double, double* %out, i64 5
+  store double %v43, double* %v44, align 8
+  %v45 = getelementptr inbounds double, double* %p, i64 2
+  %v46 = load double, double* %v45, align 8
+  %v47 = fmul double 0x3FF0000000000000, %v46
+  %v48 = getelementptr inbounds double, double* %out, i64 6
+  store double %v47, double* %v48, align 8
+  %v49 = getelementptr inbounds double, double* %w, i64 6
+  %v50 = load double, double* %v49, align 8
+  %v51 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v52 = getelementptr inbounds double, double* %w, i64 5
+  %v53 = load double, double* %v52, align 8
+  %v54 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v55 = getelementptr inbounds double, double* %out, i64 7
+  store double 0x3FF0000000000000, double* %v55, align 8
+  %v56 = getelementptr inbounds double, double* %out, i64 8
+  store double %v54, double* %v56, align 8
+  %v57 = getelementptr inbounds double, double* %out, i64 9
+  store double %v51, double* %v57, align 8
+  %v58 = getelementptr inbounds double, double* %out, i64 10
+  store double 0x3FF0000000000000, double* %v58, align 8
+  %v59 = fmul double 0x3FF0000000000000, %v46
+  %v60 = getelementptr inbounds double, double* %out, i64 11
+  store double %v59, double* %v60, align 8
+  %v61 = getelementptr inbounds double, double* %p, i64 6
+  %v62 = load double, double* %v61, align 8
+  %v63 = fmul double 0x3FF0000000000000, %v62
+  %v64 = getelementptr inbounds double, double* %out, i64 12
   store double %v63, double* %v64, align 8
-  %v65 = fdiv double 0x3FF0000000000000, %v9
-  %v66 = fmul double 0x3FF0000000000000, %v65
-  %v67 = getelementptr inbounds double, double* %out, i64 0
-  store double %v66, double* %v67, align 8
-  %v68 = fmul double 0x3FF0000000000000, %v13
-  %v69 = getelementptr inbounds double, double* %out, i64 1
-  store double %v68, double* %v69, align 8
-  %v70 = fmul double 0xBFF0000000000000, %v24
-  %v71 = fmul double 0x3FF0000000000000, %v70
-  %v72 = fmul double 0x3FF0000000000000, %v17
-  %v73 = fmul double %v72, 0xBFF0000000000000
-  %v74 = getelementptr inbounds double, double* %out, i64 2
-  store double %v71, double* %v74, align 8
-  %v75 = getelementptr inbounds double, double* %out, i64 3
-  store double %v73, double* %v75, align 8
-  %v76 = fdiv double 0x3FF0000000000000, %v32
-  %v77 = fmul double 0x3FF0000000000000, %v76
-  %v78 = getelementptr inbounds double, double* %out, i64 4
-  store double %v77, double* %v78, align 8
-  %v79 = fmul double 0x3FF0000000000000, %v36
-  %v80 = getelementptr inbounds double, double* %out, i64 5
-  store double %v79, double* %v80, align 8
-  %v81 = fmul double 0x3FF0000000000000, %v40
-  %v82 = getelementptr inbounds double, double* %out, i64 6
+  %v65 = getelementptr inbounds double, double* %p, i64 5
+  %v66 = load double, double* %v65, align 8
+  %v67 = fmul double %v11, %v11
+  %v68 = fmul double %v66, %v67
+  %v69 = fdiv double %v68, %v4
+  %v70 = fadd double 0x3FF0000000000000, %v69
+  %v71 = fdiv double 0x3FF0000000000000, %v70
+  %v72 = getelementptr inbounds double, double* %w, i64 9
+  %v73 = load double, double* %v72, align 8
+  %v74 = getelementptr inbounds double, double* %w, i64 10
+  %v75 = load double, double* %v74, align 8
+  %v76 = fmul double %v75, %v11
+  %v77 = fneg double %v76
+  %v78 = fadd double %v73, %v77
+  %v79 = fmul double 0x3FF0000000000000, %v71
+  %v80 = fmul double 0xBFF0000000000000, %v11
+  %v81 = fmul double %v79, %v80
+  %v82 = getelementptr inbounds double, double* %out, i64 13
   store double %v81, double* %v82, align 8
-  %v83 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v84 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v85 = getelementptr inbounds double, double* %out, i64 7
+  %v83 = getelementptr inbounds double, double* %out, i64 14
+  store double %v79, double* %v83, align 8
+  %v84 = getelementptr inbounds double, double* %out, i64 15
+  store double 0x3FF0000000000000, double* %v84, align 8
+  %v85 = getelementptr inbounds double, double* %out, i64 16
   store double 0x3FF0000000000000, double* %v85, align 8
-  %v86 = getelementptr inbounds double, double* %out, i64 8
-  store double %v84, double* %v86, align 8
-  %v87 = getelementptr inbounds double, double* %out, i64 9
-  store double %v83, double* %v87, align 8
-  %v88 = getelementptr inbounds double, double* %out, i64 10
-  store double 0x3FF0000000000000, double* %v88, align 8
-  %v89 = fmul double 0x3FF0000000000000, %v40
-  %v90 = getelementptr inbounds double, double* %out, i64 11
-  store double %v89, double* %v90, align 8
-  %v91 = fmul double 0x3FF0000000000000, %v51
-  %v92 = getelementptr inbounds double, double* %out, i64 12
-  store double %v91, double* %v92, align 8
-  %v93 = fdiv double 0x3FF0000000000000, %v59
-  %v94 = fmul double 0x3FF0000000000000, %v93
-  %v95 = fmul double 0xBFF0000000000000, %v13
-  %v96 = fmul double %v94, %v95
-  %v97 = getelementptr inbounds double, double* %out, i64 13
-  store double %v96, double* %v97, align 8
-  %v98 = getelementptr inbounds double, double* %out, i64 14
-  store double %v94, double* %v98, align 8
-  %v99 = getelementptr inbounds double, double* %out, i64 15
-  store double 0x3FF0000000000000, double* %v99, align 8
-  %v100 = getelementptr inbounds double, double* %out, i64 16
-  store double 0x3FF0000000000000, double* %v100, align 8
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 9
   %v2 = load double, double* %v1, align 8
@@ -690,17 +666,17 @@ entry:
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_servo_2b945d64cc687f89cddb7176a049eb01_a5dd3fa0d179_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_servo_33274c65e8b856e26660e59e5fa9c4f4_7556d1bd6df5_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 74, 18   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 77, 18   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 3, 10, 0
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

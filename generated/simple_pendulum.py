@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "simple_pendulum"
 MODEL_FILE = "simple_pendulum.yaml"
-MODEL_HASH = "e82e5e8311dffd9cb1b7c337ab8a6606"
+MODEL_HASH = "5241272fd5ac5ea4a9a1c25ed650cf23"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606", sys.modules[__name__])
-__name__ = "_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606"
+    sys.modules.setdefault("_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23", sys.modules[__name__])
+__name__ = "_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23"
 
 STATE_NAMES = ("bob.m.px", "bob.m.py", "bob.m.pz", "bob.J.px", "bob.J.py", "bob.J.pz", "bob.x", "bob.ax", "bob.y", "bob.ay", "bob.z", "bob.az", )
 PARAM_NAMES = ("pin__stiffness", "pin__damping", "pin__rot_stiffness", "pin__rot_damping", "pin__tx_load", "pin__ty_load", "pin__tz_load", "pin__ry_load", "pin__rz_load", )
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e"
+_KERNEL_PREFIX = "_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -117,53 +117,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape_ptr = internal constant [70 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 11, i64 13, i64 14, i64 15, i64 20, i64 22, i64 26, i64 28, i64 29, i64 31, i64 36, i64 38, i64 43, i64 45, i64 49, i64 51, i64 52, i64 54, i64 55, i64 57, i64 59, i64 61, i64 62, i64 66, i64 68, i64 69, i64 71, i64 72, i64 73, i64 79, i64 85, i64 89, i64 90, i64 92, i64 94, i64 95, i64 101, i64 105, i64 106, i64 108, i64 110, i64 112, i64 114, i64 116, i64 122, i64 128, i64 130, i64 136, i64 142, i64 148, i64 150, i64 151, i64 152, i64 153, i64 154, i64 155, i64 156, i64 157, i64 162, i64 163, i64 167, i64 168, i64 175]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape_ptr = internal constant [70 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 11, i64 13, i64 14, i64 15, i64 20, i64 22, i64 26, i64 28, i64 29, i64 31, i64 36, i64 38, i64 43, i64 45, i64 49, i64 51, i64 52, i64 54, i64 55, i64 57, i64 59, i64 61, i64 62, i64 66, i64 68, i64 69, i64 71, i64 72, i64 73, i64 79, i64 85, i64 89, i64 90, i64 92, i64 94, i64 95, i64 101, i64 105, i64 106, i64 108, i64 110, i64 112, i64 114, i64 116, i64 122, i64 128, i64 130, i64 136, i64 142, i64 148, i64 150, i64 151, i64 152, i64 153, i64 154, i64 155, i64 156, i64 157, i64 162, i64 163, i64 167, i64 168, i64 175]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape_src = internal constant [175 x i64] [i64 -6, i64 -3, i64 -2, i64 -6, i64 -3, i64 -2, i64 3, i64 5, i64 0, i64 1, i64 2, i64 6, i64 -10, i64 -4, i64 -1, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 9, i64 8, i64 10, i64 11, i64 12, i64 -7, i64 13, i64 7, i64 14, i64 3, i64 5, i64 0, i64 1, i64 2, i64 16, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 8, i64 18, i64 19, i64 20, i64 -8, i64 21, i64 17, i64 22, i64 23, i64 4, i64 2, i64 25, i64 -12, i64 4, i64 5, i64 1, i64 9, i64 8, i64 27, i64 28, i64 29, i64 -9, i64 30, i64 26, i64 31, i64 -5, i64 18, i64 9, i64 33, i64 8, i64 10, i64 6, i64 11, i64 9, i64 33, i64 8, i64 27, i64 25, i64 28, i64 35, i64 36, i64 10, i64 27, i64 37, i64 34, i64 38, i64 39, i64 27, i64 10, i64 9, i64 33, i64 8, i64 18, i64 16, i64 19, i64 42, i64 36, i64 18, i64 27, i64 43, i64 41, i64 44, i64 45, i64 27, i64 39, i64 10, i64 45, i64 18, i64 47, i64 48, i64 49, i64 40, i64 46, i64 10, i64 18, i64 27, i64 15, i64 23, i64 32, i64 11, i64 19, i64 28, i64 51, i64 50, i64 49, i64 40, i64 46, i64 6, i64 16, i64 25, i64 49, i64 40, i64 46, i64 11, i64 19, i64 28, i64 15, i64 23, i64 32, i64 10, i64 18, i64 27, i64 55, i64 54, i64 15, i64 24, i64 32, i64 52, i64 53, i64 56, i64 -7, i64 4, i64 5, i64 9, i64 33, i64 2, i64 -8, i64 5, i64 9, i64 33, i64 2, i64 -9, i64 4, i64 5, i64 9, i64 33, i64 8, i64 1, i64 2]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape_src = internal constant [175 x i64] [i64 -6, i64 -3, i64 -2, i64 -6, i64 -3, i64 -2, i64 3, i64 5, i64 0, i64 1, i64 2, i64 6, i64 -10, i64 -4, i64 -1, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 9, i64 8, i64 10, i64 11, i64 12, i64 -7, i64 13, i64 7, i64 14, i64 3, i64 5, i64 0, i64 1, i64 2, i64 16, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 8, i64 18, i64 19, i64 20, i64 -8, i64 21, i64 17, i64 22, i64 23, i64 4, i64 2, i64 25, i64 -12, i64 4, i64 5, i64 1, i64 9, i64 8, i64 27, i64 28, i64 29, i64 -9, i64 30, i64 26, i64 31, i64 -5, i64 18, i64 9, i64 33, i64 8, i64 10, i64 6, i64 11, i64 9, i64 33, i64 8, i64 27, i64 25, i64 28, i64 35, i64 36, i64 10, i64 27, i64 37, i64 34, i64 38, i64 39, i64 27, i64 10, i64 9, i64 33, i64 8, i64 18, i64 16, i64 19, i64 42, i64 36, i64 18, i64 27, i64 43, i64 41, i64 44, i64 45, i64 27, i64 39, i64 10, i64 45, i64 18, i64 47, i64 48, i64 49, i64 40, i64 46, i64 10, i64 18, i64 27, i64 15, i64 23, i64 32, i64 11, i64 19, i64 28, i64 51, i64 50, i64 49, i64 40, i64 46, i64 6, i64 16, i64 25, i64 49, i64 40, i64 46, i64 11, i64 19, i64 28, i64 15, i64 23, i64 32, i64 10, i64 18, i64 27, i64 55, i64 54, i64 15, i64 24, i64 32, i64 52, i64 53, i64 56, i64 -7, i64 4, i64 5, i64 9, i64 33, i64 2, i64 -8, i64 5, i64 9, i64 33, i64 2, i64 -9, i64 4, i64 5, i64 9, i64 33, i64 8, i64 1, i64 2]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_row = internal constant [65 x i64] [i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 59, i64 59, i64 59, i64 59, i64 59, i64 59, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 61, i64 61, i64 61, i64 61, i64 61, i64 61, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 63, i64 64, i64 64, i64 64, i64 64, i64 65, i64 66, i64 66, i64 66, i64 67, i64 68, i64 68, i64 68, i64 68, i64 68]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_row = internal constant [65 x i64] [i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 59, i64 59, i64 59, i64 59, i64 59, i64 59, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 61, i64 61, i64 61, i64 61, i64 61, i64 61, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 63, i64 64, i64 64, i64 64, i64 64, i64 65, i64 66, i64 66, i64 66, i64 67, i64 68, i64 68, i64 68, i64 68, i64 68]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_col = internal constant [65 x i64] [i64 6, i64 0, i64 3, i64 9, i64 5, i64 2, i64 1, i64 7, i64 0, i64 3, i64 5, i64 10, i64 2, i64 1, i64 8, i64 0, i64 3, i64 2, i64 11, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 0, i64 4, i64 3, i64 5, i64 2, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 6, i64 0, i64 4, i64 2, i64 1, i64 7, i64 0, i64 4, i64 1, i64 8, i64 0, i64 4, i64 3, i64 2, i64 1]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_col = internal constant [65 x i64] [i64 6, i64 0, i64 3, i64 9, i64 5, i64 2, i64 1, i64 7, i64 0, i64 3, i64 5, i64 10, i64 2, i64 1, i64 8, i64 0, i64 3, i64 2, i64 11, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 0, i64 4, i64 3, i64 5, i64 2, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 6, i64 0, i64 4, i64 2, i64 1, i64 7, i64 0, i64 4, i64 1, i64 8, i64 0, i64 4, i64 3, i64 2, i64 1]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_zero = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_zero = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_k = internal constant [65 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_k = internal constant [65 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_i = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_i = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_j = internal constant [65 x i64] [i64 0, i64 3, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 5, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 3, i64 4, i64 5, i64 7, i64 9, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_j = internal constant [65 x i64] [i64 0, i64 3, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 5, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 3, i64 4, i64 5, i64 7, i64 9, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 1073
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -222,7 +224,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -253,7 +255,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -311,82 +313,82 @@ ends:
 }
 
 
-define internal void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 70
   %v2 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 245
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 6624, i1 false)
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_tape_src, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 8584)
+  %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 8584)
+  %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -399,29 +401,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -784,865 +786,681 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
-  %v3 = call double @llvm.sin.f64(double %v2)
-  %v4 = getelementptr inbounds double, double* %w, i64 0
-  store double %v3, double* %v4, align 8
-  %v5 = getelementptr inbounds double, double* %x, i64 9
-  %v6 = load double, double* %v5, align 8
-  %v7 = call double @llvm.sin.f64(double %v6)
-  %v8 = getelementptr inbounds double, double* %w, i64 1
-  store double %v7, double* %v8, align 8
-  %v9 = getelementptr inbounds double, double* %x, i64 11
-  %v10 = load double, double* %v9, align 8
-  %v11 = call double @llvm.sin.f64(double %v10)
-  %v12 = getelementptr inbounds double, double* %w, i64 2
-  store double %v11, double* %v12, align 8
-  %v13 = call double @llvm.cos.f64(double %v2)
-  %v14 = getelementptr inbounds double, double* %w, i64 3
-  store double %v13, double* %v14, align 8
-  %v15 = call double @llvm.cos.f64(double %v6)
-  %v16 = getelementptr inbounds double, double* %w, i64 4
-  store double %v15, double* %v16, align 8
-  %v17 = call double @llvm.cos.f64(double %v10)
-  %v18 = getelementptr inbounds double, double* %w, i64 5
-  store double %v17, double* %v18, align 8
-  %v19 = fmul double %v13, %v17
-  %v20 = fmul double %v3, %v7
-  %v21 = fmul double %v20, %v11
-  %v22 = fneg double %v21
-  %v23 = fadd double %v19, %v22
-  %v24 = getelementptr inbounds double, double* %w, i64 6
-  store double %v23, double* %v24, align 8
-  %v25 = getelementptr inbounds double, double* %p, i64 4
-  %v26 = load double, double* %v25, align 8
-  %v27 = fneg double %v26
-  %v28 = getelementptr inbounds double, double* %p, i64 0
+  %v3 = call double @llvm.cos.f64(double %v2)
+  %v4 = fmul double 0x3FF0000000000000, %v3
+  %v5 = getelementptr inbounds double, double* %out, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 9
+  %v7 = load double, double* %v6, align 8
+  %v8 = call double @llvm.cos.f64(double %v7)
+  %v9 = fmul double 0x3FF0000000000000, %v8
+  %v10 = getelementptr inbounds double, double* %out, i64 1
+  store double %v9, double* %v10, align 8
+  %v11 = getelementptr inbounds double, double* %x, i64 11
+  %v12 = load double, double* %v11, align 8
+  %v13 = call double @llvm.cos.f64(double %v12)
+  %v14 = fmul double 0x3FF0000000000000, %v13
+  %v15 = getelementptr inbounds double, double* %out, i64 2
+  store double %v14, double* %v15, align 8
+  %v16 = call double @llvm.sin.f64(double %v2)
+  %v17 = fneg double %v16
+  %v18 = fmul double 0x3FF0000000000000, %v17
+  %v19 = getelementptr inbounds double, double* %out, i64 3
+  store double %v18, double* %v19, align 8
+  %v20 = call double @llvm.sin.f64(double %v7)
+  %v21 = fneg double %v20
+  %v22 = fmul double 0x3FF0000000000000, %v21
+  %v23 = getelementptr inbounds double, double* %out, i64 4
+  store double %v22, double* %v23, align 8
+  %v24 = call double @llvm.sin.f64(double %v12)
+  %v25 = fneg double %v24
+  %v26 = fmul double 0x3FF0000000000000, %v25
+  %v27 = getelementptr inbounds double, double* %out, i64 5
+  store double %v26, double* %v27, align 8
+  %v28 = getelementptr inbounds double, double* %w, i64 0
   %v29 = load double, double* %v28, align 8
-  %v30 = getelementptr inbounds double, double* %x, i64 6
+  %v30 = getelementptr inbounds double, double* %w, i64 1
   %v31 = load double, double* %v30, align 8
-  %v32 = fadd double %v23, %v31
-  %v33 = fmul double %v29, %v32
-  %v34 = fadd double %v27, %v33
-  %v35 = getelementptr inbounds double, double* %w, i64 7
-  store double %v34, double* %v35, align 8
-  %v36 = getelementptr inbounds double, double* %x, i64 5
-  %v37 = load double, double* %v36, align 8
-  %v38 = fmul double 0x40A3880000000000, %v37
-  %v39 = getelementptr inbounds double, double* %w, i64 8
-  store double %v38, double* %v39, align 8
-  %v40 = getelementptr inbounds double, double* %x, i64 3
-  %v41 = load double, double* %v40, align 8
-  %v42 = fmul double 0x40A3880000000000, %v41
-  %v43 = getelementptr inbounds double, double* %w, i64 9
-  store double %v42, double* %v43, align 8
-  %v44 = fmul double %v13, %v11
-  %v45 = fmul double %v17, %v3
-  %v46 = fmul double %v45, %v7
-  %v47 = fadd double %v44, %v46
-  %v48 = getelementptr inbounds double, double* %w, i64 10
-  store double %v47, double* %v48, align 8
-  %v49 = fmul double %v15, %v3
-  %v50 = fneg double %v49
-  %v51 = getelementptr inbounds double, double* %w, i64 11
-  store double %v50, double* %v51, align 8
-  %v52 = fmul double %v42, %v50
-  %v53 = fmul double %v38, %v47
-  %v54 = fneg double %v53
-  %v55 = fadd double %v52, %v54
-  %v56 = getelementptr inbounds double, double* %w, i64 12
-  store double %v55, double* %v56, align 8
-  %v57 = getelementptr inbounds double, double* %x, i64 0
-  %v58 = load double, double* %v57, align 8
-  %v59 = fadd double %v55, %v58
-  %v60 = getelementptr inbounds double, double* %w, i64 13
-  store double %v59, double* %v60, align 8
-  %v61 = getelementptr inbounds double, double* %p, i64 1
-  %v62 = load double, double* %v61, align 8
-  %v63 = fmul double %v59, %v62
-  %v64 = getelementptr inbounds double, double* %w, i64 14
-  store double %v63, double* %v64, align 8
-  %v65 = fadd double %v34, %v63
-  %v66 = getelementptr inbounds double, double* %w, i64 15
-  store double %v65, double* %v66, align 8
-  %v67 = fmul double %v17, %v3
-  %v68 = fmul double %v13, %v7
-  %v69 = fmul double %v68, %v11
-  %v70 = fadd double %v67, %v69
-  %v71 = getelementptr inbounds double, double* %w, i64 16
+  %v32 = getelementptr inbounds double, double* %w, i64 2
+  %v33 = load double, double* %v32, align 8
+  %v34 = fmul double 0xBFF0000000000000, %v31
+  %v35 = fmul double %v34, %v33
+  %v36 = fmul double 0xBFF0000000000000, %v29
+  %v37 = fmul double %v36, %v33
+  %v38 = fmul double 0xBFF0000000000000, %v29
+  %v39 = fmul double %v38, %v31
+  %v40 = fmul double 0x3FF0000000000000, %v35
+  %v41 = fmul double 0x3FF0000000000000, %v37
+  %v42 = fmul double 0x3FF0000000000000, %v39
+  %v43 = getelementptr inbounds double, double* %w, i64 3
+  %v44 = load double, double* %v43, align 8
+  %v45 = getelementptr inbounds double, double* %w, i64 5
+  %v46 = load double, double* %v45, align 8
+  %v47 = fmul double 0x3FF0000000000000, %v46
+  %v48 = fmul double 0x3FF0000000000000, %v44
+  %v49 = getelementptr inbounds double, double* %out, i64 6
+  store double %v47, double* %v49, align 8
+  %v50 = getelementptr inbounds double, double* %out, i64 7
+  store double %v48, double* %v50, align 8
+  %v51 = getelementptr inbounds double, double* %out, i64 8
+  store double %v40, double* %v51, align 8
+  %v52 = getelementptr inbounds double, double* %out, i64 9
+  store double %v41, double* %v52, align 8
+  %v53 = getelementptr inbounds double, double* %out, i64 10
+  store double %v42, double* %v53, align 8
+  %v54 = getelementptr inbounds double, double* %p, i64 0
+  %v55 = load double, double* %v54, align 8
+  %v56 = getelementptr inbounds double, double* %w, i64 6
+  %v57 = load double, double* %v56, align 8
+  %v58 = getelementptr inbounds double, double* %x, i64 6
+  %v59 = load double, double* %v58, align 8
+  %v60 = fadd double %v57, %v59
+  %v61 = fmul double 0x3FF0000000000000, %v55
+  %v62 = getelementptr inbounds double, double* %out, i64 11
+  store double %v61, double* %v62, align 8
+  %v63 = getelementptr inbounds double, double* %out, i64 12
+  store double %v61, double* %v63, align 8
+  %v64 = getelementptr inbounds double, double* %x, i64 5
+  %v65 = load double, double* %v64, align 8
+  %v66 = fmul double 0x3FF0000000000000, 0x40A3880000000000
+  %v67 = getelementptr inbounds double, double* %out, i64 13
+  store double %v66, double* %v67, align 8
+  %v68 = getelementptr inbounds double, double* %x, i64 3
+  %v69 = load double, double* %v68, align 8
+  %v70 = fmul double 0x3FF0000000000000, 0x40A3880000000000
+  %v71 = getelementptr inbounds double, double* %out, i64 14
   store double %v70, double* %v71, align 8
-  %v72 = getelementptr inbounds double, double* %p, i64 5
-  %v73 = load double, double* %v72, align 8
-  %v74 = fneg double %v73
-  %v75 = getelementptr inbounds double, double* %x, i64 8
-  %v76 = load double, double* %v75, align 8
-  %v77 = fadd double %v70, %v76
-  %v78 = fmul double %v29, %v77
-  %v79 = fadd double %v74, %v78
-  %v80 = getelementptr inbounds double, double* %w, i64 17
-  store double %v79, double* %v80, align 8
-  %v81 = fmul double %v3, %v11
-  %v82 = fmul double %v13, %v17
-  %v83 = fmul double %v82, %v7
-  %v84 = fneg double %v83
-  %v85 = fadd double %v81, %v84
-  %v86 = getelementptr inbounds double, double* %w, i64 18
-  store double %v85, double* %v86, align 8
-  %v87 = fmul double %v13, %v15
-  %v88 = getelementptr inbounds double, double* %w, i64 19
-  store double %v87, double* %v88, align 8
-  %v89 = fmul double %v42, %v87
-  %v90 = fmul double %v38, %v85
-  %v91 = fneg double %v90
-  %v92 = fadd double %v89, %v91
-  %v93 = getelementptr inbounds double, double* %w, i64 20
-  store double %v92, double* %v93, align 8
-  %v94 = getelementptr inbounds double, double* %x, i64 1
-  %v95 = load double, double* %v94, align 8
-  %v96 = fadd double %v92, %v95
-  %v97 = getelementptr inbounds double, double* %w, i64 21
-  store double %v96, double* %v97, align 8
-  %v98 = fmul double %v96, %v62
-  %v99 = getelementptr inbounds double, double* %w, i64 22
-  store double %v98, double* %v99, align 8
-  %v100 = fadd double %v79, %v98
-  %v101 = getelementptr inbounds double, double* %w, i64 23
-  store double %v100, double* %v101, align 8
-  %v102 = fneg double %v100
-  %v103 = fadd double 0xC0239EB851EB851F, %v102
-  %v104 = getelementptr inbounds double, double* %w, i64 24
-  store double %v103, double* %v104, align 8
-  %v105 = fmul double %v15, %v11
-  %v106 = fneg double %v105
-  %v107 = getelementptr inbounds double, double* %w, i64 25
-  store double %v106, double* %v107, align 8
-  %v108 = getelementptr inbounds double, double* %p, i64 6
-  %v109 = load double, double* %v108, align 8
-  %v110 = fneg double %v109
-  %v111 = getelementptr inbounds double, double* %x, i64 10
-  %v112 = load double, double* %v111, align 8
-  %v113 = fadd double %v106, %v112
-  %v114 = fmul double %v29, %v113
-  %v115 = fadd double %v110, %v114
-  %v116 = getelementptr inbounds double, double* %w, i64 26
-  store double %v115, double* %v116, align 8
-  %v117 = fmul double %v15, %v17
-  %v118 = getelementptr inbounds double, double* %w, i64 27
+  %v72 = fmul double %v29, %v31
+  %v73 = fmul double %v46, %v31
+  %v74 = fmul double %v46, %v29
+  %v75 = fmul double 0x3FF0000000000000, %v72
+  %v76 = fmul double 0x3FF0000000000000, %v73
+  %v77 = fmul double 0x3FF0000000000000, %v74
+  %v78 = fmul double 0x3FF0000000000000, %v33
+  %v79 = fmul double 0x3FF0000000000000, %v44
+  %v80 = getelementptr inbounds double, double* %out, i64 15
+  store double %v78, double* %v80, align 8
+  %v81 = getelementptr inbounds double, double* %out, i64 16
+  store double %v75, double* %v81, align 8
+  %v82 = getelementptr inbounds double, double* %out, i64 17
+  store double %v76, double* %v82, align 8
+  %v83 = getelementptr inbounds double, double* %out, i64 18
+  store double %v77, double* %v83, align 8
+  %v84 = getelementptr inbounds double, double* %out, i64 19
+  store double %v79, double* %v84, align 8
+  %v85 = getelementptr inbounds double, double* %w, i64 4
+  %v86 = load double, double* %v85, align 8
+  %v87 = fmul double 0xBFF0000000000000, %v29
+  %v88 = fmul double 0xBFF0000000000000, %v86
+  %v89 = fmul double 0x3FF0000000000000, %v87
+  %v90 = fmul double 0x3FF0000000000000, %v88
+  %v91 = getelementptr inbounds double, double* %out, i64 20
+  store double %v89, double* %v91, align 8
+  %v92 = getelementptr inbounds double, double* %out, i64 21
+  store double %v90, double* %v92, align 8
+  %v93 = getelementptr inbounds double, double* %w, i64 8
+  %v94 = load double, double* %v93, align 8
+  %v95 = getelementptr inbounds double, double* %w, i64 10
+  %v96 = load double, double* %v95, align 8
+  %v97 = fmul double 0xBFF0000000000000, %v96
+  %v98 = fmul double 0xBFF0000000000000, %v94
+  %v99 = fmul double 0x3FF0000000000000, %v97
+  %v100 = fmul double 0x3FF0000000000000, %v98
+  %v101 = getelementptr inbounds double, double* %w, i64 9
+  %v102 = load double, double* %v101, align 8
+  %v103 = getelementptr inbounds double, double* %w, i64 11
+  %v104 = load double, double* %v103, align 8
+  %v105 = fmul double 0x3FF0000000000000, %v104
+  %v106 = fmul double 0x3FF0000000000000, %v102
+  %v107 = getelementptr inbounds double, double* %out, i64 22
+  store double %v105, double* %v107, align 8
+  %v108 = getelementptr inbounds double, double* %out, i64 23
+  store double %v99, double* %v108, align 8
+  %v109 = getelementptr inbounds double, double* %out, i64 24
+  store double %v100, double* %v109, align 8
+  %v110 = getelementptr inbounds double, double* %out, i64 25
+  store double %v106, double* %v110, align 8
+  %v111 = getelementptr inbounds double, double* %out, i64 26
+  store double 0x3FF0000000000000, double* %v111, align 8
+  %v112 = getelementptr inbounds double, double* %out, i64 27
+  store double 0x3FF0000000000000, double* %v112, align 8
+  %v113 = getelementptr inbounds double, double* %w, i64 13
+  %v114 = load double, double* %v113, align 8
+  %v115 = getelementptr inbounds double, double* %p, i64 1
+  %v116 = load double, double* %v115, align 8
+  %v117 = fmul double 0x3FF0000000000000, %v116
+  %v118 = getelementptr inbounds double, double* %out, i64 28
   store double %v117, double* %v118, align 8
-  %v119 = getelementptr inbounds double, double* %w, i64 28
-  store double %v7, double* %v119, align 8
-  %v120 = fmul double %v42, %v7
-  %v121 = fmul double %v38, %v117
-  %v122 = fneg double %v121
-  %v123 = fadd double %v120, %v122
-  %v124 = getelementptr inbounds double, double* %w, i64 29
-  store double %v123, double* %v124, align 8
-  %v125 = getelementptr inbounds double, double* %x, i64 2
-  %v126 = load double, double* %v125, align 8
-  %v127 = fadd double %v123, %v126
-  %v128 = getelementptr inbounds double, double* %w, i64 30
-  store double %v127, double* %v128, align 8
-  %v129 = fmul double %v127, %v62
-  %v130 = getelementptr inbounds double, double* %w, i64 31
-  store double %v129, double* %v130, align 8
-  %v131 = fadd double %v115, %v129
-  %v132 = getelementptr inbounds double, double* %w, i64 32
-  store double %v131, double* %v132, align 8
-  %v133 = getelementptr inbounds double, double* %x, i64 4
-  %v134 = load double, double* %v133, align 8
-  %v135 = fmul double 0x40A3880000000000, %v134
-  %v136 = getelementptr inbounds double, double* %w, i64 33
-  store double %v135, double* %v136, align 8
-  %v137 = getelementptr inbounds double, double* %p, i64 7
-  %v138 = load double, double* %v137, align 8
-  %v139 = fneg double %v138
-  %v140 = getelementptr inbounds double, double* %p, i64 2
-  %v141 = load double, double* %v140, align 8
-  %v142 = fmul double %v141, %v85
-  %v143 = fneg double %v142
-  %v144 = fadd double %v139, %v143
-  %v145 = getelementptr inbounds double, double* %w, i64 34
-  store double %v144, double* %v145, align 8
-  %v146 = fmul double %v42, %v47
-  %v147 = fmul double %v135, %v23
-  %v148 = fmul double %v38, %v50
-  %v149 = fadd double %v146, %v147
-  %v150 = fadd double %v149, %v148
-  %v151 = getelementptr inbounds double, double* %w, i64 35
-  store double %v150, double* %v151, align 8
-  %v152 = fmul double %v42, %v117
-  %v153 = fmul double %v135, %v106
-  %v154 = fmul double %v38, %v7
-  %v155 = fadd double %v152, %v153
-  %v156 = fadd double %v155, %v154
-  %v157 = getelementptr inbounds double, double* %w, i64 36
-  store double %v156, double* %v157, align 8
-  %v158 = fmul double %v150, %v117
-  %v159 = fmul double %v156, %v47
-  %v160 = fneg double %v159
-  %v161 = fadd double %v158, %v160
-  %v162 = getelementptr inbounds double, double* %w, i64 37
-  store double %v161, double* %v162, align 8
-  %v163 = getelementptr inbounds double, double* %p, i64 3
-  %v164 = load double, double* %v163, align 8
-  %v165 = fmul double %v161, %v164
-  %v166 = getelementptr inbounds double, double* %w, i64 38
-  store double %v165, double* %v166, align 8
-  %v167 = fadd double %v144, %v165
-  %v168 = getelementptr inbounds double, double* %w, i64 39
-  store double %v167, double* %v168, align 8
-  %v169 = fmul double %v167, %v117
-  %v170 = getelementptr inbounds double, double* %w, i64 40
-  store double %v169, double* %v170, align 8
-  %v171 = getelementptr inbounds double, double* %p, i64 8
-  %v172 = load double, double* %v171, align 8
-  %v173 = fneg double %v172
-  %v174 = fmul double %v141, %v47
-  %v175 = fadd double %v173, %v174
-  %v176 = getelementptr inbounds double, double* %w, i64 41
-  store double %v175, double* %v176, align 8
-  %v177 = fmul double %v42, %v85
-  %v178 = fmul double %v135, %v70
-  %v179 = fmul double %v38, %v87
-  %v180 = fadd double %v177, %v178
-  %v181 = fadd double %v180, %v179
-  %v182 = getelementptr inbounds double, double* %w, i64 42
-  store double %v181, double* %v182, align 8
-  %v183 = fmul double %v181, %v117
-  %v184 = fmul double %v156, %v85
-  %v185 = fneg double %v184
-  %v186 = fadd double %v183, %v185
-  %v187 = getelementptr inbounds double, double* %w, i64 43
+  %v119 = getelementptr inbounds double, double* %out, i64 29
+  store double 0x3FF0000000000000, double* %v119, align 8
+  %v120 = getelementptr inbounds double, double* %out, i64 30
+  store double 0x3FF0000000000000, double* %v120, align 8
+  %v121 = fmul double %v31, %v33
+  %v122 = fmul double %v44, %v33
+  %v123 = fmul double %v44, %v31
+  %v124 = fmul double 0x3FF0000000000000, %v121
+  %v125 = fmul double 0x3FF0000000000000, %v122
+  %v126 = fmul double 0x3FF0000000000000, %v123
+  %v127 = fmul double 0x3FF0000000000000, %v29
+  %v128 = fmul double 0x3FF0000000000000, %v46
+  %v129 = getelementptr inbounds double, double* %out, i64 31
+  store double %v124, double* %v129, align 8
+  %v130 = getelementptr inbounds double, double* %out, i64 32
+  store double %v127, double* %v130, align 8
+  %v131 = getelementptr inbounds double, double* %out, i64 33
+  store double %v128, double* %v131, align 8
+  %v132 = getelementptr inbounds double, double* %out, i64 34
+  store double %v125, double* %v132, align 8
+  %v133 = getelementptr inbounds double, double* %out, i64 35
+  store double %v126, double* %v133, align 8
+  %v134 = getelementptr inbounds double, double* %w, i64 16
+  %v135 = load double, double* %v134, align 8
+  %v136 = getelementptr inbounds double, double* %x, i64 8
+  %v137 = load double, double* %v136, align 8
+  %v138 = fadd double %v135, %v137
+  %v139 = fmul double 0x3FF0000000000000, %v55
+  %v140 = getelementptr inbounds double, double* %out, i64 36
+  store double %v139, double* %v140, align 8
+  %v141 = getelementptr inbounds double, double* %out, i64 37
+  store double %v139, double* %v141, align 8
+  %v142 = fmul double 0xBFF0000000000000, %v46
+  %v143 = fmul double %v142, %v31
+  %v144 = fmul double 0xBFF0000000000000, %v44
+  %v145 = fmul double %v144, %v31
+  %v146 = fmul double 0xBFF0000000000000, %v44
+  %v147 = fmul double %v146, %v46
+  %v148 = fmul double 0x3FF0000000000000, %v143
+  %v149 = fmul double 0x3FF0000000000000, %v145
+  %v150 = fmul double 0x3FF0000000000000, %v147
+  %v151 = fmul double 0x3FF0000000000000, %v33
+  %v152 = fmul double 0x3FF0000000000000, %v29
+  %v153 = getelementptr inbounds double, double* %out, i64 38
+  store double %v148, double* %v153, align 8
+  %v154 = getelementptr inbounds double, double* %out, i64 39
+  store double %v149, double* %v154, align 8
+  %v155 = getelementptr inbounds double, double* %out, i64 40
+  store double %v151, double* %v155, align 8
+  %v156 = getelementptr inbounds double, double* %out, i64 41
+  store double %v150, double* %v156, align 8
+  %v157 = getelementptr inbounds double, double* %out, i64 42
+  store double %v152, double* %v157, align 8
+  %v158 = fmul double 0x3FF0000000000000, %v86
+  %v159 = fmul double 0x3FF0000000000000, %v44
+  %v160 = getelementptr inbounds double, double* %out, i64 43
+  store double %v158, double* %v160, align 8
+  %v161 = getelementptr inbounds double, double* %out, i64 44
+  store double %v159, double* %v161, align 8
+  %v162 = getelementptr inbounds double, double* %w, i64 18
+  %v163 = load double, double* %v162, align 8
+  %v164 = fmul double 0xBFF0000000000000, %v163
+  %v165 = fmul double 0xBFF0000000000000, %v94
+  %v166 = fmul double 0x3FF0000000000000, %v164
+  %v167 = fmul double 0x3FF0000000000000, %v165
+  %v168 = getelementptr inbounds double, double* %w, i64 19
+  %v169 = load double, double* %v168, align 8
+  %v170 = fmul double 0x3FF0000000000000, %v169
+  %v171 = fmul double 0x3FF0000000000000, %v102
+  %v172 = getelementptr inbounds double, double* %out, i64 45
+  store double %v170, double* %v172, align 8
+  %v173 = getelementptr inbounds double, double* %out, i64 46
+  store double %v166, double* %v173, align 8
+  %v174 = getelementptr inbounds double, double* %out, i64 47
+  store double %v167, double* %v174, align 8
+  %v175 = getelementptr inbounds double, double* %out, i64 48
+  store double %v171, double* %v175, align 8
+  %v176 = getelementptr inbounds double, double* %out, i64 49
+  store double 0x3FF0000000000000, double* %v176, align 8
+  %v177 = getelementptr inbounds double, double* %out, i64 50
+  store double 0x3FF0000000000000, double* %v177, align 8
+  %v178 = getelementptr inbounds double, double* %w, i64 21
+  %v179 = load double, double* %v178, align 8
+  %v180 = fmul double 0x3FF0000000000000, %v116
+  %v181 = getelementptr inbounds double, double* %out, i64 51
+  store double %v180, double* %v181, align 8
+  %v182 = getelementptr inbounds double, double* %out, i64 52
+  store double 0x3FF0000000000000, double* %v182, align 8
+  %v183 = getelementptr inbounds double, double* %out, i64 53
+  store double 0x3FF0000000000000, double* %v183, align 8
+  %v184 = getelementptr inbounds double, double* %w, i64 23
+  %v185 = load double, double* %v184, align 8
+  %v186 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v187 = getelementptr inbounds double, double* %out, i64 54
   store double %v186, double* %v187, align 8
-  %v188 = fmul double %v186, %v164
-  %v189 = getelementptr inbounds double, double* %w, i64 44
-  store double %v188, double* %v189, align 8
-  %v190 = fadd double %v175, %v188
-  %v191 = getelementptr inbounds double, double* %w, i64 45
-  store double %v190, double* %v191, align 8
-  %v192 = fmul double %v190, %v117
-  %v193 = getelementptr inbounds double, double* %w, i64 46
-  store double %v192, double* %v193, align 8
-  %v194 = fmul double %v167, %v47
-  %v195 = fneg double %v194
-  %v196 = getelementptr inbounds double, double* %w, i64 47
-  store double %v195, double* %v196, align 8
-  %v197 = fmul double %v190, %v85
-  %v198 = fneg double %v197
-  %v199 = getelementptr inbounds double, double* %w, i64 48
-  store double %v198, double* %v199, align 8
-  %v200 = fadd double %v195, %v198
-  %v201 = getelementptr inbounds double, double* %w, i64 49
-  store double %v200, double* %v201, align 8
-  %v202 = fmul double %v200, %v117
-  %v203 = fmul double %v169, %v47
-  %v204 = fmul double %v192, %v85
-  %v205 = fadd double %v202, %v203
-  %v206 = fadd double %v205, %v204
-  %v207 = getelementptr inbounds double, double* %w, i64 50
-  store double %v206, double* %v207, align 8
-  %v208 = fmul double %v65, %v50
-  %v209 = fmul double %v100, %v87
-  %v210 = fmul double %v131, %v7
-  %v211 = fadd double %v208, %v209
-  %v212 = fadd double %v211, %v210
-  %v213 = getelementptr inbounds double, double* %w, i64 51
-  store double %v212, double* %v213, align 8
-  %v214 = fneg double %v212
-  %v215 = fneg double %v206
-  %v216 = fadd double %v214, %v215
-  %v217 = getelementptr inbounds double, double* %w, i64 52
-  store double %v216, double* %v217, align 8
-  %v218 = fmul double %v200, %v106
-  %v219 = fmul double %v169, %v23
-  %v220 = fmul double %v192, %v70
-  %v221 = fadd double %v218, %v219
-  %v222 = fadd double %v221, %v220
-  %v223 = getelementptr inbounds double, double* %w, i64 53
-  store double %v222, double* %v223, align 8
-  %v224 = fmul double %v200, %v7
-  %v225 = fmul double %v169, %v50
-  %v226 = fmul double %v192, %v87
-  %v227 = fadd double %v224, %v225
-  %v228 = fadd double %v227, %v226
-  %v229 = getelementptr inbounds double, double* %w, i64 54
-  store double %v228, double* %v229, align 8
-  %v230 = fmul double %v65, %v47
-  %v231 = fmul double %v100, %v85
-  %v232 = fmul double %v131, %v117
-  %v233 = fadd double %v230, %v231
-  %v234 = fadd double %v233, %v232
-  %v235 = getelementptr inbounds double, double* %w, i64 55
-  store double %v234, double* %v235, align 8
-  %v236 = fneg double %v228
-  %v237 = fadd double %v234, %v236
-  %v238 = getelementptr inbounds double, double* %w, i64 56
-  store double %v237, double* %v238, align 8
-  %v239 = fmul double 0x3FF0000000000000, %v13
-  %v240 = getelementptr inbounds double, double* %out, i64 0
-  store double %v239, double* %v240, align 8
-  %v241 = fmul double 0x3FF0000000000000, %v15
-  %v242 = getelementptr inbounds double, double* %out, i64 1
-  store double %v241, double* %v242, align 8
-  %v243 = fmul double 0x3FF0000000000000, %v17
-  %v244 = getelementptr inbounds double, double* %out, i64 2
-  store double %v243, double* %v244, align 8
-  %v245 = fneg double %v3
-  %v246 = fmul double 0x3FF0000000000000, %v245
-  %v247 = getelementptr inbounds double, double* %out, i64 3
-  store double %v246, double* %v247, align 8
-  %v248 = fneg double %v7
-  %v249 = fmul double 0x3FF0000000000000, %v248
-  %v250 = getelementptr inbounds double, double* %out, i64 4
-  store double %v249, double* %v250, align 8
-  %v251 = fneg double %v11
-  %v252 = fmul double 0x3FF0000000000000, %v251
-  %v253 = getelementptr inbounds double, double* %out, i64 5
-  store double %v252, double* %v253, align 8
-  %v254 = fmul double 0xBFF0000000000000, %v7
-  %v255 = fmul double %v254, %v11
-  %v256 = fmul double 0xBFF0000000000000, %v3
-  %v257 = fmul double %v256, %v11
-  %v258 = fmul double 0xBFF0000000000000, %v3
-  %v259 = fmul double %v258, %v7
-  %v260 = fmul double 0x3FF0000000000000, %v255
-  %v261 = fmul double 0x3FF0000000000000, %v257
-  %v262 = fmul double 0x3FF0000000000000, %v259
-  %v263 = fmul double 0x3FF0000000000000, %v17
-  %v264 = fmul double 0x3FF0000000000000, %v13
-  %v265 = getelementptr inbounds double, double* %out, i64 6
-  store double %v263, double* %v265, align 8
-  %v266 = getelementptr inbounds double, double* %out, i64 7
-  store double %v264, double* %v266, align 8
-  %v267 = getelementptr inbounds double, double* %out, i64 8
-  store double %v260, double* %v267, align 8
-  %v268 = getelementptr inbounds double, double* %out, i64 9
-  store double %v261, double* %v268, align 8
-  %v269 = getelementptr inbounds double, double* %out, i64 10
-  store double %v262, double* %v269, align 8
-  %v270 = fmul double 0x3FF0000000000000, %v29
-  %v271 = getelementptr inbounds double, double* %out, i64 11
-  store double %v270, double* %v271, align 8
-  %v272 = getelementptr inbounds double, double* %out, i64 12
-  store double %v270, double* %v272, align 8
-  %v273 = fmul double 0x3FF0000000000000, 0x40A3880000000000
-  %v274 = getelementptr inbounds double, double* %out, i64 13
-  store double %v273, double* %v274, align 8
-  %v275 = fmul double 0x3FF0000000000000, 0x40A3880000000000
-  %v276 = getelementptr inbounds double, double* %out, i64 14
-  store double %v275, double* %v276, align 8
-  %v277 = fmul double %v3, %v7
-  %v278 = fmul double %v17, %v7
-  %v279 = fmul double %v17, %v3
-  %v280 = fmul double 0x3FF0000000000000, %v277
-  %v281 = fmul double 0x3FF0000000000000, %v278
-  %v282 = fmul double 0x3FF0000000000000, %v279
-  %v283 = fmul double 0x3FF0000000000000, %v11
-  %v284 = fmul double 0x3FF0000000000000, %v13
-  %v285 = getelementptr inbounds double, double* %out, i64 15
-  store double %v283, double* %v285, align 8
-  %v286 = getelementptr inbounds double, double* %out, i64 16
-  store double %v280, double* %v286, align 8
-  %v287 = getelementptr inbounds double, double* %out, i64 17
-  store double %v281, double* %v287, align 8
-  %v288 = getelementptr inbounds double, double* %out, i64 18
-  store double %v282, double* %v288, align 8
-  %v289 = getelementptr inbounds double, double* %out, i64 19
-  store double %v284, double* %v289, align 8
-  %v290 = fmul double 0xBFF0000000000000, %v3
-  %v291 = fmul double 0xBFF0000000000000, %v15
-  %v292 = fmul double 0x3FF0000000000000, %v290
-  %v293 = fmul double 0x3FF0000000000000, %v291
-  %v294 = getelementptr inbounds double, double* %out, i64 20
-  store double %v292, double* %v294, align 8
-  %v295 = getelementptr inbounds double, double* %out, i64 21
-  store double %v293, double* %v295, align 8
-  %v296 = fmul double 0xBFF0000000000000, %v47
-  %v297 = fmul double 0xBFF0000000000000, %v38
-  %v298 = fmul double 0x3FF0000000000000, %v296
-  %v299 = fmul double 0x3FF0000000000000, %v297
-  %v300 = fmul double 0x3FF0000000000000, %v50
-  %v301 = fmul double 0x3FF0000000000000, %v42
-  %v302 = getelementptr inbounds double, double* %out, i64 22
-  store double %v300, double* %v302, align 8
-  %v303 = getelementptr inbounds double, double* %out, i64 23
-  store double %v298, double* %v303, align 8
-  %v304 = getelementptr inbounds double, double* %out, i64 24
-  store double %v299, double* %v304, align 8
-  %v305 = getelementptr inbounds double, double* %out, i64 25
-  store double %v301, double* %v305, align 8
-  %v306 = getelementptr inbounds double, double* %out, i64 26
-  store double 0x3FF0000000000000, double* %v306, align 8
-  %v307 = getelementptr inbounds double, double* %out, i64 27
-  store double 0x3FF0000000000000, double* %v307, align 8
-  %v308 = fmul double 0x3FF0000000000000, %v62
-  %v309 = getelementptr inbounds double, double* %out, i64 28
-  store double %v308, double* %v309, align 8
-  %v310 = getelementptr inbounds double, double* %out, i64 29
-  store double 0x3FF0000000000000, double* %v310, align 8
-  %v311 = getelementptr inbounds double, double* %out, i64 30
-  store double 0x3FF0000000000000, double* %v311, align 8
-  %v312 = fmul double %v7, %v11
-  %v313 = fmul double %v13, %v11
-  %v314 = fmul double %v13, %v7
-  %v315 = fmul double 0x3FF0000000000000, %v312
-  %v316 = fmul double 0x3FF0000000000000, %v313
-  %v317 = fmul double 0x3FF0000000000000, %v314
-  %v318 = fmul double 0x3FF0000000000000, %v3
-  %v319 = fmul double 0x3FF0000000000000, %v17
-  %v320 = getelementptr inbounds double, double* %out, i64 31
-  store double %v315, double* %v320, align 8
-  %v321 = getelementptr inbounds double, double* %out, i64 32
-  store double %v318, double* %v321, align 8
-  %v322 = getelementptr inbounds double, double* %out, i64 33
-  store double %v319, double* %v322, align 8
-  %v323 = getelementptr inbounds double, double* %out, i64 34
-  store double %v316, double* %v323, align 8
-  %v324 = getelementptr inbounds double, double* %out, i64 35
-  store double %v317, double* %v324, align 8
-  %v325 = fmul double 0x3FF0000000000000, %v29
-  %v326 = getelementptr inbounds double, double* %out, i64 36
-  store double %v325, double* %v326, align 8
-  %v327 = getelementptr inbounds double, double* %out, i64 37
-  store double %v325, double* %v327, align 8
-  %v328 = fmul double 0xBFF0000000000000, %v17
-  %v329 = fmul double %v328, %v7
-  %v330 = fmul double 0xBFF0000000000000, %v13
-  %v331 = fmul double %v330, %v7
-  %v332 = fmul double 0xBFF0000000000000, %v13
-  %v333 = fmul double %v332, %v17
-  %v334 = fmul double 0x3FF0000000000000, %v329
-  %v335 = fmul double 0x3FF0000000000000, %v331
-  %v336 = fmul double 0x3FF0000000000000, %v333
-  %v337 = fmul double 0x3FF0000000000000, %v11
-  %v338 = fmul double 0x3FF0000000000000, %v3
-  %v339 = getelementptr inbounds double, double* %out, i64 38
-  store double %v334, double* %v339, align 8
-  %v340 = getelementptr inbounds double, double* %out, i64 39
-  store double %v335, double* %v340, align 8
-  %v341 = getelementptr inbounds double, double* %out, i64 40
-  store double %v337, double* %v341, align 8
-  %v342 = getelementptr inbounds double, double* %out, i64 41
-  store double %v336, double* %v342, align 8
-  %v343 = getelementptr inbounds double, double* %out, i64 42
-  store double %v338, double* %v343, align 8
-  %v344 = fmul double 0x3FF0000000000000, %v15
-  %v345 = fmul double 0x3FF0000000000000, %v13
-  %v346 = getelementptr inbounds double, double* %out, i64 43
-  store double %v344, double* %v346, align 8
-  %v347 = getelementptr inbounds double, double* %out, i64 44
-  store double %v345, double* %v347, align 8
-  %v348 = fmul double 0xBFF0000000000000, %v85
-  %v349 = fmul double 0xBFF0000000000000, %v38
-  %v350 = fmul double 0x3FF0000000000000, %v348
+  %v188 = fmul double 0xBFF0000000000000, %v33
+  %v189 = fmul double 0xBFF0000000000000, %v86
+  %v190 = fmul double 0x3FF0000000000000, %v188
+  %v191 = fmul double 0x3FF0000000000000, %v189
+  %v192 = getelementptr inbounds double, double* %out, i64 55
+  store double %v190, double* %v192, align 8
+  %v193 = getelementptr inbounds double, double* %out, i64 56
+  store double %v191, double* %v193, align 8
+  %v194 = getelementptr inbounds double, double* %w, i64 25
+  %v195 = load double, double* %v194, align 8
+  %v196 = getelementptr inbounds double, double* %x, i64 10
+  %v197 = load double, double* %v196, align 8
+  %v198 = fadd double %v195, %v197
+  %v199 = fmul double 0x3FF0000000000000, %v55
+  %v200 = getelementptr inbounds double, double* %out, i64 57
+  store double %v199, double* %v200, align 8
+  %v201 = getelementptr inbounds double, double* %out, i64 58
+  store double %v199, double* %v201, align 8
+  %v202 = fmul double 0x3FF0000000000000, %v46
+  %v203 = fmul double 0x3FF0000000000000, %v86
+  %v204 = getelementptr inbounds double, double* %out, i64 59
+  store double %v202, double* %v204, align 8
+  %v205 = getelementptr inbounds double, double* %out, i64 60
+  store double %v203, double* %v205, align 8
+  %v206 = getelementptr inbounds double, double* %out, i64 61
+  store double 0x3FF0000000000000, double* %v206, align 8
+  %v207 = getelementptr inbounds double, double* %w, i64 27
+  %v208 = load double, double* %v207, align 8
+  %v209 = fmul double 0xBFF0000000000000, %v208
+  %v210 = fmul double 0xBFF0000000000000, %v94
+  %v211 = fmul double 0x3FF0000000000000, %v209
+  %v212 = fmul double 0x3FF0000000000000, %v210
+  %v213 = getelementptr inbounds double, double* %w, i64 28
+  %v214 = load double, double* %v213, align 8
+  %v215 = fmul double 0x3FF0000000000000, %v214
+  %v216 = fmul double 0x3FF0000000000000, %v102
+  %v217 = getelementptr inbounds double, double* %out, i64 62
+  store double %v215, double* %v217, align 8
+  %v218 = getelementptr inbounds double, double* %out, i64 63
+  store double %v211, double* %v218, align 8
+  %v219 = getelementptr inbounds double, double* %out, i64 64
+  store double %v212, double* %v219, align 8
+  %v220 = getelementptr inbounds double, double* %out, i64 65
+  store double %v216, double* %v220, align 8
+  %v221 = getelementptr inbounds double, double* %out, i64 66
+  store double 0x3FF0000000000000, double* %v221, align 8
+  %v222 = getelementptr inbounds double, double* %out, i64 67
+  store double 0x3FF0000000000000, double* %v222, align 8
+  %v223 = getelementptr inbounds double, double* %w, i64 30
+  %v224 = load double, double* %v223, align 8
+  %v225 = fmul double 0x3FF0000000000000, %v116
+  %v226 = getelementptr inbounds double, double* %out, i64 68
+  store double %v225, double* %v226, align 8
+  %v227 = getelementptr inbounds double, double* %out, i64 69
+  store double 0x3FF0000000000000, double* %v227, align 8
+  %v228 = getelementptr inbounds double, double* %out, i64 70
+  store double 0x3FF0000000000000, double* %v228, align 8
+  %v229 = getelementptr inbounds double, double* %x, i64 4
+  %v230 = load double, double* %v229, align 8
+  %v231 = fmul double 0x3FF0000000000000, 0x40A3880000000000
+  %v232 = getelementptr inbounds double, double* %out, i64 71
+  store double %v231, double* %v232, align 8
+  %v233 = getelementptr inbounds double, double* %p, i64 2
+  %v234 = load double, double* %v233, align 8
+  %v235 = fmul double 0xBFF0000000000000, %v234
+  %v236 = fmul double 0x3FF0000000000000, %v235
+  %v237 = getelementptr inbounds double, double* %out, i64 72
+  store double %v236, double* %v237, align 8
+  %v238 = fmul double 0x3FF0000000000000, %v104
+  %v239 = fmul double 0x3FF0000000000000, %v94
+  %v240 = getelementptr inbounds double, double* %w, i64 33
+  %v241 = load double, double* %v240, align 8
+  %v242 = fmul double 0x3FF0000000000000, %v57
+  %v243 = fmul double 0x3FF0000000000000, %v241
+  %v244 = fmul double 0x3FF0000000000000, %v96
+  %v245 = fmul double 0x3FF0000000000000, %v102
+  %v246 = getelementptr inbounds double, double* %out, i64 73
+  store double %v244, double* %v246, align 8
+  %v247 = getelementptr inbounds double, double* %out, i64 74
+  store double %v242, double* %v247, align 8
+  %v248 = getelementptr inbounds double, double* %out, i64 75
+  store double %v238, double* %v248, align 8
+  %v249 = getelementptr inbounds double, double* %out, i64 76
+  store double %v245, double* %v249, align 8
+  %v250 = getelementptr inbounds double, double* %out, i64 77
+  store double %v243, double* %v250, align 8
+  %v251 = getelementptr inbounds double, double* %out, i64 78
+  store double %v239, double* %v251, align 8
+  %v252 = fmul double 0x3FF0000000000000, %v214
+  %v253 = fmul double 0x3FF0000000000000, %v94
+  %v254 = fmul double 0x3FF0000000000000, %v195
+  %v255 = fmul double 0x3FF0000000000000, %v241
+  %v256 = fmul double 0x3FF0000000000000, %v208
+  %v257 = fmul double 0x3FF0000000000000, %v102
+  %v258 = getelementptr inbounds double, double* %out, i64 79
+  store double %v256, double* %v258, align 8
+  %v259 = getelementptr inbounds double, double* %out, i64 80
+  store double %v254, double* %v259, align 8
+  %v260 = getelementptr inbounds double, double* %out, i64 81
+  store double %v252, double* %v260, align 8
+  %v261 = getelementptr inbounds double, double* %out, i64 82
+  store double %v257, double* %v261, align 8
+  %v262 = getelementptr inbounds double, double* %out, i64 83
+  store double %v255, double* %v262, align 8
+  %v263 = getelementptr inbounds double, double* %out, i64 84
+  store double %v253, double* %v263, align 8
+  %v264 = getelementptr inbounds double, double* %w, i64 36
+  %v265 = load double, double* %v264, align 8
+  %v266 = fmul double 0xBFF0000000000000, %v96
+  %v267 = fmul double 0xBFF0000000000000, %v265
+  %v268 = fmul double 0x3FF0000000000000, %v266
+  %v269 = fmul double 0x3FF0000000000000, %v267
+  %v270 = getelementptr inbounds double, double* %w, i64 35
+  %v271 = load double, double* %v270, align 8
+  %v272 = fmul double 0x3FF0000000000000, %v208
+  %v273 = fmul double 0x3FF0000000000000, %v271
+  %v274 = getelementptr inbounds double, double* %out, i64 85
+  store double %v272, double* %v274, align 8
+  %v275 = getelementptr inbounds double, double* %out, i64 86
+  store double %v268, double* %v275, align 8
+  %v276 = getelementptr inbounds double, double* %out, i64 87
+  store double %v269, double* %v276, align 8
+  %v277 = getelementptr inbounds double, double* %out, i64 88
+  store double %v273, double* %v277, align 8
+  %v278 = getelementptr inbounds double, double* %w, i64 37
+  %v279 = load double, double* %v278, align 8
+  %v280 = getelementptr inbounds double, double* %p, i64 3
+  %v281 = load double, double* %v280, align 8
+  %v282 = fmul double 0x3FF0000000000000, %v281
+  %v283 = getelementptr inbounds double, double* %out, i64 89
+  store double %v282, double* %v283, align 8
+  %v284 = getelementptr inbounds double, double* %out, i64 90
+  store double 0x3FF0000000000000, double* %v284, align 8
+  %v285 = getelementptr inbounds double, double* %out, i64 91
+  store double 0x3FF0000000000000, double* %v285, align 8
+  %v286 = getelementptr inbounds double, double* %w, i64 39
+  %v287 = load double, double* %v286, align 8
+  %v288 = fmul double 0x3FF0000000000000, %v208
+  %v289 = fmul double 0x3FF0000000000000, %v287
+  %v290 = getelementptr inbounds double, double* %out, i64 92
+  store double %v288, double* %v290, align 8
+  %v291 = getelementptr inbounds double, double* %out, i64 93
+  store double %v289, double* %v291, align 8
+  %v292 = fmul double 0x3FF0000000000000, %v234
+  %v293 = getelementptr inbounds double, double* %out, i64 94
+  store double %v292, double* %v293, align 8
+  %v294 = fmul double 0x3FF0000000000000, %v169
+  %v295 = fmul double 0x3FF0000000000000, %v94
+  %v296 = fmul double 0x3FF0000000000000, %v135
+  %v297 = fmul double 0x3FF0000000000000, %v241
+  %v298 = fmul double 0x3FF0000000000000, %v163
+  %v299 = fmul double 0x3FF0000000000000, %v102
+  %v300 = getelementptr inbounds double, double* %out, i64 95
+  store double %v298, double* %v300, align 8
+  %v301 = getelementptr inbounds double, double* %out, i64 96
+  store double %v296, double* %v301, align 8
+  %v302 = getelementptr inbounds double, double* %out, i64 97
+  store double %v294, double* %v302, align 8
+  %v303 = getelementptr inbounds double, double* %out, i64 98
+  store double %v299, double* %v303, align 8
+  %v304 = getelementptr inbounds double, double* %out, i64 99
+  store double %v297, double* %v304, align 8
+  %v305 = getelementptr inbounds double, double* %out, i64 100
+  store double %v295, double* %v305, align 8
+  %v306 = fmul double 0xBFF0000000000000, %v163
+  %v307 = fmul double 0xBFF0000000000000, %v265
+  %v308 = fmul double 0x3FF0000000000000, %v306
+  %v309 = fmul double 0x3FF0000000000000, %v307
+  %v310 = getelementptr inbounds double, double* %w, i64 42
+  %v311 = load double, double* %v310, align 8
+  %v312 = fmul double 0x3FF0000000000000, %v208
+  %v313 = fmul double 0x3FF0000000000000, %v311
+  %v314 = getelementptr inbounds double, double* %out, i64 101
+  store double %v312, double* %v314, align 8
+  %v315 = getelementptr inbounds double, double* %out, i64 102
+  store double %v308, double* %v315, align 8
+  %v316 = getelementptr inbounds double, double* %out, i64 103
+  store double %v309, double* %v316, align 8
+  %v317 = getelementptr inbounds double, double* %out, i64 104
+  store double %v313, double* %v317, align 8
+  %v318 = getelementptr inbounds double, double* %w, i64 43
+  %v319 = load double, double* %v318, align 8
+  %v320 = fmul double 0x3FF0000000000000, %v281
+  %v321 = getelementptr inbounds double, double* %out, i64 105
+  store double %v320, double* %v321, align 8
+  %v322 = getelementptr inbounds double, double* %out, i64 106
+  store double 0x3FF0000000000000, double* %v322, align 8
+  %v323 = getelementptr inbounds double, double* %out, i64 107
+  store double 0x3FF0000000000000, double* %v323, align 8
+  %v324 = getelementptr inbounds double, double* %w, i64 45
+  %v325 = load double, double* %v324, align 8
+  %v326 = fmul double 0x3FF0000000000000, %v208
+  %v327 = fmul double 0x3FF0000000000000, %v325
+  %v328 = getelementptr inbounds double, double* %out, i64 108
+  store double %v326, double* %v328, align 8
+  %v329 = getelementptr inbounds double, double* %out, i64 109
+  store double %v327, double* %v329, align 8
+  %v330 = fmul double 0xBFF0000000000000, %v96
+  %v331 = fmul double 0xBFF0000000000000, %v287
+  %v332 = fmul double 0x3FF0000000000000, %v330
+  %v333 = fmul double 0x3FF0000000000000, %v331
+  %v334 = getelementptr inbounds double, double* %out, i64 110
+  store double %v332, double* %v334, align 8
+  %v335 = getelementptr inbounds double, double* %out, i64 111
+  store double %v333, double* %v335, align 8
+  %v336 = fmul double 0xBFF0000000000000, %v163
+  %v337 = fmul double 0xBFF0000000000000, %v325
+  %v338 = fmul double 0x3FF0000000000000, %v336
+  %v339 = fmul double 0x3FF0000000000000, %v337
+  %v340 = getelementptr inbounds double, double* %out, i64 112
+  store double %v338, double* %v340, align 8
+  %v341 = getelementptr inbounds double, double* %out, i64 113
+  store double %v339, double* %v341, align 8
+  %v342 = getelementptr inbounds double, double* %out, i64 114
+  store double 0x3FF0000000000000, double* %v342, align 8
+  %v343 = getelementptr inbounds double, double* %out, i64 115
+  store double 0x3FF0000000000000, double* %v343, align 8
+  %v344 = getelementptr inbounds double, double* %w, i64 46
+  %v345 = load double, double* %v344, align 8
+  %v346 = fmul double 0x3FF0000000000000, %v163
+  %v347 = fmul double 0x3FF0000000000000, %v345
+  %v348 = getelementptr inbounds double, double* %w, i64 40
+  %v349 = load double, double* %v348, align 8
+  %v350 = fmul double 0x3FF0000000000000, %v96
   %v351 = fmul double 0x3FF0000000000000, %v349
-  %v352 = fmul double 0x3FF0000000000000, %v87
-  %v353 = fmul double 0x3FF0000000000000, %v42
-  %v354 = getelementptr inbounds double, double* %out, i64 45
-  store double %v352, double* %v354, align 8
-  %v355 = getelementptr inbounds double, double* %out, i64 46
-  store double %v350, double* %v355, align 8
-  %v356 = getelementptr inbounds double, double* %out, i64 47
-  store double %v351, double* %v356, align 8
-  %v357 = getelementptr inbounds double, double* %out, i64 48
-  store double %v353, double* %v357, align 8
-  %v358 = getelementptr inbounds double, double* %out, i64 49
-  store double 0x3FF0000000000000, double* %v358, align 8
-  %v359 = getelementptr inbounds double, double* %out, i64 50
-  store double 0x3FF0000000000000, double* %v359, align 8
-  %v360 = fmul double 0x3FF0000000000000, %v62
-  %v361 = getelementptr inbounds double, double* %out, i64 51
-  store double %v360, double* %v361, align 8
-  %v362 = getelementptr inbounds double, double* %out, i64 52
-  store double 0x3FF0000000000000, double* %v362, align 8
-  %v363 = getelementptr inbounds double, double* %out, i64 53
-  store double 0x3FF0000000000000, double* %v363, align 8
-  %v364 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v365 = getelementptr inbounds double, double* %out, i64 54
-  store double %v364, double* %v365, align 8
-  %v366 = fmul double 0xBFF0000000000000, %v11
-  %v367 = fmul double 0xBFF0000000000000, %v15
-  %v368 = fmul double 0x3FF0000000000000, %v366
-  %v369 = fmul double 0x3FF0000000000000, %v367
-  %v370 = getelementptr inbounds double, double* %out, i64 55
-  store double %v368, double* %v370, align 8
-  %v371 = getelementptr inbounds double, double* %out, i64 56
-  store double %v369, double* %v371, align 8
-  %v372 = fmul double 0x3FF0000000000000, %v29
-  %v373 = getelementptr inbounds double, double* %out, i64 57
-  store double %v372, double* %v373, align 8
-  %v374 = getelementptr inbounds double, double* %out, i64 58
-  store double %v372, double* %v374, align 8
-  %v375 = fmul double 0x3FF0000000000000, %v17
-  %v376 = fmul double 0x3FF0000000000000, %v15
-  %v377 = getelementptr inbounds double, double* %out, i64 59
-  store double %v375, double* %v377, align 8
-  %v378 = getelementptr inbounds double, double* %out, i64 60
-  store double %v376, double* %v378, align 8
-  %v379 = getelementptr inbounds double, double* %out, i64 61
-  store double 0x3FF0000000000000, double* %v379, align 8
-  %v380 = fmul double 0xBFF0000000000000, %v117
-  %v381 = fmul double 0xBFF0000000000000, %v38
-  %v382 = fmul double 0x3FF0000000000000, %v380
-  %v383 = fmul double 0x3FF0000000000000, %v381
-  %v384 = fmul double 0x3FF0000000000000, %v7
-  %v385 = fmul double 0x3FF0000000000000, %v42
-  %v386 = getelementptr inbounds double, double* %out, i64 62
-  store double %v384, double* %v386, align 8
-  %v387 = getelementptr inbounds double, double* %out, i64 63
-  store double %v382, double* %v387, align 8
-  %v388 = getelementptr inbounds double, double* %out, i64 64
-  store double %v383, double* %v388, align 8
-  %v389 = getelementptr inbounds double, double* %out, i64 65
-  store double %v385, double* %v389, align 8
-  %v390 = getelementptr inbounds double, double* %out, i64 66
-  store double 0x3FF0000000000000, double* %v390, align 8
-  %v391 = getelementptr inbounds double, double* %out, i64 67
-  store double 0x3FF0000000000000, double* %v391, align 8
-  %v392 = fmul double 0x3FF0000000000000, %v62
-  %v393 = getelementptr inbounds double, double* %out, i64 68
-  store double %v392, double* %v393, align 8
-  %v394 = getelementptr inbounds double, double* %out, i64 69
-  store double 0x3FF0000000000000, double* %v394, align 8
-  %v395 = getelementptr inbounds double, double* %out, i64 70
-  store double 0x3FF0000000000000, double* %v395, align 8
-  %v396 = fmul double 0x3FF0000000000000, 0x40A3880000000000
-  %v397 = getelementptr inbounds double, double* %out, i64 71
-  store double %v396, double* %v397, align 8
-  %v398 = fmul double 0xBFF0000000000000, %v141
-  %v399 = fmul double 0x3FF0000000000000, %v398
-  %v400 = getelementptr inbounds double, double* %out, i64 72
-  store double %v399, double* %v400, align 8
-  %v401 = fmul double 0x3FF0000000000000, %v50
-  %v402 = fmul double 0x3FF0000000000000, %v38
-  %v403 = fmul double 0x3FF0000000000000, %v23
-  %v404 = fmul double 0x3FF0000000000000, %v135
-  %v405 = fmul double 0x3FF0000000000000, %v47
-  %v406 = fmul double 0x3FF0000000000000, %v42
-  %v407 = getelementptr inbounds double, double* %out, i64 73
-  store double %v405, double* %v407, align 8
-  %v408 = getelementptr inbounds double, double* %out, i64 74
-  store double %v403, double* %v408, align 8
-  %v409 = getelementptr inbounds double, double* %out, i64 75
-  store double %v401, double* %v409, align 8
-  %v410 = getelementptr inbounds double, double* %out, i64 76
-  store double %v406, double* %v410, align 8
-  %v411 = getelementptr inbounds double, double* %out, i64 77
-  store double %v404, double* %v411, align 8
-  %v412 = getelementptr inbounds double, double* %out, i64 78
-  store double %v402, double* %v412, align 8
-  %v413 = fmul double 0x3FF0000000000000, %v7
-  %v414 = fmul double 0x3FF0000000000000, %v38
-  %v415 = fmul double 0x3FF0000000000000, %v106
-  %v416 = fmul double 0x3FF0000000000000, %v135
-  %v417 = fmul double 0x3FF0000000000000, %v117
-  %v418 = fmul double 0x3FF0000000000000, %v42
-  %v419 = getelementptr inbounds double, double* %out, i64 79
-  store double %v417, double* %v419, align 8
-  %v420 = getelementptr inbounds double, double* %out, i64 80
-  store double %v415, double* %v420, align 8
-  %v421 = getelementptr inbounds double, double* %out, i64 81
-  store double %v413, double* %v421, align 8
-  %v422 = getelementptr inbounds double, double* %out, i64 82
-  store double %v418, double* %v422, align 8
-  %v423 = getelementptr inbounds double, double* %out, i64 83
-  store double %v416, double* %v423, align 8
-  %v424 = getelementptr inbounds double, double* %out, i64 84
-  store double %v414, double* %v424, align 8
-  %v425 = fmul double 0xBFF0000000000000, %v47
-  %v426 = fmul double 0xBFF0000000000000, %v156
-  %v427 = fmul double 0x3FF0000000000000, %v425
-  %v428 = fmul double 0x3FF0000000000000, %v426
-  %v429 = fmul double 0x3FF0000000000000, %v117
-  %v430 = fmul double 0x3FF0000000000000, %v150
-  %v431 = getelementptr inbounds double, double* %out, i64 85
-  store double %v429, double* %v431, align 8
-  %v432 = getelementptr inbounds double, double* %out, i64 86
-  store double %v427, double* %v432, align 8
-  %v433 = getelementptr inbounds double, double* %out, i64 87
-  store double %v428, double* %v433, align 8
-  %v434 = getelementptr inbounds double, double* %out, i64 88
-  store double %v430, double* %v434, align 8
-  %v435 = fmul double 0x3FF0000000000000, %v164
-  %v436 = getelementptr inbounds double, double* %out, i64 89
+  %v352 = getelementptr inbounds double, double* %w, i64 49
+  %v353 = load double, double* %v352, align 8
+  %v354 = fmul double 0x3FF0000000000000, %v208
+  %v355 = fmul double 0x3FF0000000000000, %v353
+  %v356 = getelementptr inbounds double, double* %out, i64 116
+  store double %v354, double* %v356, align 8
+  %v357 = getelementptr inbounds double, double* %out, i64 117
+  store double %v350, double* %v357, align 8
+  %v358 = getelementptr inbounds double, double* %out, i64 118
+  store double %v346, double* %v358, align 8
+  %v359 = getelementptr inbounds double, double* %out, i64 119
+  store double %v351, double* %v359, align 8
+  %v360 = getelementptr inbounds double, double* %out, i64 120
+  store double %v347, double* %v360, align 8
+  %v361 = getelementptr inbounds double, double* %out, i64 121
+  store double %v355, double* %v361, align 8
+  %v362 = getelementptr inbounds double, double* %w, i64 32
+  %v363 = load double, double* %v362, align 8
+  %v364 = fmul double 0x3FF0000000000000, %v214
+  %v365 = fmul double 0x3FF0000000000000, %v363
+  %v366 = fmul double 0x3FF0000000000000, %v169
+  %v367 = fmul double 0x3FF0000000000000, %v185
+  %v368 = getelementptr inbounds double, double* %w, i64 15
+  %v369 = load double, double* %v368, align 8
+  %v370 = fmul double 0x3FF0000000000000, %v104
+  %v371 = fmul double 0x3FF0000000000000, %v369
+  %v372 = getelementptr inbounds double, double* %out, i64 122
+  store double %v370, double* %v372, align 8
+  %v373 = getelementptr inbounds double, double* %out, i64 123
+  store double %v366, double* %v373, align 8
+  %v374 = getelementptr inbounds double, double* %out, i64 124
+  store double %v364, double* %v374, align 8
+  %v375 = getelementptr inbounds double, double* %out, i64 125
+  store double %v371, double* %v375, align 8
+  %v376 = getelementptr inbounds double, double* %out, i64 126
+  store double %v367, double* %v376, align 8
+  %v377 = getelementptr inbounds double, double* %out, i64 127
+  store double %v365, double* %v377, align 8
+  %v378 = getelementptr inbounds double, double* %w, i64 50
+  %v379 = load double, double* %v378, align 8
+  %v380 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v381 = getelementptr inbounds double, double* %w, i64 51
+  %v382 = load double, double* %v381, align 8
+  %v383 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v384 = getelementptr inbounds double, double* %out, i64 128
+  store double %v383, double* %v384, align 8
+  %v385 = getelementptr inbounds double, double* %out, i64 129
+  store double %v380, double* %v385, align 8
+  %v386 = fmul double 0x3FF0000000000000, %v135
+  %v387 = fmul double 0x3FF0000000000000, %v345
+  %v388 = fmul double 0x3FF0000000000000, %v57
+  %v389 = fmul double 0x3FF0000000000000, %v349
+  %v390 = fmul double 0x3FF0000000000000, %v195
+  %v391 = fmul double 0x3FF0000000000000, %v353
+  %v392 = getelementptr inbounds double, double* %out, i64 130
+  store double %v390, double* %v392, align 8
+  %v393 = getelementptr inbounds double, double* %out, i64 131
+  store double %v388, double* %v393, align 8
+  %v394 = getelementptr inbounds double, double* %out, i64 132
+  store double %v386, double* %v394, align 8
+  %v395 = getelementptr inbounds double, double* %out, i64 133
+  store double %v389, double* %v395, align 8
+  %v396 = getelementptr inbounds double, double* %out, i64 134
+  store double %v387, double* %v396, align 8
+  %v397 = getelementptr inbounds double, double* %out, i64 135
+  store double %v391, double* %v397, align 8
+  %v398 = fmul double 0x3FF0000000000000, %v169
+  %v399 = fmul double 0x3FF0000000000000, %v345
+  %v400 = fmul double 0x3FF0000000000000, %v104
+  %v401 = fmul double 0x3FF0000000000000, %v349
+  %v402 = fmul double 0x3FF0000000000000, %v214
+  %v403 = fmul double 0x3FF0000000000000, %v353
+  %v404 = getelementptr inbounds double, double* %out, i64 136
+  store double %v402, double* %v404, align 8
+  %v405 = getelementptr inbounds double, double* %out, i64 137
+  store double %v400, double* %v405, align 8
+  %v406 = getelementptr inbounds double, double* %out, i64 138
+  store double %v398, double* %v406, align 8
+  %v407 = getelementptr inbounds double, double* %out, i64 139
+  store double %v401, double* %v407, align 8
+  %v408 = getelementptr inbounds double, double* %out, i64 140
+  store double %v399, double* %v408, align 8
+  %v409 = getelementptr inbounds double, double* %out, i64 141
+  store double %v403, double* %v409, align 8
+  %v410 = fmul double 0x3FF0000000000000, %v208
+  %v411 = fmul double 0x3FF0000000000000, %v363
+  %v412 = fmul double 0x3FF0000000000000, %v163
+  %v413 = fmul double 0x3FF0000000000000, %v185
+  %v414 = fmul double 0x3FF0000000000000, %v96
+  %v415 = fmul double 0x3FF0000000000000, %v369
+  %v416 = getelementptr inbounds double, double* %out, i64 142
+  store double %v414, double* %v416, align 8
+  %v417 = getelementptr inbounds double, double* %out, i64 143
+  store double %v412, double* %v417, align 8
+  %v418 = getelementptr inbounds double, double* %out, i64 144
+  store double %v410, double* %v418, align 8
+  %v419 = getelementptr inbounds double, double* %out, i64 145
+  store double %v415, double* %v419, align 8
+  %v420 = getelementptr inbounds double, double* %out, i64 146
+  store double %v413, double* %v420, align 8
+  %v421 = getelementptr inbounds double, double* %out, i64 147
+  store double %v411, double* %v421, align 8
+  %v422 = getelementptr inbounds double, double* %w, i64 54
+  %v423 = load double, double* %v422, align 8
+  %v424 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v425 = getelementptr inbounds double, double* %out, i64 148
+  store double 0x3FF0000000000000, double* %v425, align 8
+  %v426 = getelementptr inbounds double, double* %out, i64 149
+  store double %v424, double* %v426, align 8
+  %v427 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v428 = getelementptr inbounds double, double* %out, i64 150
+  store double %v427, double* %v428, align 8
+  %v429 = getelementptr inbounds double, double* %out, i64 151
+  store double 0x3FF0000000000000, double* %v429, align 8
+  %v430 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v431 = getelementptr inbounds double, double* %out, i64 152
+  store double %v430, double* %v431, align 8
+  %v432 = getelementptr inbounds double, double* %out, i64 153
+  store double 0x3FF0000000000000, double* %v432, align 8
+  %v433 = getelementptr inbounds double, double* %w, i64 53
+  %v434 = load double, double* %v433, align 8
+  %v435 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v436 = getelementptr inbounds double, double* %out, i64 154
   store double %v435, double* %v436, align 8
-  %v437 = getelementptr inbounds double, double* %out, i64 90
+  %v437 = getelementptr inbounds double, double* %out, i64 155
   store double 0x3FF0000000000000, double* %v437, align 8
-  %v438 = getelementptr inbounds double, double* %out, i64 91
+  %v438 = getelementptr inbounds double, double* %out, i64 156
   store double 0x3FF0000000000000, double* %v438, align 8
-  %v439 = fmul double 0x3FF0000000000000, %v117
-  %v440 = fmul double 0x3FF0000000000000, %v167
-  %v441 = getelementptr inbounds double, double* %out, i64 92
-  store double %v439, double* %v441, align 8
-  %v442 = getelementptr inbounds double, double* %out, i64 93
-  store double %v440, double* %v442, align 8
-  %v443 = fmul double 0x3FF0000000000000, %v141
-  %v444 = getelementptr inbounds double, double* %out, i64 94
-  store double %v443, double* %v444, align 8
-  %v445 = fmul double 0x3FF0000000000000, %v87
-  %v446 = fmul double 0x3FF0000000000000, %v38
-  %v447 = fmul double 0x3FF0000000000000, %v70
-  %v448 = fmul double 0x3FF0000000000000, %v135
-  %v449 = fmul double 0x3FF0000000000000, %v85
-  %v450 = fmul double 0x3FF0000000000000, %v42
-  %v451 = getelementptr inbounds double, double* %out, i64 95
-  store double %v449, double* %v451, align 8
-  %v452 = getelementptr inbounds double, double* %out, i64 96
-  store double %v447, double* %v452, align 8
-  %v453 = getelementptr inbounds double, double* %out, i64 97
-  store double %v445, double* %v453, align 8
-  %v454 = getelementptr inbounds double, double* %out, i64 98
-  store double %v450, double* %v454, align 8
-  %v455 = getelementptr inbounds double, double* %out, i64 99
-  store double %v448, double* %v455, align 8
-  %v456 = getelementptr inbounds double, double* %out, i64 100
-  store double %v446, double* %v456, align 8
-  %v457 = fmul double 0xBFF0000000000000, %v85
-  %v458 = fmul double 0xBFF0000000000000, %v156
-  %v459 = fmul double 0x3FF0000000000000, %v457
-  %v460 = fmul double 0x3FF0000000000000, %v458
-  %v461 = fmul double 0x3FF0000000000000, %v117
-  %v462 = fmul double 0x3FF0000000000000, %v181
-  %v463 = getelementptr inbounds double, double* %out, i64 101
-  store double %v461, double* %v463, align 8
-  %v464 = getelementptr inbounds double, double* %out, i64 102
-  store double %v459, double* %v464, align 8
-  %v465 = getelementptr inbounds double, double* %out, i64 103
-  store double %v460, double* %v465, align 8
-  %v466 = getelementptr inbounds double, double* %out, i64 104
-  store double %v462, double* %v466, align 8
-  %v467 = fmul double 0x3FF0000000000000, %v164
-  %v468 = getelementptr inbounds double, double* %out, i64 105
-  store double %v467, double* %v468, align 8
-  %v469 = getelementptr inbounds double, double* %out, i64 106
-  store double 0x3FF0000000000000, double* %v469, align 8
-  %v470 = getelementptr inbounds double, double* %out, i64 107
+  %v439 = fdiv double 0x3FF0000000000000, %v86
+  %v440 = fmul double %v46, %v102
+  %v441 = fmul double %v241, %v33
+  %v442 = fneg double %v441
+  %v443 = fadd double %v440, %v442
+  %v444 = fmul double 0x3FF0000000000000, %v443
+  %v445 = fmul double 0x3FF0000000000000, %v439
+  %v446 = fmul double 0xBFF0000000000000, %v33
+  %v447 = fmul double 0xBFF0000000000000, %v241
+  %v448 = fmul double %v445, %v446
+  %v449 = fmul double %v445, %v447
+  %v450 = fmul double %v445, %v102
+  %v451 = fmul double %v445, %v46
+  %v452 = fmul double %v86, %v86
+  %v453 = fdiv double 0x3FF0000000000000, %v452
+  %v454 = fmul double 0xBFF0000000000000, %v453
+  %v455 = fmul double %v444, %v454
+  %v456 = getelementptr inbounds double, double* %out, i64 157
+  store double %v455, double* %v456, align 8
+  %v457 = getelementptr inbounds double, double* %out, i64 158
+  store double %v450, double* %v457, align 8
+  %v458 = getelementptr inbounds double, double* %out, i64 159
+  store double %v451, double* %v458, align 8
+  %v459 = getelementptr inbounds double, double* %out, i64 160
+  store double %v448, double* %v459, align 8
+  %v460 = getelementptr inbounds double, double* %out, i64 161
+  store double %v449, double* %v460, align 8
+  %v461 = getelementptr inbounds double, double* %out, i64 162
+  store double 0x3FF0000000000000, double* %v461, align 8
+  %v462 = fmul double 0x3FF0000000000000, %v33
+  %v463 = fmul double 0x3FF0000000000000, %v102
+  %v464 = fmul double 0x3FF0000000000000, %v241
+  %v465 = fmul double 0x3FF0000000000000, %v46
+  %v466 = getelementptr inbounds double, double* %out, i64 163
+  store double %v464, double* %v466, align 8
+  %v467 = getelementptr inbounds double, double* %out, i64 164
+  store double %v462, double* %v467, align 8
+  %v468 = getelementptr inbounds double, double* %out, i64 165
+  store double %v465, double* %v468, align 8
+  %v469 = getelementptr inbounds double, double* %out, i64 166
+  store double %v463, double* %v469, align 8
+  %v470 = getelementptr inbounds double, double* %out, i64 167
   store double 0x3FF0000000000000, double* %v470, align 8
-  %v471 = fmul double 0x3FF0000000000000, %v117
-  %v472 = fmul double 0x3FF0000000000000, %v190
-  %v473 = getelementptr inbounds double, double* %out, i64 108
-  store double %v471, double* %v473, align 8
-  %v474 = getelementptr inbounds double, double* %out, i64 109
-  store double %v472, double* %v474, align 8
-  %v475 = fmul double 0xBFF0000000000000, %v47
-  %v476 = fmul double 0xBFF0000000000000, %v167
-  %v477 = fmul double 0x3FF0000000000000, %v475
-  %v478 = fmul double 0x3FF0000000000000, %v476
-  %v479 = getelementptr inbounds double, double* %out, i64 110
-  store double %v477, double* %v479, align 8
-  %v480 = getelementptr inbounds double, double* %out, i64 111
-  store double %v478, double* %v480, align 8
-  %v481 = fmul double 0xBFF0000000000000, %v85
-  %v482 = fmul double 0xBFF0000000000000, %v190
-  %v483 = fmul double 0x3FF0000000000000, %v481
-  %v484 = fmul double 0x3FF0000000000000, %v482
-  %v485 = getelementptr inbounds double, double* %out, i64 112
-  store double %v483, double* %v485, align 8
-  %v486 = getelementptr inbounds double, double* %out, i64 113
-  store double %v484, double* %v486, align 8
-  %v487 = getelementptr inbounds double, double* %out, i64 114
-  store double 0x3FF0000000000000, double* %v487, align 8
-  %v488 = getelementptr inbounds double, double* %out, i64 115
-  store double 0x3FF0000000000000, double* %v488, align 8
-  %v489 = fmul double 0x3FF0000000000000, %v85
-  %v490 = fmul double 0x3FF0000000000000, %v192
-  %v491 = fmul double 0x3FF0000000000000, %v47
-  %v492 = fmul double 0x3FF0000000000000, %v169
-  %v493 = fmul double 0x3FF0000000000000, %v117
-  %v494 = fmul double 0x3FF0000000000000, %v200
-  %v495 = getelementptr inbounds double, double* %out, i64 116
-  store double %v493, double* %v495, align 8
-  %v496 = getelementptr inbounds double, double* %out, i64 117
-  store double %v491, double* %v496, align 8
-  %v497 = getelementptr inbounds double, double* %out, i64 118
-  store double %v489, double* %v497, align 8
-  %v498 = getelementptr inbounds double, double* %out, i64 119
-  store double %v492, double* %v498, align 8
-  %v499 = getelementptr inbounds double, double* %out, i64 120
-  store double %v490, double* %v499, align 8
-  %v500 = getelementptr inbounds double, double* %out, i64 121
-  store double %v494, double* %v500, align 8
-  %v501 = fmul double 0x3FF0000000000000, %v7
-  %v502 = fmul double 0x3FF0000000000000, %v131
-  %v503 = fmul double 0x3FF0000000000000, %v87
-  %v504 = fmul double 0x3FF0000000000000, %v100
-  %v505 = fmul double 0x3FF0000000000000, %v50
-  %v506 = fmul double 0x3FF0000000000000, %v65
-  %v507 = getelementptr inbounds double, double* %out, i64 122
-  store double %v505, double* %v507, align 8
-  %v508 = getelementptr inbounds double, double* %out, i64 123
-  store double %v503, double* %v508, align 8
-  %v509 = getelementptr inbounds double, double* %out, i64 124
-  store double %v501, double* %v509, align 8
-  %v510 = getelementptr inbounds double, double* %out, i64 125
-  store double %v506, double* %v510, align 8
-  %v511 = getelementptr inbounds double, double* %out, i64 126
-  store double %v504, double* %v511, align 8
-  %v512 = getelementptr inbounds double, double* %out, i64 127
-  store double %v502, double* %v512, align 8
-  %v513 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v514 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v515 = getelementptr inbounds double, double* %out, i64 128
-  store double %v514, double* %v515, align 8
-  %v516 = getelementptr inbounds double, double* %out, i64 129
-  store double %v513, double* %v516, align 8
-  %v517 = fmul double 0x3FF0000000000000, %v70
-  %v518 = fmul double 0x3FF0000000000000, %v192
-  %v519 = fmul double 0x3FF0000000000000, %v23
-  %v520 = fmul double 0x3FF0000000000000, %v169
-  %v521 = fmul double 0x3FF0000000000000, %v106
-  %v522 = fmul double 0x3FF0000000000000, %v200
-  %v523 = getelementptr inbounds double, double* %out, i64 130
-  store double %v521, double* %v523, align 8
-  %v524 = getelementptr inbounds double, double* %out, i64 131
-  store double %v519, double* %v524, align 8
-  %v525 = getelementptr inbounds double, double* %out, i64 132
-  store double %v517, double* %v525, align 8
-  %v526 = getelementptr inbounds double, double* %out, i64 133
-  store double %v520, double* %v526, align 8
-  %v527 = getelementptr inbounds double, double* %out, i64 134
-  store double %v518, double* %v527, align 8
-  %v528 = getelementptr inbounds double, double* %out, i64 135
-  store double %v522, double* %v528, align 8
-  %v529 = fmul double 0x3FF0000000000000, %v87
-  %v530 = fmul double 0x3FF0000000000000, %v192
-  %v531 = fmul double 0x3FF0000000000000, %v50
-  %v532 = fmul double 0x3FF0000000000000, %v169
-  %v533 = fmul double 0x3FF0000000000000, %v7
-  %v534 = fmul double 0x3FF0000000000000, %v200
-  %v535 = getelementptr inbounds double, double* %out, i64 136
-  store double %v533, double* %v535, align 8
-  %v536 = getelementptr inbounds double, double* %out, i64 137
-  store double %v531, double* %v536, align 8
-  %v537 = getelementptr inbounds double, double* %out, i64 138
-  store double %v529, double* %v537, align 8
-  %v538 = getelementptr inbounds double, double* %out, i64 139
-  store double %v532, double* %v538, align 8
-  %v539 = getelementptr inbounds double, double* %out, i64 140
-  store double %v530, double* %v539, align 8
-  %v540 = getelementptr inbounds double, double* %out, i64 141
-  store double %v534, double* %v540, align 8
-  %v541 = fmul double 0x3FF0000000000000, %v117
-  %v542 = fmul double 0x3FF0000000000000, %v131
-  %v543 = fmul double 0x3FF0000000000000, %v85
-  %v544 = fmul double 0x3FF0000000000000, %v100
-  %v545 = fmul double 0x3FF0000000000000, %v47
-  %v546 = fmul double 0x3FF0000000000000, %v65
-  %v547 = getelementptr inbounds double, double* %out, i64 142
-  store double %v545, double* %v547, align 8
-  %v548 = getelementptr inbounds double, double* %out, i64 143
-  store double %v543, double* %v548, align 8
-  %v549 = getelementptr inbounds double, double* %out, i64 144
-  store double %v541, double* %v549, align 8
-  %v550 = getelementptr inbounds double, double* %out, i64 145
-  store double %v546, double* %v550, align 8
-  %v551 = getelementptr inbounds double, double* %out, i64 146
-  store double %v544, double* %v551, align 8
-  %v552 = getelementptr inbounds double, double* %out, i64 147
-  store double %v542, double* %v552, align 8
-  %v553 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v554 = getelementptr inbounds double, double* %out, i64 148
-  store double 0x3FF0000000000000, double* %v554, align 8
-  %v555 = getelementptr inbounds double, double* %out, i64 149
-  store double %v553, double* %v555, align 8
-  %v556 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v557 = getelementptr inbounds double, double* %out, i64 150
-  store double %v556, double* %v557, align 8
-  %v558 = getelementptr inbounds double, double* %out, i64 151
-  store double 0x3FF0000000000000, double* %v558, align 8
-  %v559 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v560 = getelementptr inbounds double, double* %out, i64 152
-  store double %v559, double* %v560, align 8
-  %v561 = getelementptr inbounds double, double* %out, i64 153
-  store double 0x3FF0000000000000, double* %v561, align 8
-  %v562 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v563 = getelementptr inbounds double, double* %out, i64 154
-  store double %v562, double* %v563, align 8
-  %v564 = getelementptr inbounds double, double* %out, i64 155
-  store double 0x3FF0000000000000, double* %v564, align 8
-  %v565 = getelementptr inbounds double, double* %out, i64 156
-  store double 0x3FF0000000000000, double* %v565, align 8
-  %v566 = fdiv double 0x3FF0000000000000, %v15
-  %v567 = fmul double %v17, %v42
-  %v568 = fmul double %v135, %v11
-  %v569 = fneg double %v568
-  %v570 = fadd double %v567, %v569
-  %v571 = fmul double 0x3FF0000000000000, %v570
-  %v572 = fmul double 0x3FF0000000000000, %v566
-  %v573 = fmul double 0xBFF0000000000000, %v11
-  %v574 = fmul double 0xBFF0000000000000, %v135
-  %v575 = fmul double %v572, %v573
-  %v576 = fmul double %v572, %v574
-  %v577 = fmul double %v572, %v42
-  %v578 = fmul double %v572, %v17
-  %v579 = fmul double %v15, %v15
-  %v580 = fdiv double 0x3FF0000000000000, %v579
-  %v581 = fmul double 0xBFF0000000000000, %v580
-  %v582 = fmul double %v571, %v581
-  %v583 = getelementptr inbounds double, double* %out, i64 157
-  store double %v582, double* %v583, align 8
-  %v584 = getelementptr inbounds double, double* %out, i64 158
-  store double %v577, double* %v584, align 8
-  %v585 = getelementptr inbounds double, double* %out, i64 159
-  store double %v578, double* %v585, align 8
-  %v586 = getelementptr inbounds double, double* %out, i64 160
-  store double %v575, double* %v586, align 8
-  %v587 = getelementptr inbounds double, double* %out, i64 161
-  store double %v576, double* %v587, align 8
-  %v588 = getelementptr inbounds double, double* %out, i64 162
-  store double 0x3FF0000000000000, double* %v588, align 8
-  %v589 = fmul double 0x3FF0000000000000, %v11
-  %v590 = fmul double 0x3FF0000000000000, %v42
-  %v591 = fmul double 0x3FF0000000000000, %v135
-  %v592 = fmul double 0x3FF0000000000000, %v17
-  %v593 = getelementptr inbounds double, double* %out, i64 163
-  store double %v591, double* %v593, align 8
-  %v594 = getelementptr inbounds double, double* %out, i64 164
-  store double %v589, double* %v594, align 8
-  %v595 = getelementptr inbounds double, double* %out, i64 165
-  store double %v592, double* %v595, align 8
-  %v596 = getelementptr inbounds double, double* %out, i64 166
-  store double %v590, double* %v596, align 8
-  %v597 = getelementptr inbounds double, double* %out, i64 167
-  store double 0x3FF0000000000000, double* %v597, align 8
-  %v598 = fmul double 0xBFF0000000000000, %v566
-  %v599 = fmul double %v598, %v570
-  %v600 = fmul double 0xBFF0000000000000, %v7
-  %v601 = fmul double %v600, %v570
-  %v602 = fmul double 0xBFF0000000000000, %v7
-  %v603 = fmul double %v602, %v566
-  %v604 = fmul double 0x3FF0000000000000, %v599
-  %v605 = fmul double 0x3FF0000000000000, %v601
-  %v606 = fmul double 0x3FF0000000000000, %v603
-  %v607 = fmul double 0xBFF0000000000000, %v11
-  %v608 = fmul double 0xBFF0000000000000, %v135
-  %v609 = fmul double %v606, %v607
-  %v610 = fmul double %v606, %v608
-  %v611 = fmul double %v606, %v42
-  %v612 = fmul double %v606, %v17
-  %v613 = fmul double 0xBFF0000000000000, %v580
-  %v614 = fmul double %v605, %v613
-  %v615 = getelementptr inbounds double, double* %out, i64 168
-  store double %v614, double* %v615, align 8
-  %v616 = getelementptr inbounds double, double* %out, i64 169
-  store double %v611, double* %v616, align 8
-  %v617 = getelementptr inbounds double, double* %out, i64 170
-  store double %v612, double* %v617, align 8
-  %v618 = getelementptr inbounds double, double* %out, i64 171
-  store double %v609, double* %v618, align 8
-  %v619 = getelementptr inbounds double, double* %out, i64 172
-  store double 0x3FF0000000000000, double* %v619, align 8
-  %v620 = getelementptr inbounds double, double* %out, i64 173
-  store double %v604, double* %v620, align 8
-  %v621 = getelementptr inbounds double, double* %out, i64 174
-  store double %v610, double* %v621, align 8
+  %v471 = fmul double 0xBFF0000000000000, %v439
+  %v472 = fmul double %v471, %v443
+  %v473 = fmul double 0xBFF0000000000000, %v31
+  %v474 = fmul double %v473, %v443
+  %v475 = fmul double 0xBFF0000000000000, %v31
+  %v476 = fmul double %v475, %v439
+  %v477 = fmul double 0x3FF0000000000000, %v472
+  %v478 = fmul double 0x3FF0000000000000, %v474
+  %v479 = fmul double 0x3FF0000000000000, %v476
+  %v480 = fmul double 0xBFF0000000000000, %v33
+  %v481 = fmul double 0xBFF0000000000000, %v241
+  %v482 = fmul double %v479, %v480
+  %v483 = fmul double %v479, %v481
+  %v484 = fmul double %v479, %v102
+  %v485 = fmul double %v479, %v46
+  %v486 = fmul double 0xBFF0000000000000, %v453
+  %v487 = fmul double %v478, %v486
+  %v488 = getelementptr inbounds double, double* %out, i64 168
+  store double %v487, double* %v488, align 8
+  %v489 = getelementptr inbounds double, double* %out, i64 169
+  store double %v484, double* %v489, align 8
+  %v490 = getelementptr inbounds double, double* %out, i64 170
+  store double %v485, double* %v490, align 8
+  %v491 = getelementptr inbounds double, double* %out, i64 171
+  store double %v482, double* %v491, align 8
+  %v492 = getelementptr inbounds double, double* %out, i64 172
+  store double 0x3FF0000000000000, double* %v492, align 8
+  %v493 = getelementptr inbounds double, double* %out, i64 173
+  store double %v477, double* %v493, align 8
+  %v494 = getelementptr inbounds double, double* %out, i64 174
+  store double %v483, double* %v494, align 8
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 6
   %v2 = load double, double* %v1, align 8
@@ -1668,7 +1486,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1680,12 +1498,12 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_e82e5e8311dffd9cb1b7c337ab8a6606_7d8f1b815a7e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_5241272fd5ac5ea4a9a1c25ed650cf23_4656ca328e7a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 1073, 70   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 1085, 70   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 9, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

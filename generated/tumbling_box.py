@@ -25,7 +25,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "20c3052fd06bb17a7fe1b7b954071f3d"
+MODEL_HASH = "cd44672e1387b16ffa53be2168e2f06b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +37,8 @@ SETTINGS = {"t_end": 5.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d", sys.modules[__name__])
-__name__ = "_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d"
+    sys.modules.setdefault("_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b", sys.modules[__name__])
+__name__ = "_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b"
 
 STATE_NAMES = ("box.m.px", "box.m.py", "box.m.pz", "box.J.px", "box.J.py", "box.J.pz", "box.x", "box.ax", "box.y", "box.ay", "box.z", "box.az", )
 PARAM_NAMES = ()
@@ -104,7 +104,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00"
+_KERNEL_PREFIX = "_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217"
 KERNEL_FUNCTIONS = 20
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -117,53 +117,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape_ptr = internal constant [23 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 25, i64 26, i64 30, i64 31, i64 38]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape_ptr = internal constant [23 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 25, i64 26, i64 30, i64 31, i64 38]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape_src = internal constant [38 x i64] [i64 -5, i64 -4, i64 -5, i64 -4, i64 -1, i64 -2, i64 -3, i64 5, i64 6, i64 4, i64 6, i64 4, i64 5, i64 -1, i64 -1, i64 -1, i64 7, i64 8, i64 9, i64 10, i64 2, i64 3, i64 4, i64 5, i64 1, i64 11, i64 3, i64 4, i64 5, i64 1, i64 12, i64 2, i64 3, i64 4, i64 5, i64 6, i64 0, i64 1]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape_src = internal constant [38 x i64] [i64 -5, i64 -4, i64 -5, i64 -4, i64 -1, i64 -2, i64 -3, i64 5, i64 6, i64 4, i64 6, i64 4, i64 5, i64 -1, i64 -1, i64 -1, i64 7, i64 8, i64 9, i64 10, i64 2, i64 3, i64 4, i64 5, i64 1, i64 11, i64 3, i64 4, i64 5, i64 1, i64 12, i64 2, i64 3, i64 4, i64 5, i64 6, i64 0, i64 1]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_row = internal constant [21 x i64] [i64 13, i64 13, i64 14, i64 14, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 21, i64 21]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_row = internal constant [21 x i64] [i64 13, i64 13, i64 14, i64 14, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 21, i64 21]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_col = internal constant [21 x i64] [i64 1, i64 2, i64 0, i64 2, i64 0, i64 1, i64 0, i64 0, i64 1, i64 4, i64 3, i64 0, i64 0, i64 1, i64 3, i64 0, i64 0, i64 1, i64 2, i64 4, i64 3]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_col = internal constant [21 x i64] [i64 1, i64 2, i64 0, i64 2, i64 0, i64 1, i64 0, i64 0, i64 1, i64 4, i64 3, i64 0, i64 0, i64 1, i64 3, i64 0, i64 0, i64 1, i64 2, i64 4, i64 3]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_zero = internal constant [21 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_zero = internal constant [21 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_k = internal constant [21 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_k = internal constant [21 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_i = internal constant [21 x i64] [i64 3, i64 3, i64 4, i64 4, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_i = internal constant [21 x i64] [i64 3, i64 3, i64 4, i64 4, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_j = internal constant [21 x i64] [i64 4, i64 5, i64 3, i64 5, i64 3, i64 4, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_j = internal constant [21 x i64] [i64 4, i64 5, i64 3, i64 5, i64 3, i64 4, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  %scratch = getelementptr inbounds double, double* %w, i64 184
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -222,7 +224,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -253,7 +255,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -311,82 +313,82 @@ ends:
 }
 
 
-define internal void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 36
   %v2 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 74
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 880, i1 false)
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_tape_src, i64 0, i64 0))
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 1472)
+  %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
-  %raw = call i8* @malloc(i64 1472)
+  %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -399,29 +401,29 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -547,211 +549,193 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
-  %v3 = call double @llvm.sin.f64(double %v2)
-  %v4 = getelementptr inbounds double, double* %w, i64 1
-  store double %v3, double* %v4, align 8
-  %v5 = getelementptr inbounds double, double* %x, i64 11
-  %v6 = load double, double* %v5, align 8
-  %v7 = call double @llvm.sin.f64(double %v6)
-  %v8 = getelementptr inbounds double, double* %w, i64 2
-  store double %v7, double* %v8, align 8
-  %v9 = call double @llvm.cos.f64(double %v2)
-  %v10 = getelementptr inbounds double, double* %w, i64 4
+  %v3 = call double @llvm.cos.f64(double %v2)
+  %v4 = fmul double 0x3FF0000000000000, %v3
+  %v5 = getelementptr inbounds double, double* %out, i64 0
+  store double %v4, double* %v5, align 8
+  %v6 = getelementptr inbounds double, double* %x, i64 11
+  %v7 = load double, double* %v6, align 8
+  %v8 = call double @llvm.cos.f64(double %v7)
+  %v9 = fmul double 0x3FF0000000000000, %v8
+  %v10 = getelementptr inbounds double, double* %out, i64 1
   store double %v9, double* %v10, align 8
-  %v11 = call double @llvm.cos.f64(double %v6)
-  %v12 = getelementptr inbounds double, double* %w, i64 5
-  store double %v11, double* %v12, align 8
-  %v13 = getelementptr inbounds double, double* %x, i64 3
-  %v14 = load double, double* %v13, align 8
-  %v15 = fmul double 0x4024000000000000, %v14
-  %v16 = getelementptr inbounds double, double* %w, i64 6
-  store double %v15, double* %v16, align 8
-  %v17 = getelementptr inbounds double, double* %x, i64 4
-  %v18 = load double, double* %v17, align 8
-  %v19 = fmul double 0x4014000000000000, %v18
-  %v20 = getelementptr inbounds double, double* %w, i64 7
-  store double %v19, double* %v20, align 8
-  %v21 = getelementptr inbounds double, double* %x, i64 5
-  %v22 = load double, double* %v21, align 8
-  %v23 = fmul double 0x400AAAAAAAAAAAAB, %v22
-  %v24 = getelementptr inbounds double, double* %w, i64 8
-  store double %v23, double* %v24, align 8
-  %v25 = fmul double 0x3FB999999999999A, %v19
-  %v26 = fmul double %v25, %v23
-  %v27 = getelementptr inbounds double, double* %w, i64 9
-  store double %v26, double* %v27, align 8
-  %v28 = fmul double 0xBFC999999999999A, %v15
-  %v29 = fmul double %v28, %v23
-  %v30 = getelementptr inbounds double, double* %w, i64 10
+  %v11 = call double @llvm.sin.f64(double %v2)
+  %v12 = fneg double %v11
+  %v13 = fmul double 0x3FF0000000000000, %v12
+  %v14 = getelementptr inbounds double, double* %out, i64 2
+  store double %v13, double* %v14, align 8
+  %v15 = call double @llvm.sin.f64(double %v7)
+  %v16 = fneg double %v15
+  %v17 = fmul double 0x3FF0000000000000, %v16
+  %v18 = getelementptr inbounds double, double* %out, i64 3
+  store double %v17, double* %v18, align 8
+  %v19 = getelementptr inbounds double, double* %x, i64 3
+  %v20 = load double, double* %v19, align 8
+  %v21 = fmul double 0x3FF0000000000000, 0x4024000000000000
+  %v22 = getelementptr inbounds double, double* %out, i64 4
+  store double %v21, double* %v22, align 8
+  %v23 = getelementptr inbounds double, double* %x, i64 4
+  %v24 = load double, double* %v23, align 8
+  %v25 = fmul double 0x3FF0000000000000, 0x4014000000000000
+  %v26 = getelementptr inbounds double, double* %out, i64 5
+  store double %v25, double* %v26, align 8
+  %v27 = getelementptr inbounds double, double* %x, i64 5
+  %v28 = load double, double* %v27, align 8
+  %v29 = fmul double 0x3FF0000000000000, 0x400AAAAAAAAAAAAB
+  %v30 = getelementptr inbounds double, double* %out, i64 6
   store double %v29, double* %v30, align 8
-  %v31 = fmul double 0x3FB999999999999A, %v15
-  %v32 = fmul double %v31, %v19
-  %v33 = getelementptr inbounds double, double* %w, i64 11
-  store double %v32, double* %v33, align 8
-  %v34 = getelementptr inbounds double, double* %x, i64 0
-  %v35 = load double, double* %v34, align 8
-  %v36 = fmul double 0x3FE0000000000000, %v35
-  %v37 = getelementptr inbounds double, double* %w, i64 12
-  store double %v36, double* %v37, align 8
-  %v38 = getelementptr inbounds double, double* %x, i64 1
-  %v39 = load double, double* %v38, align 8
-  %v40 = fmul double 0x3FE0000000000000, %v39
-  %v41 = getelementptr inbounds double, double* %w, i64 13
-  store double %v40, double* %v41, align 8
-  %v42 = getelementptr inbounds double, double* %x, i64 2
-  %v43 = load double, double* %v42, align 8
-  %v44 = fmul double 0x3FE0000000000000, %v43
-  %v45 = getelementptr inbounds double, double* %w, i64 14
-  store double %v44, double* %v45, align 8
-  %v46 = fmul double 0x3FF0000000000000, %v9
-  %v47 = getelementptr inbounds double, double* %out, i64 0
-  store double %v46, double* %v47, align 8
-  %v48 = fmul double 0x3FF0000000000000, %v11
-  %v49 = getelementptr inbounds double, double* %out, i64 1
-  store double %v48, double* %v49, align 8
-  %v50 = fneg double %v3
-  %v51 = fmul double 0x3FF0000000000000, %v50
-  %v52 = getelementptr inbounds double, double* %out, i64 2
-  store double %v51, double* %v52, align 8
-  %v53 = fneg double %v7
-  %v54 = fmul double 0x3FF0000000000000, %v53
-  %v55 = getelementptr inbounds double, double* %out, i64 3
-  store double %v54, double* %v55, align 8
-  %v56 = fmul double 0x3FF0000000000000, 0x4024000000000000
-  %v57 = getelementptr inbounds double, double* %out, i64 4
-  store double %v56, double* %v57, align 8
-  %v58 = fmul double 0x3FF0000000000000, 0x4014000000000000
-  %v59 = getelementptr inbounds double, double* %out, i64 5
-  store double %v58, double* %v59, align 8
-  %v60 = fmul double 0x3FF0000000000000, 0x400AAAAAAAAAAAAB
-  %v61 = getelementptr inbounds double, double* %out, i64 6
-  store double %v60, double* %v61, align 8
-  %v62 = fmul double 0x3FB999999999999A, %v23
-  %v63 = fmul double 0x3FB999999999999A, %v19
-  %v64 = fmul double 0x3FF0000000000000, %v62
-  %v65 = fmul double 0x3FF0000000000000, %v63
-  %v66 = getelementptr inbounds double, double* %out, i64 7
-  store double %v64, double* %v66, align 8
-  %v67 = getelementptr inbounds double, double* %out, i64 8
-  store double %v65, double* %v67, align 8
-  %v68 = fmul double 0xBFC999999999999A, %v23
-  %v69 = fmul double 0xBFC999999999999A, %v15
-  %v70 = fmul double 0x3FF0000000000000, %v68
-  %v71 = fmul double 0x3FF0000000000000, %v69
-  %v72 = getelementptr inbounds double, double* %out, i64 9
-  store double %v70, double* %v72, align 8
-  %v73 = getelementptr inbounds double, double* %out, i64 10
-  store double %v71, double* %v73, align 8
-  %v74 = fmul double 0x3FB999999999999A, %v19
-  %v75 = fmul double 0x3FB999999999999A, %v15
-  %v76 = fmul double 0x3FF0000000000000, %v74
-  %v77 = fmul double 0x3FF0000000000000, %v75
-  %v78 = getelementptr inbounds double, double* %out, i64 11
-  store double %v76, double* %v78, align 8
-  %v79 = getelementptr inbounds double, double* %out, i64 12
-  store double %v77, double* %v79, align 8
-  %v80 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v81 = getelementptr inbounds double, double* %out, i64 13
-  store double %v80, double* %v81, align 8
-  %v82 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v83 = getelementptr inbounds double, double* %out, i64 14
-  store double %v82, double* %v83, align 8
-  %v84 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
-  %v85 = getelementptr inbounds double, double* %out, i64 15
-  store double %v84, double* %v85, align 8
-  %v86 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v87 = getelementptr inbounds double, double* %out, i64 16
-  store double %v86, double* %v87, align 8
-  %v88 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v89 = getelementptr inbounds double, double* %out, i64 17
-  store double %v88, double* %v89, align 8
-  %v90 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
-  %v91 = getelementptr inbounds double, double* %out, i64 18
-  store double %v90, double* %v91, align 8
-  %v92 = getelementptr inbounds double, double* %out, i64 19
-  store double 0x3FF0000000000000, double* %v92, align 8
-  %v93 = fdiv double 0x3FF0000000000000, %v9
-  %v94 = fmul double %v11, %v15
-  %v95 = fmul double %v19, %v7
-  %v96 = fneg double %v95
-  %v97 = fadd double %v94, %v96
-  %v98 = fmul double 0x3FF0000000000000, %v97
-  %v99 = fmul double 0x3FF0000000000000, %v93
-  %v100 = fmul double 0xBFF0000000000000, %v7
-  %v101 = fmul double 0xBFF0000000000000, %v19
-  %v102 = fmul double %v99, %v100
-  %v103 = fmul double %v99, %v101
-  %v104 = fmul double %v99, %v15
-  %v105 = fmul double %v99, %v11
-  %v106 = fmul double %v9, %v9
-  %v107 = fdiv double 0x3FF0000000000000, %v106
-  %v108 = fmul double 0xBFF0000000000000, %v107
-  %v109 = fmul double %v98, %v108
-  %v110 = getelementptr inbounds double, double* %out, i64 20
-  store double %v109, double* %v110, align 8
-  %v111 = getelementptr inbounds double, double* %out, i64 21
-  store double %v104, double* %v111, align 8
-  %v112 = getelementptr inbounds double, double* %out, i64 22
-  store double %v105, double* %v112, align 8
-  %v113 = getelementptr inbounds double, double* %out, i64 23
-  store double %v102, double* %v113, align 8
-  %v114 = getelementptr inbounds double, double* %out, i64 24
-  store double %v103, double* %v114, align 8
-  %v115 = getelementptr inbounds double, double* %out, i64 25
-  store double 0x3FF0000000000000, double* %v115, align 8
-  %v116 = fmul double 0x3FF0000000000000, %v7
-  %v117 = fmul double 0x3FF0000000000000, %v15
-  %v118 = fmul double 0x3FF0000000000000, %v19
-  %v119 = fmul double 0x3FF0000000000000, %v11
-  %v120 = getelementptr inbounds double, double* %out, i64 26
-  store double %v118, double* %v120, align 8
-  %v121 = getelementptr inbounds double, double* %out, i64 27
-  store double %v116, double* %v121, align 8
-  %v122 = getelementptr inbounds double, double* %out, i64 28
-  store double %v119, double* %v122, align 8
-  %v123 = getelementptr inbounds double, double* %out, i64 29
-  store double %v117, double* %v123, align 8
-  %v124 = getelementptr inbounds double, double* %out, i64 30
-  store double 0x3FF0000000000000, double* %v124, align 8
-  %v125 = fmul double 0xBFF0000000000000, %v93
-  %v126 = fmul double %v125, %v97
-  %v127 = fmul double 0xBFF0000000000000, %v3
-  %v128 = fmul double %v127, %v97
-  %v129 = fmul double 0xBFF0000000000000, %v3
-  %v130 = fmul double %v129, %v93
-  %v131 = fmul double 0x3FF0000000000000, %v126
-  %v132 = fmul double 0x3FF0000000000000, %v128
-  %v133 = fmul double 0x3FF0000000000000, %v130
-  %v134 = fmul double 0xBFF0000000000000, %v7
-  %v135 = fmul double 0xBFF0000000000000, %v19
-  %v136 = fmul double %v133, %v134
-  %v137 = fmul double %v133, %v135
-  %v138 = fmul double %v133, %v15
-  %v139 = fmul double %v133, %v11
-  %v140 = fmul double 0xBFF0000000000000, %v107
-  %v141 = fmul double %v132, %v140
-  %v142 = getelementptr inbounds double, double* %out, i64 31
-  store double %v141, double* %v142, align 8
-  %v143 = getelementptr inbounds double, double* %out, i64 32
-  store double %v138, double* %v143, align 8
-  %v144 = getelementptr inbounds double, double* %out, i64 33
-  store double %v139, double* %v144, align 8
-  %v145 = getelementptr inbounds double, double* %out, i64 34
-  store double %v136, double* %v145, align 8
-  %v146 = getelementptr inbounds double, double* %out, i64 35
-  store double 0x3FF0000000000000, double* %v146, align 8
-  %v147 = getelementptr inbounds double, double* %out, i64 36
-  store double %v131, double* %v147, align 8
-  %v148 = getelementptr inbounds double, double* %out, i64 37
-  store double %v137, double* %v148, align 8
+  %v31 = getelementptr inbounds double, double* %w, i64 7
+  %v32 = load double, double* %v31, align 8
+  %v33 = getelementptr inbounds double, double* %w, i64 8
+  %v34 = load double, double* %v33, align 8
+  %v35 = fmul double 0x3FB999999999999A, %v34
+  %v36 = fmul double 0x3FB999999999999A, %v32
+  %v37 = fmul double 0x3FF0000000000000, %v35
+  %v38 = fmul double 0x3FF0000000000000, %v36
+  %v39 = getelementptr inbounds double, double* %out, i64 7
+  store double %v37, double* %v39, align 8
+  %v40 = getelementptr inbounds double, double* %out, i64 8
+  store double %v38, double* %v40, align 8
+  %v41 = getelementptr inbounds double, double* %w, i64 6
+  %v42 = load double, double* %v41, align 8
+  %v43 = fmul double 0xBFC999999999999A, %v34
+  %v44 = fmul double 0xBFC999999999999A, %v42
+  %v45 = fmul double 0x3FF0000000000000, %v43
+  %v46 = fmul double 0x3FF0000000000000, %v44
+  %v47 = getelementptr inbounds double, double* %out, i64 9
+  store double %v45, double* %v47, align 8
+  %v48 = getelementptr inbounds double, double* %out, i64 10
+  store double %v46, double* %v48, align 8
+  %v49 = fmul double 0x3FB999999999999A, %v32
+  %v50 = fmul double 0x3FB999999999999A, %v42
+  %v51 = fmul double 0x3FF0000000000000, %v49
+  %v52 = fmul double 0x3FF0000000000000, %v50
+  %v53 = getelementptr inbounds double, double* %out, i64 11
+  store double %v51, double* %v53, align 8
+  %v54 = getelementptr inbounds double, double* %out, i64 12
+  store double %v52, double* %v54, align 8
+  %v55 = getelementptr inbounds double, double* %x, i64 0
+  %v56 = load double, double* %v55, align 8
+  %v57 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v58 = getelementptr inbounds double, double* %out, i64 13
+  store double %v57, double* %v58, align 8
+  %v59 = getelementptr inbounds double, double* %x, i64 1
+  %v60 = load double, double* %v59, align 8
+  %v61 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v62 = getelementptr inbounds double, double* %out, i64 14
+  store double %v61, double* %v62, align 8
+  %v63 = getelementptr inbounds double, double* %x, i64 2
+  %v64 = load double, double* %v63, align 8
+  %v65 = fmul double 0x3FF0000000000000, 0x3FE0000000000000
+  %v66 = getelementptr inbounds double, double* %out, i64 15
+  store double %v65, double* %v66, align 8
+  %v67 = getelementptr inbounds double, double* %w, i64 9
+  %v68 = load double, double* %v67, align 8
+  %v69 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v70 = getelementptr inbounds double, double* %out, i64 16
+  store double %v69, double* %v70, align 8
+  %v71 = getelementptr inbounds double, double* %w, i64 10
+  %v72 = load double, double* %v71, align 8
+  %v73 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v74 = getelementptr inbounds double, double* %out, i64 17
+  store double %v73, double* %v74, align 8
+  %v75 = getelementptr inbounds double, double* %w, i64 11
+  %v76 = load double, double* %v75, align 8
+  %v77 = fmul double 0x3FF0000000000000, 0xBFF0000000000000
+  %v78 = getelementptr inbounds double, double* %out, i64 18
+  store double %v77, double* %v78, align 8
+  %v79 = getelementptr inbounds double, double* %out, i64 19
+  store double 0x3FF0000000000000, double* %v79, align 8
+  %v80 = getelementptr inbounds double, double* %w, i64 4
+  %v81 = load double, double* %v80, align 8
+  %v82 = fdiv double 0x3FF0000000000000, %v81
+  %v83 = getelementptr inbounds double, double* %w, i64 5
+  %v84 = load double, double* %v83, align 8
+  %v85 = fmul double %v84, %v42
+  %v86 = getelementptr inbounds double, double* %w, i64 2
+  %v87 = load double, double* %v86, align 8
+  %v88 = fmul double %v32, %v87
+  %v89 = fneg double %v88
+  %v90 = fadd double %v85, %v89
+  %v91 = fmul double 0x3FF0000000000000, %v90
+  %v92 = fmul double 0x3FF0000000000000, %v82
+  %v93 = fmul double 0xBFF0000000000000, %v87
+  %v94 = fmul double 0xBFF0000000000000, %v32
+  %v95 = fmul double %v92, %v93
+  %v96 = fmul double %v92, %v94
+  %v97 = fmul double %v92, %v42
+  %v98 = fmul double %v92, %v84
+  %v99 = fmul double %v81, %v81
+  %v100 = fdiv double 0x3FF0000000000000, %v99
+  %v101 = fmul double 0xBFF0000000000000, %v100
+  %v102 = fmul double %v91, %v101
+  %v103 = getelementptr inbounds double, double* %out, i64 20
+  store double %v102, double* %v103, align 8
+  %v104 = getelementptr inbounds double, double* %out, i64 21
+  store double %v97, double* %v104, align 8
+  %v105 = getelementptr inbounds double, double* %out, i64 22
+  store double %v98, double* %v105, align 8
+  %v106 = getelementptr inbounds double, double* %out, i64 23
+  store double %v95, double* %v106, align 8
+  %v107 = getelementptr inbounds double, double* %out, i64 24
+  store double %v96, double* %v107, align 8
+  %v108 = getelementptr inbounds double, double* %out, i64 25
+  store double 0x3FF0000000000000, double* %v108, align 8
+  %v109 = fmul double 0x3FF0000000000000, %v87
+  %v110 = fmul double 0x3FF0000000000000, %v42
+  %v111 = fmul double 0x3FF0000000000000, %v32
+  %v112 = fmul double 0x3FF0000000000000, %v84
+  %v113 = getelementptr inbounds double, double* %out, i64 26
+  store double %v111, double* %v113, align 8
+  %v114 = getelementptr inbounds double, double* %out, i64 27
+  store double %v109, double* %v114, align 8
+  %v115 = getelementptr inbounds double, double* %out, i64 28
+  store double %v112, double* %v115, align 8
+  %v116 = getelementptr inbounds double, double* %out, i64 29
+  store double %v110, double* %v116, align 8
+  %v117 = getelementptr inbounds double, double* %out, i64 30
+  store double 0x3FF0000000000000, double* %v117, align 8
+  %v118 = getelementptr inbounds double, double* %w, i64 1
+  %v119 = load double, double* %v118, align 8
+  %v120 = fmul double 0xBFF0000000000000, %v82
+  %v121 = fmul double %v120, %v90
+  %v122 = fmul double 0xBFF0000000000000, %v119
+  %v123 = fmul double %v122, %v90
+  %v124 = fmul double 0xBFF0000000000000, %v119
+  %v125 = fmul double %v124, %v82
+  %v126 = fmul double 0x3FF0000000000000, %v121
+  %v127 = fmul double 0x3FF0000000000000, %v123
+  %v128 = fmul double 0x3FF0000000000000, %v125
+  %v129 = fmul double 0xBFF0000000000000, %v87
+  %v130 = fmul double 0xBFF0000000000000, %v32
+  %v131 = fmul double %v128, %v129
+  %v132 = fmul double %v128, %v130
+  %v133 = fmul double %v128, %v42
+  %v134 = fmul double %v128, %v84
+  %v135 = fmul double 0xBFF0000000000000, %v100
+  %v136 = fmul double %v127, %v135
+  %v137 = getelementptr inbounds double, double* %out, i64 31
+  store double %v136, double* %v137, align 8
+  %v138 = getelementptr inbounds double, double* %out, i64 32
+  store double %v133, double* %v138, align 8
+  %v139 = getelementptr inbounds double, double* %out, i64 33
+  store double %v134, double* %v139, align 8
+  %v140 = getelementptr inbounds double, double* %out, i64 34
+  store double %v131, double* %v140, align 8
+  %v141 = getelementptr inbounds double, double* %out, i64 35
+  store double 0x3FF0000000000000, double* %v141, align 8
+  %v142 = getelementptr inbounds double, double* %out, i64 36
+  store double %v126, double* %v142, align 8
+  %v143 = getelementptr inbounds double, double* %out, i64 37
+  store double %v132, double* %v143, align 8
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 3
   %v2 = load double, double* %v1, align 8
@@ -815,7 +799,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -827,12 +811,12 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_20c3052fd06bb17a7fe1b7b954071f3d_ade4f2b66b00_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_cd44672e1387b16ffa53be2168e2f06b_2f993920c217_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
-N_WORK, N_EVAL = 184, 36   # the Jacobian's workspace, the others'
+N_WORK, N_EVAL = 196, 36   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 0, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
 # JAC_SIZE > _N: the Jacobian of the DAE x' = f(x, u), 0 = b(x) - A(x) u that keeps the

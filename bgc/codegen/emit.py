@@ -19,7 +19,7 @@ import jinja2
 import sympy as sp
 
 from bgc import __version__, methods, progress
-from bgc.codegen import kernels, start, workspace
+from bgc.codegen import instances, kernels, start, workspace
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.codegen.jacobian import tape
 from bgc.codegen.module_file import (  # noqa: F401
@@ -108,12 +108,17 @@ def _defines(item) -> list:
     return [item[0]]
 
 
-def _free(item) -> set:
-    return item.free_symbols if isinstance(item, LinearBlock) else item[1].free_symbols
+def _free(item, memo: dict | None = None) -> set:
+    """The symbols an assignment or a block reads (``memo``: ``instances.reads``', shared
+    by the cones and the instance loops of one module's programs)."""
+    if isinstance(item, LinearBlock):
+        return item.free_symbols
+    return item[1].free_symbols if memo is None else instances.reads(item[1], memo)
 
 
-def cone(assignments, targets):
-    """The assignments that ``targets`` depend on, in their original order."""
+def cone(assignments, targets, memo: dict | None = None):
+    """The assignments that ``targets`` depend on, in their original order (``memo``:
+    see ``_free``)."""
     need = set()
     for e in targets:
         need |= e.free_symbols
@@ -121,7 +126,7 @@ def cone(assignments, targets):
     for item in reversed(assignments):
         if any(v in need for v in _defines(item)):
             keep.append(item)
-            need |= _free(item)
+            need |= _free(item, memo)
     return keep[::-1], need
 
 
@@ -192,13 +197,17 @@ def _calls(e, roots: set, memo: dict) -> frozenset:
     return out
 
 
-def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
+def programs(system: EquationSystem, memo: dict | None = None
+             ) -> tuple[EquationSystem, dict, object]:
     """The kernels' programs of a system (its calls hoisted, ``hoist_calls``): name ->
-    (the assignments in causal order that its results need, [(out index, expr)]), and
-    the Jacobian's tape. ``kernels.lower`` turns them into IR."""
+    (the assignments in causal order that its results need, [(out index, expr)]; jac's:
+    none, and "rhs", the program it runs first: ``kernels.lower``), and
+    the Jacobian's tape. ``kernels.lower`` turns them into IR (``memo``: the symbols each
+    expression reads, for the cones here and the instance loops there)."""
     system, hoisted = hoist_calls(system)
     dx = [st.dsym for st in system.states]
-    rhs_asg, _ = cone(system.assignments, dx)
+    free = {} if memo is None else memo
+    rhs_asg, _ = cone(system.assignments, dx, free)
     a_patterns = {it.index: workspace.factor_pattern(len(it.unknowns), *it.factors)
                   for it in rhs_asg if isinstance(it, LinearBlock)
                   and it.regularize is not None}
@@ -211,30 +220,38 @@ def programs(system: EquationSystem) -> tuple[EquationSystem, dict, object]:
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
-    jac_all, _ = cone(system.assignments, jac_targets)
+    jac_all, _ = cone(system.assignments, jac_targets, free)
+    # the partials read values that rhs computes (all of them, when the tape's inputs
+    # are rhs's): program jac runs rhs first and adds only the partials, instead of
+    # computing those values again in code of its own (as much code as rhs: half the
+    # instance loops' scheduling, lowering and LLVM's work of a large model)
+    in_rhs = {id(it) for it in rhs_asg}
+    jac = (([], jt.partials, "rhs") if all(id(it) in in_rhs for it in jac_all)
+           else (jac_all, jt.partials))
     out_exprs = [e for _, e in system.outputs]
-    out_asg, _ = cone(system.assignments, out_exprs)
+    out_asg, _ = cone(system.assignments, out_exprs, free)
     guard_exprs = [e for _, e in system.guards]
-    guard_asg, _ = cone(system.assignments, guard_exprs)
+    guard_asg, _ = cone(system.assignments, guard_exprs, free)
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
-    con_asg, _ = cone(system.assignments, con_exprs)
+    con_asg, _ = cone(system.assignments, con_exprs, free)
     progs = {
         "rhs": (rhs_asg, list(enumerate(dx))),
-        "jac": (jac_all, jt.partials),
+        "jac": jac,
         "out": (out_asg, list(enumerate(out_exprs))),
         "guard": (guard_asg, list(enumerate(guard_exprs))),
         "con": (con_asg, list(enumerate(con_exprs)))}
     if system.projection:       # every state's correction (zero where it has none)
         corrections = dict(system.projection)
         proj = [(i, corrections.get(i, sp.S.Zero)) for i in range(len(system.states))]
-        progs["proj"] = (cone(system.assignments, [e for _, e in proj])[0], proj)
+        progs["proj"] = (cone(system.assignments, [e for _, e in proj], free)[0], proj)
     return system, progs, jt
 
 
 def render(system: EquationSystem) -> str:
     """The module source for an equation system."""
-    system, progs, jt = programs(system)
+    memo: dict = {}
+    system, progs, jt = programs(system, memo)
     m = system.model
     dx = [st.dsym for st in system.states]
     freqs = [s.frequency.xreplace(system.folded) if system.folded else s.frequency
@@ -244,7 +261,7 @@ def render(system: EquationSystem) -> str:
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
-    kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt)
+    kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt, memo)
     # the kernels' names: the module's and its IR's digest (one model compiled with other
     # options is other code; two such modules in one process must not share a name)
     digest = hashlib.sha256(f"{kern.ir}\n{kern.ir_straight}".encode()).hexdigest()[:12]

@@ -64,10 +64,11 @@ def owners(instances) -> callable:
     cache: dict = {}
 
     def owner(s) -> str | None:
-        hit = cache.get(s, False)
+        name = s.name           # (a name's hash is cached in C; a sympy object's is not)
+        hit = cache.get(name, False)
         if hit is not False:
             return hit
-        name, hit = s.name, None
+        hit = None
         k = name.find(dot)
         while k >= 0 and hit is None:
             j = name.find("_")
@@ -85,7 +86,7 @@ def owners(instances) -> callable:
             if deeper not in idents:
                 break
             hit, k = deeper, k + len(dot) + len(seg)
-        hit = cache[s] = None if hit is None else idents[hit]
+        hit = cache[name] = None if hit is None else idents[hit]
         return hit
     return owner
 
@@ -115,7 +116,7 @@ def schedule(steps: list, instances, where, assigned: dict | None = None,
         e = step.e
         if isinstance(step, Grad) and e in assigned:
             return by_symbol(assigned[e])
-        found = {o for o in map(by_symbol, _symbols(e, owner.memo)) if o is not None}
+        found = {o for o in map(by_symbol, reads(e, owner.memo)) if o is not None}
         return found.pop() if len(found) == 1 else None
     owner.step, owner.memo = own, memo if memo is not None else {}
     owner.of = by_symbol
@@ -139,13 +140,17 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
     """One stretch between solves and stores: level by level, with loops."""
     if len(steps) < 2 * min_copies:
         return steps
-    level, defined = [], {}
+    level, defined = [], {}         # (by name: see owners)
+    memo = owner.memo
     for step in steps:
-        reads = _symbols(step.e, owner.memo)
-        lv = 1 + max((defined[s] for s in reads if s in defined), default=-1)
+        lv = 0
+        for s in reads(step.e, memo):
+            d = defined.get(s.name)
+            if d is not None and d >= lv:
+                lv = d + 1
         level.append(lv)
         if isinstance(step, Set):
-            defined[step.v] = lv
+            defined[step.v.name] = lv
     by_level: dict[int, list] = {}
     for lv, step in zip(level, steps):
         by_level.setdefault(lv, []).append(step)
@@ -157,9 +162,10 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
     return out if looped else steps
 
 
-def _symbols(e, memo: dict) -> frozenset:
+def reads(e, memo: dict) -> frozenset:
     """The symbols ``e`` reads (sympy's ``free_symbols``, memoized on the expressions,
-    which the programs of a module share)."""
+    which the programs of a module share: ``emit.cone`` and ``schedule`` fill one
+    memo)."""
     hit = memo.get(id(e))
     if hit is not None and hit[0] is e:
         return hit[1]
@@ -168,7 +174,7 @@ def _symbols(e, memo: dict) -> frozenset:
     elif not e.args:
         out = frozenset()
     else:
-        out = frozenset().union(*(_symbols(a, memo) for a in e.args))
+        out = frozenset().union(*(reads(a, memo) for a in e.args))
     memo[id(e)] = (e, out)
     return out
 
@@ -232,13 +238,14 @@ class _View:
 
     def name(self, s) -> str:
         """``s``'s name with ``o`` as '@' and its array's instances by offset."""
-        hit = self.names.get(s)
+        name = s.name
+        hit = self.names.get(name)
         if hit is None:
-            hit = s.name.replace(self.mark, "@" + symbols.DOT)
+            hit = name.replace(self.mark, "@" + symbols.DOT)
             if self.arrays is not None and self.base is not None:
                 hit = self.arrays.sub(self._offset, hit)
             hit = _DIGITS.sub(_padded, hit)      # counters (x__99, x__100) in number order
-            self.names[s] = hit
+            self.names[name] = hit
         return hit
 
     def key(self, e) -> str:
@@ -289,23 +296,23 @@ def _canonical(block: list, view: _View, where, memo: dict):
         return ("grad", view.key(step.e),
                 tuple(sorted(view.name(w) for _, w in step.partials)))
     ordered = sorted(block, key=sort_key)
-    ph: dict = {}
+    ph: dict = {}           # placeholder numbers by symbol name (see owners)
+    syms: list = []         # the symbols in that order
     nums: list = []
     key = []
     for i, step in enumerate(ordered):
         if isinstance(step, Set):
-            lhs = _place(step.v, ph)
-            key.append(("set", lhs) + _shape(step.e, ph, nums, view))
+            lhs = _place(step.v, ph, syms)
+            key.append(("set", lhs) + _shape(step.e, ph, syms, nums, view))
         elif isinstance(step, Out):
-            key.append(("out",) + _shape(step.e, ph, nums, view))
+            key.append(("out",) + _shape(step.e, ph, syms, nums, view))
         elif isinstance(step, Store):
-            key.append(("store",) + _shape(step.e, ph, nums, view))
+            key.append(("store",) + _shape(step.e, ph, syms, nums, view))
         else:
-            shape = _shape(step.e, ph, nums, view)
-            partials = sorted(step.partials, key=lambda jw: (_place(jw[1], ph),))
+            shape = _shape(step.e, ph, syms, nums, view)
+            partials = sorted(step.partials, key=lambda jw: _place(jw[1], ph, syms))
             ordered[i] = step = Grad(step.e, partials)
-            key.append(("grad",) + shape + (tuple(ph[w] for _, w in partials),))
-    syms = list(ph)
+            key.append(("grad",) + shape + (tuple(ph[w.name] for _, w in partials),))
     bases = tuple(_where(s, where, memo)[0] for s in syms)
     return (tuple(key), bases), (ordered, syms, nums)
 
@@ -318,44 +325,57 @@ def _where(s, where, memo: dict) -> tuple[str, int]:
     return hit
 
 
-def _shape(e, ph: dict, nums: list, view: _View) -> tuple:
+def _shape(e, ph: dict, syms: list, nums: list, view: _View) -> tuple:
     """``e``'s shape (``_walk``, its symbols numbered within it; memoized on the
     expression and the instance it is seen from) and its symbols as placeholders of the
-    block (``ph``); its numbers appended to ``nums``."""
+    block (``ph``, ``syms``: ``_place``); its numbers appended to ``nums``."""
     k = id(e)
     hit = view.shapes.get(k)
     if hit is None or hit[0] is not e:
         local: dict = {}
+        order: list = []
         found: list = []
-        hit = view.shapes[k] = (e, _walk(e, local, found, view), list(local), found)
-    _, shape, syms, found = hit
+        shape = _walk(e, local, order, found, view)
+        hit = view.shapes[k] = (e, shape, order, [s.name for s in order], found)
+    _, shape, order, names, found = hit
     nums.extend(found)
-    return shape, tuple(_place(s, ph) for s in syms)
+    out = []
+    for s, name in zip(order, names):
+        i = ph.get(name)
+        if i is None:
+            i = ph[name] = len(syms)
+            syms.append(s)
+        out.append(i)
+    return shape, tuple(out)
 
 
-def _place(s, ph: dict) -> int:
-    i = ph.get(s)
+def _place(s, ph: dict, syms: list) -> int:
+    """``s``'s number among the placeholders ``ph`` (by name), a new one at the end."""
+    name = s.name
+    i = ph.get(name)
     if i is None:
-        i = ph[s] = len(ph)
+        i = ph[name] = len(syms)
+        syms.append(s)
     return i
 
 
-def _walk(e, ph: dict, nums: list, view: _View):
+def _walk(e, ph: dict, syms: list, nums: list, view: _View):
     """``e``'s shape: symbols by placeholder number, numbers out (into ``nums``), but
     those that are structure (integer exponents, a table's index); a sum's or product's
     arguments in ``view``'s order."""
     if e.is_Symbol:
-        return _place(e, ph) if e is not symbols.t else "t"
+        return _place(e, ph, syms) if e is not symbols.t else "t"
     if e.is_Number:
         nums.append(e)
         return "#"
     if e.is_Pow and e.exp.is_Number:
-        return ("Pow", _walk(e.base, ph, nums, view), str(e.exp))
+        return ("Pow", _walk(e.base, ph, syms, nums, view), str(e.exp))
     if isinstance(e, (table, table_slope)):
-        return (type(e).__name__, str(e.args[0]), _walk(e.args[1], ph, nums, view))
+        return (type(e).__name__, str(e.args[0]), _walk(e.args[1], ph, syms, nums, view))
     if not e.args:
         return (type(e).__name__, str(e))        # pi, E, true, false, nan ...
-    return (type(e).__name__,) + tuple(_walk(a, ph, nums, view) for a in view.args(e))
+    return (type(e).__name__,) + tuple(_walk(a, ph, syms, nums, view)
+                                       for a in view.args(e))
 
 
 def _loop(members: list, where, view: _View) -> Loop:
@@ -402,10 +422,10 @@ def _loop(members: list, where, view: _View) -> Loop:
             steps.append(Grad(e, [(len(T) + len(slots) + k, sym_map[w])
                                   for k, (_, w) in enumerate(step.partials)]))
             slots += ["out"] * len(step.partials)
-    bases = [where(s)[0] for s in first_syms] + slots
+    bases = [_where(s, where, view.memo)[0] for s in first_syms] + slots
     lp = Loop(steps, T, bases, C)
     for o, _, (ordered, syms, nums) in members:
-        row = [where(s)[1] for s in syms]
+        row = [_where(s, where, view.memo)[1] for s in syms]
         row += [slot for step in ordered if not isinstance(step, Set)
                 for slot in ([step.slot] if isinstance(step, (Out, Store))
                              else [m for m, _ in step.partials])]

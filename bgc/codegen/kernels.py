@@ -95,7 +95,7 @@ class Module(linalg.LinearBlocks):
     the linear blocks' functions (``linalg.LinearBlocks``) and the C entry points of the
     native integrators."""
 
-    def __init__(self, prefix: str, system, layout: Layout):
+    def __init__(self, prefix: str, system, layout: Layout, memo: dict | None = None):
         self.prefix, self.layout = prefix, layout
         self.states = {st.sym: i for i, st in enumerate(system.states)}
         self.params = {s: i for i, (s, _, _) in enumerate(system.params)}
@@ -107,7 +107,8 @@ class Module(linalg.LinearBlocks):
         self.loops = 0
         self.assigned = {it[1]: it[0] for it in system.assignments
                          if not isinstance(it, LinearBlock)} if self.instances else {}
-        self.memo: dict = {}                # instances.schedule's, shared by the programs
+        # instances.schedule's, shared by the programs (and with emit.programs' cones)
+        self.memo: dict = {} if memo is None else memo
 
     @staticmethod
     def _region(fn: Function, offset: int, base: str = "%w") -> str:
@@ -126,9 +127,11 @@ class Module(linalg.LinearBlocks):
             fn.body.append(f"  call void @llvm.memcpy.p0i8.p0i8.i64(i8* "
                            f"{self._region(fn, to)}, i8* {self._region(fn, frm)}, "
                            f"i64 {8 * count}, i1 false)")
-    def program(self, name: str, items, outputs):
+    def program(self, name: str, items, outputs, after: str | None = None):
         """``@<prefix>_<name>(t, x, p, w, out)``: the assignments in chunks, each linear
-        block solved where the causal order reaches it."""
+        block solved where the causal order reaches it; ``after``: a program called
+        first, whose values in w the steps read (its own outputs into the layout's
+        ``scratch``)."""
         chunks: list[str] = []       # calls, in order
         fn = None
         count = 0
@@ -162,7 +165,12 @@ class Module(linalg.LinearBlocks):
             count += 1
             self.lower_step(fn, step)
         flush()
-        if self.layout.tables:
+        if after is not None:           # (it computes the tables' values too)
+            chunks[:0] = [f"  %scratch = getelementptr inbounds double, double* %w, i64 "
+                          f"{self.layout.scratch}",
+                          f"  call void @{self.prefix}_{after}(double %t, double* %x, "
+                          f"double* %p, double* %w, double* %scratch)"]
+        elif self.layout.tables:
             chunks.insert(0, f"  call void @{self.prefix}_tables(double %t, double* %w)")
         self.functions.append("\n".join(
             [f"define void @{self.prefix}_{name}({ARGS}) nounwind {{", "entry:", *chunks,
@@ -359,16 +367,20 @@ ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "gua
            ("proj_entry", "proj"), ("jacv_entry", "jac_vals"))
 
 
-def lower(system, prefix: str, programs: dict, jt) -> Kernels:
-    """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)]):
+def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None) -> Kernels:
+    """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)])
+    or (those, the name of a program run first, as the Jacobian runs rhs):
     ``PROGRAMS``, and any other, e.g. an FMU's event indicators) and for the Jacobian
     from its tape ``jt`` (program ``jac`` computes the tape's partials); functions named
-    ``<prefix>_<name>``, ``prefix`` an identifier."""
+    ``<prefix>_<name>``, ``prefix`` an identifier. ``memo``: ``emit.programs``' (the
+    symbols each expression reads), for the instance loops."""
     layout = Layout(system, max(jt.n_colours, 1))
     n_eval = layout.size
     layout.pv = layout.region(max(len(jt.src), 1))
     layout.d = layout.region(jt.n_rows * jt.n_colours)
-    mod = Module(prefix, system, layout)
+    if any(len(p) > 2 for p in programs.values()):     # a program run after another
+        layout.scratch = layout.region(len(system.states))
+    mod = Module(prefix, system, layout, memo)
     blocks = layout.blocks.values()
     if blocks:
         mod.decls |= {MEMCPY, "declare double @llvm.fabs.f64(double)"}

@@ -12,52 +12,64 @@ def strongly_connected(nodes: Iterable[Hashable],
 
     Each component is listed in the order its nodes were given; components come in an
     order where everything a component depends on comes before it (a BLT ordering).
+    The search runs on the nodes' positions: a sympy symbol's hash and equality are
+    Python methods, and the search asks for them many times per edge.
     """
     nodes = list(nodes)
     order = {n: i for i, n in enumerate(nodes)}
-    index: dict = {}
-    low: dict = {}
-    on_stack: set = set()
-    stack: list = []
+    at = order.get
+    adj = []
+    for n in nodes:
+        row = []
+        for d in deps.get(n, ()):
+            j = at(d)
+            if j is not None:
+                row.append(j)
+        adj.append(row)
+    index = [-1] * len(nodes)
+    low = [0] * len(nodes)
+    on_stack = [False] * len(nodes)
+    stack: list[int] = []
     out: list[list] = []
     counter = 0
-    for root in nodes:
-        if root in index:
+    for root in range(len(nodes)):
+        if index[root] >= 0:
             continue
-        work = [(root, iter(d for d in deps.get(root, ()) if d in order))]
+        work = [(root, iter(adj[root]))]
         index[root] = low[root] = counter
         counter += 1
         stack.append(root)
-        on_stack.add(root)
+        on_stack[root] = True
         while work:
             node, it = work[-1]
             advanced = False
             for d in it:
-                if d not in index:
+                if index[d] < 0:
                     index[d] = low[d] = counter
                     counter += 1
                     stack.append(d)
-                    on_stack.add(d)
-                    work.append((d, iter(x for x in deps.get(d, ()) if x in order)))
+                    on_stack[d] = True
+                    work.append((d, iter(adj[d])))
                     advanced = True
                     break
-                if d in on_stack:
-                    low[node] = min(low[node], index[d])
+                if on_stack[d] and index[d] < low[node]:
+                    low[node] = index[d]
             if advanced:
                 continue
             work.pop()
             if work:
                 parent = work[-1][0]
-                low[parent] = min(low[parent], low[node])
+                if low[node] < low[parent]:
+                    low[parent] = low[node]
             if low[node] == index[node]:
                 comp = []
                 while True:
                     w = stack.pop()
-                    on_stack.discard(w)
+                    on_stack[w] = False
                     comp.append(w)
                     if w == node:
                         break
-                out.append(sorted(comp, key=order.__getitem__))
+                out.append([nodes[i] for i in sorted(comp)])
     return out
 
 

@@ -28,7 +28,7 @@ def trivial(d) -> bool:
 def derivative(e, s, free: dict | None = None):
     """``sp.diff(e, s)``, the same expression, faster: sums and products are
     differentiated here as sympy does (sum rule; product rule in the order of the factors,
-    the terms added at once), skipping sympy's per-node Derivative construction and its
+    the terms added at once; sin and cos by the chain rule), skipping sympy's per-node Derivative construction and its
     ``is_zero`` assumption queries, and subtrees without ``s`` (``free``: a memo of free
     symbols, shared between the calls on one expression). Anything else goes to sympy."""
     if e is s:
@@ -52,7 +52,18 @@ def derivative(e, s, free: dict | None = None):
                 terms.append(factors[0] if len(factors) == 1 else
                              sp.Mul(*factors, _sympify=False))
         return _sum(terms)
+    if e.func in _CHAIN:                # sin, cos (the poses' rotations): the chain rule
+        da = derivative(e.args[0], s, free)
+        if da is sp.S.Zero:
+            return da
+        outer = _CHAIN[e.func](e.args[0])
+        return outer if da is sp.S.One else sp.Mul(outer, da, _sympify=False)
     return sp.diff(e, s)
+
+
+# d f(a)/da of the functions the kinematics call, as sympy's diff writes it (its
+# Derivative objects and assumption queries were a quarter of the constraints' rows)
+_CHAIN = {sp.sin: sp.cos, sp.cos: lambda a: -sp.sin(a)}
 
 
 def _sum(terms):
@@ -61,6 +72,19 @@ def _sum(terms):
     if len(terms) < 2:
         return terms[0] if terms else sp.S.Zero
     return sp.Add(*terms, _sympify=False)
+
+
+def _times(a, b):
+    """``sp.Mul(a, b)``, the same expression; the rows' most common products (a symbol
+    times a symbol, a rational number times a symbol: two of three) ordered as sympy's
+    ``Mul.flatten`` orders them (the number first, symbols by ``Basic.compare``) without
+    its general pass, the rest by sympy."""
+    if type(b) is sp.Symbol:
+        if type(a) is sp.Symbol and a is not b:
+            return sp.Mul._from_args((a, b) if a.compare(b) < 0 else (b, a), True)
+        if a.is_Rational and a is not sp.S.Zero and a is not sp.S.One:
+            return sp.Mul._from_args((a, b), True)
+    return sp.Mul(a, b, _sympify=False)
 
 
 def directional(e, sens: dict) -> dict[int, sp.Expr]:
@@ -76,7 +100,7 @@ def directional(e, sens: dict) -> dict[int, sp.Expr]:
             # partial * ds, without sympy's work for 1 * x; each seed's terms added at
             # once (one after the other rebuilds the sum each time: quadratic)
             acc.setdefault(j, []).append(ds if partial is one else partial if ds is one
-                                         else sp.Mul(partial, ds, _sympify=False))
+                                         else _times(partial, ds))
     out = {}
     for j in sorted(acc):
         d = _sum(acc[j])

@@ -9,6 +9,7 @@ Parameters: T0, J_rotor, J_load, n, k, b
 Outputs:    load_angle, load_speed, rotor_speed, load_momentum
 """
 
+import ctypes
 import hashlib
 import math
 import os
@@ -25,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "a0d33b5d81d9a6efe33eaa58ede1ccfc"
+MODEL_HASH = "ef33e81e21f68a8657acf058ad841049"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -37,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc"
+    sys.modules.setdefault("_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )
@@ -104,8 +105,8 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67"
-KERNEL_FUNCTIONS = 20
+_KERNEL_PREFIX = "_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7"
+KERNEL_FUNCTIONS = 21
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
 
@@ -113,55 +114,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_ptr = internal constant [8 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7, i64 8]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape_ptr = internal constant [8 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 6, i64 7, i64 8]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_src = internal constant [8 x i64] [i64 -1, i64 -2, i64 0, i64 2, i64 1, i64 3, i64 4, i64 2]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape_src = internal constant [8 x i64] [i64 -1, i64 -2, i64 0, i64 2, i64 1, i64 3, i64 4, i64 2]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row = internal constant [3 x i64] [i64 5, i64 5, i64 6]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_row = internal constant [3 x i64] [i64 5, i64 5, i64 6]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_col = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_zero = internal constant [3 x i64] [i64 0, i64 0, i64 0]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_k = internal constant [3 x i64] [i64 0, i64 1, i64 2]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_i = internal constant [3 x i64] [i64 0, i64 0, i64 1]
 
-@_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
+@_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_j = internal constant [3 x i64] [i64 0, i64 1, i64 0]
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 34
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -220,7 +221,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -251,7 +252,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -309,82 +310,91 @@ ends:
 }
 
 
-define internal void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 12
   %v2 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 20
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 112, i1 false)
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_tape_src, i64 0, i64 0))
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+entry:
+  %raw = call i8* @malloc(i64 96)
+  %w = bitcast i8* %raw to double*
+  call void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @free(i8* %raw)
+  ret void
+}
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -393,29 +403,31 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+declare void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con_entry(double %t, double* %x, double* %p, double* %out)
+
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -473,7 +485,7 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -539,7 +551,7 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -571,12 +583,12 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_a0d33b5d81d9a6efe33eaa58ede1ccfc_c7c26e93af67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_ef33e81e21f68a8657acf058ad841049_9cdb3935a7c7_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
@@ -665,7 +677,7 @@ def _load_kernels():
     for obj in objs:
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
     engine.finalize_object()
-    for name in ("rhs", "jac_full", "out", "guard", "con"):
+    for name in ("rhs", "jac_full", "out"):   # (numba's)
         symbol = f"{_KERNEL_PREFIX}_{name}"
         llvm.add_symbol(symbol, engine.get_function_address(symbol))
     return engine
@@ -706,8 +718,35 @@ def _kernel(symbol):
 _RHS = _kernel(_KERNEL_PREFIX + "_rhs")
 _JAC = _kernel(_KERNEL_PREFIX + "_jac_full")
 _OUT = _kernel(_KERNEL_PREFIX + "_out")
-_GUARD = _kernel(_KERNEL_PREFIX + "_guard")
-_CON = _kernel(_KERNEL_PREFIX + "_con")
+
+
+def _entry(name):
+    """The kernels' C entry point ``name`` (``void f(double t, double *x, double *p,
+    double *out)``, its workspace its own) as a ctypes function: what bgc's own Python
+    calls now and then, where a numba wrapper would cost a compile of its own."""
+    return ctypes.CFUNCTYPE(None, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p,
+                            ctypes.c_void_p)(_ENGINE.get_function_address(
+                                f"{_KERNEL_PREFIX}_{name}"))
+
+
+def _array(a, n):
+    """``a`` as a contiguous float64 array of length n (the kernels read raw memory:
+    another length is refused here, not read past)."""
+    v = np.ascontiguousarray(a, dtype=np.float64)
+    if v.shape != (n,):
+        raise ValueError("an argument has the wrong length for this model")
+    return v
+
+
+def _call(entry, t, x, p, out):
+    """``entry`` at (t, x, p) into ``out``; returns ``out``."""
+    xv, pv = _array(x, _N), _array(p, _NP)     # (kept alive across the call)
+    entry(float(t), xv.ctypes.data, pv.ctypes.data, out.ctypes.data)
+    return out
+
+
+_CON_ENTRY = _entry("con_entry")
+_GUARD_ENTRY = _entry("guard_entry")
 
 
 @njit(cache=True, error_model="numpy")
@@ -759,21 +798,15 @@ def outputs_at(t, X, p):
     return Y
 
 
-@njit(cache=True, error_model="numpy")
 def constraints(t, x, p):
     """Method lagrange: the deflection g of every blocked direction (0 where it has none),
-    then every rate dg/dt."""
-    c = np.empty(0)
-    _CON(t, _vec(x, _N), _vec(p, _NP), np.empty(N_EVAL), c)
-    return c
+    then every rate dg/dt (the kernel's C entry point: no numba wrapper to compile)."""
+    return _call(_CON_ENTRY, t, x, p, np.empty(0))
 
 
-@njit(cache=True, error_model="numpy")
 def guards(t, x, p):
     """Margins that must stay above zero (e.g. |cos b| of each body's Cardan angles)."""
-    g = np.empty(_NG)
-    _GUARD(t, _vec(x, _N), _vec(p, _NP), np.empty(N_EVAL), g)
-    return g
+    return _call(_GUARD_ENTRY, t, x, p, np.empty(_NG))
 
 
 def jacobian_values_entry_point():
@@ -798,7 +831,8 @@ def native_entry_points():
 
 def compile_all():
     """Compile everything now (``bgc compile`` does), so that a later import pays no
-    compile: numba's wrappers for float64 arrays (the kernels are compiled already)."""
+    compile: numba's wrappers for float64 arrays (the kernels are compiled already; the
+    functions on C entry points are called once too)."""
     for f in (rhs, jac, outputs, constraints, guards):
         f(0.0, X0, PARAMS)
     outputs_at(np.zeros(1), X0.reshape(1, -1), PARAMS)

@@ -19,7 +19,7 @@ import jinja2
 import sympy as sp
 
 from bgc import __version__, methods, progress
-from bgc.codegen import instances, kernels, start, workspace
+from bgc.codegen import kernels, start, workspace
 from bgc.codegen.equations import EquationSystem, LinearBlock
 from bgc.codegen.jacobian import tape
 from bgc.codegen.module_file import (  # noqa: F401
@@ -35,6 +35,7 @@ from bgc.codegen.printer import code
 from bgc.errors import BgcError
 from bgc.fileio import atomic_write
 from bgc.model import symbols
+from bgc.symbolic.algorithms import reads
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("bgc.codegen", "templates"),
                           trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
@@ -109,11 +110,11 @@ def _defines(item) -> list:
 
 
 def _free(item, memo: dict | None = None) -> set:
-    """The symbols an assignment or a block reads (``memo``: ``instances.reads``', shared
+    """The symbols an assignment or a block reads (``memo``: ``algorithms.reads``', shared
     by the cones and the instance loops of one module's programs)."""
     if isinstance(item, LinearBlock):
         return item.free_symbols
-    return item[1].free_symbols if memo is None else instances.reads(item[1], memo)
+    return item[1].free_symbols if memo is None else reads(item[1], memo)
 
 
 def cone(assignments, targets, memo: dict | None = None):

@@ -33,6 +33,7 @@ from bgc.codegen.lowering import Function
 from bgc.codegen.steps import STRAIGHT, Grad, LoopOver, Out, Set, Store
 from bgc.model import symbols
 from bgc.model.signals import table, table_slope
+from bgc.symbolic.algorithms import reads
 
 MIN_COPIES = 5           # the fewest instances of one structure that make a loop
 
@@ -160,23 +161,6 @@ def _segment(steps: list, owner, where, min_copies: int) -> list:
         looped = looped or bool(loops)
         out += straight + [LoopOver(lp) for lp in loops]
     return out if looped else steps
-
-
-def reads(e, memo: dict) -> frozenset:
-    """The symbols ``e`` reads (sympy's ``free_symbols``, memoized on the expressions,
-    which the programs of a module share: ``emit.cone`` and ``schedule`` fill one
-    memo)."""
-    hit = memo.get(id(e))
-    if hit is not None and hit[0] is e:
-        return hit[1]
-    if e.is_Symbol:
-        out = frozenset((e,))
-    elif not e.args:
-        out = frozenset()
-    else:
-        out = frozenset().union(*(reads(a, memo) for a in e.args))
-    memo[id(e)] = (e, out)
-    return out
 
 
 def _level(steps: list, owner, where, min_copies: int) -> tuple[list, list[Loop]]:

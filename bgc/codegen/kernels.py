@@ -36,7 +36,8 @@ The stage in parts, each a module:
   then the compressed forward-mode tape of ``bgc.codegen.jacobian`` as a loop over
   constant tables.
 - **C entry points** ``void f(double t, double *x, double *p, double *out)`` for bgc's
-  native integrators.
+  native integrators and the module's functions that bgc calls from Python now and then
+  (``constraints``, ``guards``, ``project``: through ctypes, no numba wrapper to compile).
 
 The IR is plain text, target-independent (no triple, no CPU), with every number written
 exactly (hexadecimal doubles): the same model gives the same bytes on every machine.
@@ -323,7 +324,7 @@ class Module(linalg.LinearBlocks):
             self.functions.append(linalg.schur_ir(P, n, jt.n_aug, lay.size))
 
     def entry(self, name: str, program: str, n_work: int):
-        """``@<prefix>_<name>(t, x, p, out)``: a C entry point for the native integrators,
+        """``@<prefix>_<name>(t, x, p, out)``: a C entry point (the native integrators',
         with a workspace of its own (malloc'ed: the SARIB's is ~100 kB, too large for a
         stack)."""
         self.decls |= {"declare i8* @malloc(i64)", "declare void @free(i8*)"}
@@ -364,7 +365,7 @@ def _declaration(definition: str) -> str:
 # and the C entry points of the native integrators
 PROGRAMS = ("rhs", "jac", "out", "guard", "con", "proj")
 ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "guard"),
-           ("proj_entry", "proj"), ("jacv_entry", "jac_vals"))
+           ("proj_entry", "proj"), ("jacv_entry", "jac_vals"), ("con_entry", "con"))
 
 
 def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None) -> Kernels:

@@ -76,3 +76,21 @@ def strongly_connected(nodes: Iterable[Hashable],
 def is_cyclic(comp: list, deps: Mapping) -> bool:
     """True if a strongly connected component is a loop (several nodes or a self-loop)."""
     return len(comp) > 1 or comp[0] in set(deps.get(comp[0], ()))
+
+
+def reads(e, memo: dict) -> frozenset:
+    """The symbols ``e`` reads (sympy's ``free_symbols``), memoized on the
+    subexpressions by identity (``memo``: whoever asks about many expressions that share
+    subtrees keeps one, e.g. the programs of a module: ``emit.cone`` and
+    ``instances.schedule``)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    if e.is_Symbol:
+        out = frozenset((e,))
+    elif not e.args:
+        out = frozenset()
+    else:
+        out = frozenset().union(*(reads(a, memo) for a in e.args))
+    memo[id(e)] = (e, out)
+    return out

@@ -127,13 +127,14 @@ def test_write_is_atomic_and_leaves_no_temp_files(tmp_path):
 def test_generated_module_imports_standalone(tmp_path):
     """`from generated import <model>` works in a fresh interpreter that has no bgc on
     its path, and the module imports only numpy, numba (with llvmlite, which compiles its
-    kernels) and the standard library; its C entry points for the native integrators are
-    there too."""
+    kernels) and the standard library (ctypes: the functions on the kernels' C entry
+    points); its C entry points for the native integrators are there too."""
     out = tmp_path / "generated"
     _, path = compile_model(MODELS / "dc_motor.yaml", out)
     text = path.read_text()
     imports = [ln for ln in text.splitlines() if ln.startswith(("import ", "from "))]
-    assert imports == ["import hashlib", "import math", "import os", "import sys",
+    assert imports == ["import ctypes", "import hashlib", "import math", "import os",
+                       "import sys",
                        "from types import ModuleType", "import llvmlite",
                        "import llvmlite.binding as llvm", "import numpy as np",
                        "from llvmlite import ir", "from numba import njit, types",
@@ -143,6 +144,8 @@ def test_generated_module_imports_standalone(tmp_path):
             "dx = m.rhs(0.0, m.X0, m.PARAMS); J = m.jac(0.0, m.X0, m.PARAMS)\n"
             "y = m.outputs(0.5, m.X0, m.PARAMS)\n"
             "assert all(a > 0 for a in m.native_entry_points())\n"
+            "assert len(m.guards(0.0, m.X0, m.PARAMS)) == 0\n"   # (through ctypes)
+            "assert len(m.constraints(0.0, m.X0, m.PARAMS)) == 0\n"
             "print(len(dx), J.shape, len(y), m.STATE_NAMES, m.MODEL_HASH, m.BGC_VERSION)")
     res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
                          text=True, env=dict(os.environ, PYTHONPATH=""))

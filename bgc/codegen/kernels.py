@@ -37,7 +37,8 @@ The stage in parts, each a module:
   constant tables.
 - **C entry points** ``void f(double t, double *x, double *p, double *out)`` for bgc's
   native integrators and the module's functions that bgc calls from Python now and then
-  (``constraints``, ``guards``, ``project``: through ctypes, no numba wrapper to compile).
+  (``constraints``, ``guards``, ``project``, ``outputs_at``'s loop ``out_at``: through
+  ctypes, no numba wrapper to compile).
 
 The IR is plain text, target-independent (no triple, no CPU), with every number written
 exactly (hexadecimal doubles): the same model gives the same bytes on every machine.
@@ -340,6 +341,38 @@ class Module(linalg.LinearBlocks):
             "  call void @free(i8* %raw)",
             "  ret void", "}"]))
 
+    def entry_at(self, n: int, n_out: int, n_work: int):
+        """``@<prefix>_out_at(t, X, k, p, Y)``: program out at the ``k`` instants
+        ``t[i]``, ``X[i, :]`` into ``Y[i, :]`` (row-major), one workspace for them all: a
+        run's outputs in one call from Python (``outputs_at``), the loop here."""
+        self.decls |= {"declare i8* @malloc(i64)", "declare void @free(i8*)"}
+        P = self.prefix
+        self.functions.append("\n".join([
+            f"define void @{P}_out_at(double* %t, double* %X, i64 %k, double* %p, "
+            f"double* %Y) nounwind {{",
+            "entry:",
+            f"  %raw = call i8* @malloc(i64 {8 * max(n_work, 1)})",
+            "  %w = bitcast i8* %raw to double*",
+            "  br label %head",
+            "head:",
+            "  %i = phi i64 [0, %entry], [%next, %body]",
+            "  %more = icmp slt i64 %i, %k",
+            "  br i1 %more, label %body, label %exit",
+            "body:",
+            "  %ti = getelementptr inbounds double, double* %t, i64 %i",
+            "  %tv = load double, double* %ti, align 8",
+            f"  %xo = mul i64 %i, {n}",
+            "  %xi = getelementptr inbounds double, double* %X, i64 %xo",
+            f"  %yo = mul i64 %i, {n_out}",
+            "  %yi = getelementptr inbounds double, double* %Y, i64 %yo",
+            f"  call void @{P}_out(double %tv, double* %xi, double* %p, double* %w, "
+            "double* %yi)",
+            "  %next = add i64 %i, 1",
+            "  br label %head",
+            "exit:",
+            "  call void @free(i8* %raw)",
+            "  ret void", "}"]))
+
     def text(self) -> str:
         """The loops' module: it declares the chunks it calls."""
         return "\n\n".join(sorted(self.decls) + self.globals + self.functions
@@ -411,6 +444,8 @@ def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None) -> 
         if program in programs or program.startswith("jac_"):
             mod.entry(name, program, layout.size if program.startswith("jac_") else n_eval)
     n = len(system.states)
+    if "out" in programs:
+        mod.entry_at(n, len(programs["out"][1]), n_eval)
     n_schur = layout.size + linalg.schur_work(n, jt.n_aug) if jt.n_aug else 0
     return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval, n_schur,
                    [layout.blocks[k] for k in sorted(layout.blocks)])

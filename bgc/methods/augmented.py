@@ -46,6 +46,7 @@ from bgc.errors import EquationError
 from bgc.methods.lagrange import Lagrange
 from bgc.methods.multipliers import MultiplierState, acceleration_constraints, default_alpha
 from bgc.model import symbols
+from bgc.symbolic.forward_mode import times
 from bgc.symbolic.linear import LinearBlock, Regularized
 
 EPS = "augmented__eps"
@@ -75,7 +76,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     terms: dict = {}
     for j, k, e in B:
         if (k, j) in k_of:
-            terms.setdefault(k, []).append(k_of[(k, j)] * e)
+            terms.setdefault(k, []).append(times(k_of[(k, j)], e))
     before, weights = [], []
     for i in rows:
         if not terms.get(i):
@@ -110,7 +111,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     impulse = {"V": {}, "G": {}}
     for j, k, e in B:
         for tag in impulse:         # (each sum's terms added at once, not one by one)
-            impulse[tag].setdefault(dynamic[j], []).append(e * mu[tag][k])
+            impulse[tag].setdefault(dynamic[j], []).append(times(e, mu[tag][k]))
     push = {}
     for x, terms in sorted(impulse["G"].items(), key=lambda kv: kv[0].name):
         v = sp.Symbol(f"PG_{x.name}", real=True)
@@ -119,7 +120,7 @@ def regularize_and_project(b, block: LinearBlock) -> tuple[list, LinearBlock, li
     for x, terms in impulse["V"].items():
         b.projection[x] = sp.Add(*terms)
     for q, prow in st.pose_rows.items():
-        e = sp.Add(*[c * push[x] for x, c in prow.items() if x in push])
+        e = sp.Add(*[times(c, push[x]) for x, c in prow.items() if x in push])
         if e != 0:
             b.projection[q] = e
     return before, block, after

@@ -23,7 +23,7 @@ from bgc.methods.base import ConstraintMethod, Equations, LoopSolution, TornLoop
 from bgc.solvers.consistent import RANK_PARAM
 from bgc.model import symbols
 from bgc.symbolic.algorithms import is_cyclic, strongly_connected
-from bgc.symbolic.forward_mode import directional, propagate
+from bgc.symbolic.forward_mode import directional, propagate, times
 from bgc.symbolic.linear import LinearBlock
 
 RANK = RANK_PARAM            # set by the simulator from the rank at the start
@@ -121,7 +121,7 @@ def acceleration_constraints(b: Equations, pose_rows: bool = False
         rows = {dynamic[j][0]: d for j, d in directional(r, ksens).items()}
         st.rows[lam] = rows
         rdot = sp.Add(directional(r, pose).get(0, sp.S.Zero),
-                      *[d * dx for x, dx in dynamic if (d := rows.get(x)) is not None])
+                      *[times(d, dx) for x, dx in dynamic if (d := rows.get(x)) is not None])
         g = c.g if c.g is not None else sp.S.Zero
         residual = (rdot + alpha * r if c.imposed
                     else rdot + 2 * alpha * r + alpha ** 2 * g)

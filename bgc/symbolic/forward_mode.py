@@ -74,11 +74,13 @@ def _sum(terms):
     return sp.Add(*terms, _sympify=False)
 
 
-def _times(a, b):
+def times(a, b):
     """``sp.Mul(a, b)``, the same expression; the rows' most common products (a symbol
     times a symbol, a rational number times a symbol: two of three) ordered as sympy's
     ``Mul.flatten`` orders them (the number first, symbols by ``Basic.compare``) without
     its general pass, the rest by sympy."""
+    if type(a) is sp.Symbol and type(b) is not sp.Symbol:
+        a, b = b, a
     if type(b) is sp.Symbol:
         if type(a) is sp.Symbol and a is not b:
             return sp.Mul._from_args((a, b) if a.compare(b) < 0 else (b, a), True)
@@ -100,7 +102,7 @@ def directional(e, sens: dict) -> dict[int, sp.Expr]:
             # partial * ds, without sympy's work for 1 * x; each seed's terms added at
             # once (one after the other rebuilds the sum each time: quadratic)
             acc.setdefault(j, []).append(ds if partial is one else partial if ds is one
-                                         else _times(partial, ds))
+                                         else times(partial, ds))
     out = {}
     for j in sorted(acc):
         d = _sum(acc[j])

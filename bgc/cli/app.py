@@ -8,6 +8,7 @@ form. Ctrl-C exits with status 130 and no traceback.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import functools
 import json
 import os
@@ -171,8 +172,6 @@ def entry():
         atexit._run_exitfuncs()
     finally:
         for stream in (sys.stdout, sys.stderr):
-            try:
+            with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
                 stream.flush()
-            except (OSError, ValueError):     # a closed pipe: nothing more to say there
-                pass
         os._exit(code)

@@ -207,8 +207,8 @@ def programs(system: EquationSystem, memo: dict | None = None
     expression reads, for the cones here and the instance loops there)."""
     system, hoisted = hoist_calls(system)
     dx = [st.dsym for st in system.states]
-    free = {} if memo is None else memo
-    rhs_asg, _ = cone(system.assignments, dx, free)
+    memo = {} if memo is None else memo
+    rhs_asg, _ = cone(system.assignments, dx, memo)
     a_patterns = {it.index: workspace.factor_pattern(len(it.unknowns), *it.factors)
                   for it in rhs_asg if isinstance(it, LinearBlock)
                   and it.regularize is not None}
@@ -221,7 +221,7 @@ def programs(system: EquationSystem, memo: dict | None = None
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
-    jac_all, _ = cone(system.assignments, jac_targets, free)
+    jac_all, _ = cone(system.assignments, jac_targets, memo)
     # the partials read values that rhs computes (all of them, when the tape's inputs
     # are rhs's): program jac runs rhs first and adds only the partials, instead of
     # computing those values again in code of its own (as much code as rhs: half the
@@ -230,12 +230,12 @@ def programs(system: EquationSystem, memo: dict | None = None
     jac = (([], jt.partials, "rhs") if all(id(it) in in_rhs for it in jac_all)
            else (jac_all, jt.partials))
     out_exprs = [e for _, e in system.outputs]
-    out_asg, _ = cone(system.assignments, out_exprs, free)
+    out_asg, _ = cone(system.assignments, out_exprs, memo)
     guard_exprs = [e for _, e in system.guards]
-    guard_asg, _ = cone(system.assignments, guard_exprs, free)
+    guard_asg, _ = cone(system.assignments, guard_exprs, memo)
     con_exprs = ([sp.S.Zero if g is None else g for _, g, _ in system.constraints]
                  + [r for _, _, r in system.constraints])
-    con_asg, _ = cone(system.assignments, con_exprs, free)
+    con_asg, _ = cone(system.assignments, con_exprs, memo)
     progs = {
         "rhs": (rhs_asg, list(enumerate(dx))),
         "jac": jac,
@@ -245,7 +245,7 @@ def programs(system: EquationSystem, memo: dict | None = None
     if system.projection:       # every state's correction (zero where it has none)
         corrections = dict(system.projection)
         proj = [(i, corrections.get(i, sp.S.Zero)) for i in range(len(system.states))]
-        progs["proj"] = (cone(system.assignments, [e for _, e in proj], free)[0], proj)
+        progs["proj"] = (cone(system.assignments, [e for _, e in proj], memo)[0], proj)
     return system, progs, jt
 
 

@@ -320,17 +320,10 @@ def _shape(e, ph: dict, syms: list, nums: list, view: _View) -> tuple:
         order: list = []
         found: list = []
         shape = _walk(e, local, order, found, view)
-        hit = view.shapes[k] = (e, shape, order, [s.name for s in order], found)
-    _, shape, order, names, found = hit
+        hit = view.shapes[k] = (e, shape, order, found)
+    _, shape, order, found = hit
     nums.extend(found)
-    out = []
-    for s, name in zip(order, names):
-        i = ph.get(name)
-        if i is None:
-            i = ph[name] = len(syms)
-            syms.append(s)
-        out.append(i)
-    return shape, tuple(out)
+    return shape, tuple([_place(s, ph, syms) for s in order])
 
 
 def _place(s, ph: dict, syms: list) -> int:

@@ -125,6 +125,7 @@ def test_rk4_stability_region_between_the_axes():
     assert h == pytest.approx(2.6197 / 300, rel=1e-3) and abs(lam) == pytest.approx(300)
 
 
+@pytest.mark.slow       # the same run as tests/mechanics/test_bodies.py's (to 1e-6 there)
 def test_native_guard_stops_at_the_gimbal_lock(tmp_path):
     mod = body_model(tmp_path, "lock", "{mass: 1, com: [0, 0, 0], inertia: [0.1, 0.2, 0.3], "
                      "omega: [0, 2.0, 0]}")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import MODELS, ROOT, SLOW_MODELS, model_params
+from helpers import MODELS, ROOT, model_params, rendered
 
 from bgc.codegen import emit
 from bgc.codegen.kernels import program_functions
@@ -61,12 +61,6 @@ def test_jacobian_matches_finite_differences(compiled, name):
         assert np.abs(J - fd).max() / norm < 1e-5, (name, J, fd)
 
 
-# the models whose parasitic module make test compiles anyway (the session's, in gen_dir:
-# test_jacobian_matches_finite_differences, the SARIB's main job and its one leg's sweep)
-SESSION_MODULES = {n for n in ALL_MODELS if n not in ALSO and n not in SLOW_MODELS} | {
-    "sarib", "sarib_one_leg"}
-
-
 # the semi-active SARIB's code paths are the SARIB's plus ports and blocks that smaller
 # models exercise, the A02 N-four-bar's those of the chains and instance loops of
 # test_instances; their builds are left to `make test-all`
@@ -76,15 +70,11 @@ SESSION_MODULES = {n for n in ALL_MODELS if n not in ALSO and n not in SLOW_MODE
 def test_committed_generated_module_is_fresh(name, compiled):
     """generated/<model>.py in the repository is exactly what `bgc compile` writes now
     (its source, as emit renders it: the machine code, which the source determines, is
-    left to the tests that import modules): the session's module where make test compiles
-    it anyway (``emit.write`` wrote it from this render), else rendered here."""
+    left to the tests that import modules): ``helpers.rendered``, the session's module
+    where make test compiles it in any case."""
     committed = ROOT / "generated" / f"{name}.py"
     assert committed.exists(), f"run `make generated`: {committed} is missing"
-    if name in SESSION_MODULES:
-        source = Path(compiled(name).__file__).read_bytes()
-    else:
-        source = emit.render(build(MODELS / f"{name}.yaml").system).encode()
-    assert source == committed.read_bytes(), (
+    assert rendered(compiled, name) == committed.read_bytes(), (
         f"{committed} is stale: run `make generated`")
     model = load.load(MODELS / f"{name}.yaml")
     assert not emit.is_stale(committed, model.digest, "parasitic")

@@ -52,6 +52,14 @@ class _Compiled:
 _COMPILES = pytest.StashKey[list]()
 
 
+def pytest_configure(config):
+    """hypothesis is no dependency of bgc and no test uses it, but where it is installed its
+    pytest plugin's terminal summary imports it at the end of every process of the run
+    (0.7 to 1.2 s each, measured: the workers' then the controller's, one after the
+    other): not loaded here."""
+    config.pluginmanager.set_blocked("hypothesispytest")
+
+
 def pytest_sessionstart(session):
     """In the controller of a distributed run (``make test``: ``pytest -n 2``), before any
     test: bgc's one-time compiles (the native Radau and RK4 step loops into numba's cache,

@@ -109,8 +109,8 @@ def pytest_sessionfinish(session):
 
 class _FmuObject:
     """``bgc.export.radau.object_code()`` in a child (which compiles in a child of its
-    own, hence a session of their own, stopped together) at the lowest priority once it
-    holds the object's lock, until ``hurry``; ``wait``/``stop`` as
+    own, hence a session of their own, stopped together), at the lowest priority from
+    just before it takes the object's lock until ``hurry``; ``wait``/``stop`` as
     ``native.Precompile``'s."""
 
     def __init__(self):

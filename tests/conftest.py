@@ -52,13 +52,25 @@ class _Compiled:
 _COMPILES = pytest.StashKey[list]()
 
 
+def pytest_configure(config):
+    """hypothesis is no dependency of bgc and no test uses it, but where it is installed its
+    pytest plugin's terminal summary imports it at the end of every process of the run
+    (0.7 to 1.2 s each, measured: the workers' then the controller's, one after the
+    other): not loaded here."""
+    config.pluginmanager.set_blocked("hypothesispytest")
+
+
 def pytest_sessionstart(session):
     """In the controller of a distributed run (``make test``: ``pytest -n 2``), before any
     test: bgc's one-time compiles (the native Radau and RK4 step loops into numba's cache,
     the FMU's Radau object into bgc's; 27 + 4 + 28 s of CPU cold) started in children of
     their own while the workers start. Every process of the run, the CLI's children among
-    them, then finds them cached: none compiles them again beside a worker that is still
-    compiling them (``native.precompile`` cannot see another process's compile)."""
+    them, then finds the step loops cached: none compiles them again beside a worker that
+    is still compiling them (``native.precompile`` cannot see another process's compile).
+    The FMU's object, which only ``bgc export`` needs and whose compile holds a lock that
+    every other caller waits on (``radau.object_code``), is compiled at the lowest
+    priority until the tests start (``_FmuObject``): the Radau loop, which every test
+    waits for, keeps a core to itself meanwhile."""
     config = session.config
     if hasattr(config, "workerinput") or not config.pluginmanager.has_plugin("dsession"):
         return
@@ -70,30 +82,52 @@ def pytest_sessionstart(session):
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtestloop(session):
-    """The controller waits for those compiles before it hands out the first test (the
-    workers import and collect meanwhile); a compile that failed is done again, and its
-    error shown, where a test needs it."""
+    """The controller waits for the step loops before it hands out the first test (the
+    workers import and collect meanwhile), then lets the FMU's object compile at the
+    tests' priority (the tests that export an FMU wait for it on its lock); a compile
+    that failed is done again, and its error shown, where a test needs it."""
     jobs = session.config.stash.get(_COMPILES, [])
     try:
         for job in jobs:
-            job.wait()
+            if not isinstance(job, _FmuObject):
+                job.wait()
     except BaseException:           # Ctrl-C: no compiler left behind
         for job in jobs:
             job.stop()
         raise
+    for job in jobs:
+        if isinstance(job, _FmuObject):
+            job.hurry()
+
+
+def pytest_sessionfinish(session):
+    """No compile outlives the run (the FMU's object, if no test needed it, is left
+    for the next run to compile)."""
+    for job in session.config.stash.get(_COMPILES, []):
+        job.stop()
 
 
 class _FmuObject:
     """``bgc.export.radau.object_code()`` in a child (which compiles in a child of its
-    own, hence a session of their own, stopped together); ``wait``/``stop`` as
+    own, hence a session of their own, stopped together), at the lowest priority from
+    just before it takes the object's lock until ``hurry``; ``wait``/``stop`` as
     ``native.Precompile``'s."""
 
     def __init__(self):
         import subprocess
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", "from bgc.export import radau; radau.object_code()"],
+            [sys.executable, "-c", "import os; from bgc.export import radau; os.nice(19); "
+             "radau.object_code()"],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             start_new_session=True)
+
+    def hurry(self):
+        """Back to the tests' priority (the child's group: its compiler too), where this
+        user may raise it again; else it goes on at the lowest, in the cores' idle time."""
+        try:
+            os.setpriority(os.PRIO_PGRP, self.proc.pid, os.getpriority(os.PRIO_PROCESS, 0))
+        except OSError:
+            pass
 
     def wait(self) -> bool:
         return self.proc.wait() == 0

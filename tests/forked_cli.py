@@ -9,7 +9,7 @@ for each request forks a child that runs ``bgc.cli`` as ``__main__`` (``runpy``,
 stdout/stderr to files; an uncaught exception prints its traceback and exits 1, as the
 interpreter would; ``atexit`` handlers run. The server waits for the child, killing it at
 the timeout. Start-up itself is tested by the tests that run ``python -m bgc.cli``
-directly (``test_import_orders``, ``test_runtime_failure``, ``test_chain`` ...)."""
+directly (``test_import_orders``, ``test_runtime_failure``, ``test_warm_start`` ...)."""
 
 from __future__ import annotations
 

@@ -29,6 +29,25 @@ SLOW_MODELS = {"sarib", "sarib_one_leg", "sarib_semiactive", "n_four_bar"}
 REFERENCE_SOLVERS = ["native", pytest.param("radau", marks=pytest.mark.slow)]
 
 
+# the shipped models whose parasitic module make test compiles in any case (the session's,
+# ``compiled``: test_codegen's Jacobian checks, the SARIB's main job, its one leg's sweep)
+SESSION_MODELS = {"dc_motor", "double_pendulum", "duffing", "four_bar", "geared_inertias",
+                  "isosceles_slider_crank", "msd_forced", "msd_free", "pendulum", "rc_table",
+                  "rectifier", "rlc", "rr_loop", "sarib", "sarib_one_leg", "servo",
+                  "slider_crank", "tumbling_box"}
+
+
+def rendered(compiled, name: str) -> bytes:
+    """What ``bgc compile models/<name>.yaml`` writes now (parasitic), as bytes: the
+    session's module where make test compiles it in any case (``emit.write`` wrote it,
+    this run, from the very render), else rendered here."""
+    if name in SESSION_MODELS:
+        return Path(compiled(name).__file__).read_bytes()
+    from bgc.codegen import emit
+    from bgc.pipeline import build
+    return emit.render(build(MODELS / f"{name}.yaml").system).encode()
+
+
 def model_params(names=None):
     """pytest parameters for the shipped models (all by default), slow ones marked."""
     names = names or sorted(p.stem for p in MODELS.glob("*.yaml"))

@@ -4,23 +4,19 @@ sizes: well formed, the same link N times, and a mechanism that moves in space."
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from helpers import ROOT
+from helpers import bgc as forked_bgc
 
 from bgc.bench.chain import LINK, chain, write_chain
 from bgc.model.load import load
 
 
-
 def bgc(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "bgc.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    """``bgc ARGS`` in its own process (``helpers.bgc``: forked from a server that has
+    imported bgc; Python's start-up is tested where it is the subject)."""
+    return forked_bgc(*map(str, args), cwd=cwd, timeout=600)
 
 
 @pytest.mark.parametrize("n", [1, 4])

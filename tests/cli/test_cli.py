@@ -46,11 +46,14 @@ def test_compile_writes_module(tmp_path):
                                     "machine code"}
 
 
-def test_simulate_writes_csv_png_and_statistics(tmp_path, figures):
+def test_simulate_writes_csv_png_and_statistics(tmp_path, figures, compiled, gen_dir):
+    """(The module: the session's, found fresh in its directory; compiling is
+    test_compile_writes_module's.)"""
+    compiled("rlc")
     csv, png = tmp_path / "out.csv", tmp_path / "out.png"
     r = run("simulate", MODELS / "rlc.yaml", "--t-end", "0.02", "--solver", "radau",
             "--rtol", "1e-8", "--atol", "1e-10", "--out", csv, "--plot", png,
-            "-o", tmp_path / "gen")
+            "-o", gen_dir)
     assert r.exit_code == 0, r.output
     assert "steps" in r.output and "rhs" in r.output and "Jacobian" in r.output
     names, data = read_csv(csv)

@@ -7,7 +7,8 @@ a run with the time and the states involved. The millimetre four-bar with redund
 constraints, which used to start with NaN in its rhs (native Radau hung for more than 37
 minutes, scipy BDF raised a raw ValueError), is refused at once naming them.
 
-Each module is compiled once per test module (``bgc compile``); the runs load it warm.
+The modules are the session's (``compiled``, in ``gen_dir``), which each run is given with
+``-o``: the runs load them warm; their files go to a directory of this module's.
 Subprocess timeouts guard against hangs; they are not performance targets.
 """
 
@@ -51,17 +52,15 @@ def rows(path: Path) -> list[list[float]]:
 
 
 @pytest.fixture(scope="module")
-def gen(tmp_path_factory):
-    """An output directory with msd_forced (parasitic) and micro_four_bar (lagrange)."""
-    work = tmp_path_factory.mktemp("runtime")
-    for model, method in ((MSD, "parasitic"), (MICRO, "lagrange")):
-        proc = run("compile", model, "--method", method, "-o", work / "gen", cwd=work,
-                   timeout=600)
-        assert proc.returncode == 0, proc.stderr
-    return work
+def gen(tmp_path_factory, compiled):
+    """The runs' working directory; msd_forced (parasitic) and micro_four_bar (lagrange)
+    compiled into the session's ``gen_dir``."""
+    compiled("msd_forced")
+    compiled(MICRO, "lagrange")
+    return tmp_path_factory.mktemp("runtime")
 
 
-def test_non_finite_start_names_the_parameter(gen):
+def test_non_finite_start_names_the_parameter(gen, gen_dir):
     """m = 0 makes dp/dt = p/m - ... = 0/0 at the start. The CLI refuses -p m=0 with the
     model's own check (tests/model/test_hostile_input.py); a script that sets it in the
     parameter array meets the check of the start instead: refused before any step,
@@ -71,7 +70,7 @@ def test_non_finite_start_names_the_parameter(gen):
     from bgc.errors import SimulationError
     from bgc.pipeline import ensure_module
     from bgc.simulate import simulate
-    module = ensure_module(MSD, gen / "gen", "parasitic")[0]
+    module = ensure_module(MSD, gen_dir, "parasitic")[0]
     p = np.array(module.PARAMS)
     p[list(module.PARAM_NAMES).index("m")] = 0.0
     with pytest.raises(SimulationError) as err:
@@ -84,9 +83,9 @@ def test_non_finite_start_names_the_parameter(gen):
 
 
 @pytest.mark.parametrize("solver", ["native", "bdf"])
-def test_step_budget_stops_the_run_and_keeps_its_results(gen, solver):
+def test_step_budget_stops_the_run_and_keeps_its_results(gen, gen_dir, solver):
     out = gen / f"budget_{solver}.csv"
-    proc = run("simulate", MSD, "-o", "gen", "--solver", solver, "--max-steps", 25,
+    proc = run("simulate", MSD, "-o", gen_dir, "--solver", solver, "--max-steps", 25,
                "--out", out, cwd=gen)
     lines = error_lines(proc.stderr)
     assert proc.returncode == 2, proc.stderr
@@ -101,8 +100,8 @@ def test_step_budget_stops_the_run_and_keeps_its_results(gen, solver):
 
 
 @pytest.mark.parametrize("value", ["0", "-5", "1.5", "many"])
-def test_step_budget_must_be_a_whole_positive_number(gen, value):
-    proc = run("simulate", MSD, "-o", "gen", "--max-steps", value, cwd=gen)
+def test_step_budget_must_be_a_whole_positive_number(gen, gen_dir, value):
+    proc = run("simulate", MSD, "-o", gen_dir, "--max-steps", value, cwd=gen)
     lines = error_lines(proc.stderr)
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0].startswith("error: --max-steps: "), lines[0]
@@ -127,10 +126,10 @@ def _wait_for_integration(proc: subprocess.Popen, timeout: float = 120) -> None:
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir() or not hasattr(os, "memfd_create"),
                     reason="needs Linux's /proc and memfd")
 @pytest.mark.parametrize("solver", ["native", "bdf"])
-def test_ctrl_c_stops_within_a_second_and_writes_the_results_so_far(gen, solver):
+def test_ctrl_c_stops_within_a_second_and_writes_the_results_so_far(gen, gen_dir, solver):
     out = gen / f"interrupted_{solver}.csv"
     t_end = 1e6                  # 3 Hz forcing: tens of millions of steps
-    proc = subprocess.Popen(bgc_args("simulate", MSD, "-o", "gen", "--solver", solver,
+    proc = subprocess.Popen(bgc_args("simulate", MSD, "-o", gen_dir, "--solver", solver,
                                      "--t-end", t_end, "--max-steps", 10 ** 9,
                                      "--points", 100_001, "--out", out),
                             cwd=gen, env=env(), stdout=subprocess.PIPE,
@@ -156,13 +155,14 @@ def test_ctrl_c_stops_within_a_second_and_writes_the_results_so_far(gen, solver)
 
 
 @pytest.mark.parametrize("solver", ["native", "bdf"])
-def test_redundant_constraints_at_millimetre_scale_end_at_once_naming_them(gen, solver):
+def test_redundant_constraints_at_millimetre_scale_end_at_once_naming_them(gen, gen_dir,
+                                                                        solver):
     """The projection finds rank 17 of 20 on the equilibrated constraint rows, but the
     generated block solve keeps only the singular values of J M^-1 J^T above 1e-10 of the
     largest, fewer at this scale: the rhs is NaN at the start. Refused before any step,
     under every solver, naming the redundant constraints and what to do."""
     out = gen / f"micro_{solver}.csv"
-    proc = run("simulate", MICRO, "--method", "lagrange", "-o", "gen", "--solver", solver,
+    proc = run("simulate", MICRO, "--method", "lagrange", "-o", gen_dir, "--solver", solver,
                "--t-end", 0.1, "--out", out, cwd=gen, timeout=60)
     lines = error_lines(proc.stderr)
     assert proc.returncode == 2, proc.stderr

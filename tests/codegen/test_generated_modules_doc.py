@@ -1,6 +1,7 @@
 """docs/generated-modules.md works as written (issue 23, item 7): its shell blocks (``bgc``
-run as ``python -m bgc.cli``) and then its Python blocks, in order, as one script in a fresh
-interpreter and an empty directory; the numbers it prints are checked here."""
+in a process of its own, ``helpers.bgc``) and then its Python blocks, in order, as one
+script in a fresh interpreter and an empty directory; the numbers it prints are checked
+here."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import shlex
 import subprocess
 import sys
 
-from helpers import ROOT
+from helpers import ROOT, bgc
 
 DOC = ROOT / "docs" / "generated-modules.md"
 
@@ -28,8 +29,7 @@ def test_the_documented_example_runs_and_its_numbers_hold(tmp_path):
         for line in filter(None, (ln.strip() for ln in block.splitlines())):
             argv = shlex.split(line)
             assert argv[0] == "bgc", line
-            proc = subprocess.run([sys.executable, "-m", "bgc.cli", *argv[1:]], cwd=tmp_path,
-                                  env=env, capture_output=True, text=True, timeout=600)
+            proc = bgc(*argv[1:], cwd=tmp_path, timeout=600)
             assert proc.returncode == 0, proc.stderr
     script = "\n\n".join(blocks("python"))
     assert "solve_ivp(" in script and "project(" in script

@@ -20,7 +20,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import sympy as sp
-from helpers import MODELS
+from helpers import MODELS, rendered
 
 from bgc.codegen import emit
 from bgc.mechanics import exact
@@ -64,11 +64,13 @@ def _source(model) -> str:
 
 
 @pytest.mark.parametrize("name", DECIMAL_MODELS)
-def test_last_bit_of_the_geometry_does_not_reach_the_generated_code(name, monkeypatch):
+def test_last_bit_of_the_geometry_does_not_reach_the_generated_code(name, monkeypatch,
+                                                                    compiled):
     """The inputs of the geometry one ulp off give the same generated source, byte for
     byte: the geometry is computed exactly from the decimals they stand for, never in
-    floating point (which amplified such differences to 1e-10 before)."""
-    reference = _source(load.load(MODELS / f"{name}.yaml"))
+    floating point (which amplified such differences to 1e-10 before). (The reference,
+    this run's render of the model as written: ``helpers.rendered``.)"""
+    reference = rendered(compiled, name).decode()
     for seed in (1, 2):
         with monkeypatch.context() as mp:
             _nudged_inputs(mp, seed)
@@ -85,10 +87,11 @@ def _noisy(fn):
 
 
 @pytest.mark.parametrize("name", ["andrews", "four_bar", "slider_crank", "sarib_one_leg"])
-def test_numpy_linear_algebra_does_not_reach_the_generated_code(name, monkeypatch):
+def test_numpy_linear_algebra_does_not_reach_the_generated_code(name, monkeypatch,
+                                                                compiled):
     """numpy's norm, eigh, det, cross and dot give results one ulp off during the whole
     build (as another BLAS or CPU might): the generated source does not change."""
-    reference = _source(load.load(MODELS / f"{name}.yaml"))
+    reference = rendered(compiled, name).decode()
     for mod, fn in ((np.linalg, "norm"), (np.linalg, "eigh"), (np.linalg, "det"),
                     (np, "cross"), (np, "dot")):
         monkeypatch.setattr(mod, fn, _noisy(getattr(mod, fn)))

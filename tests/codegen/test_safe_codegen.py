@@ -17,7 +17,7 @@ import sys
 
 import pytest
 from click.testing import CliRunner
-from helpers import ROOT, error_lines
+from helpers import ROOT, bgc, error_lines
 
 from bgc.cli import main
 from bgc.codegen import emit
@@ -153,10 +153,8 @@ def test_hostile_module_runs_under_bgc_simulate(hostile_build, tmp_path):
     root, built = hostile_build
     fname, module = built["newline"]
     model = next((root / "src_newline").iterdir())
-    proc = subprocess.run([sys.executable, "-m", "bgc.cli", "simulate", str(model), "-o",
-                           str(module.parent), "--t-end", "0.01"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    proc = bgc("simulate", str(model), "-o", str(module.parent), "--t-end", "0.01",
+               cwd=tmp_path, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert list(tmp_path.iterdir()) == []
 

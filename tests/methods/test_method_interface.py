@@ -236,7 +236,8 @@ def test_nothing_outside_methods_branches_on_a_method_name():
     assert not found, found
 
 
-def test_a_fourth_method_through_every_hook_with_a_block_of_its_own(relaxed, tmp_path):
+def test_a_fourth_method_through_every_hook_with_a_block_of_its_own(relaxed, tmp_path,
+                                                                    compiled):
     """Every hook is asked, in the order of the stages; the method's own state and plan
     travel only through its hooks; its loops are its constraint blocks (one per joint
     force, A = w), which the kernels solve; and the forces it solves are the parasitic
@@ -266,7 +267,7 @@ def test_a_fourth_method_through_every_hook_with_a_block_of_its_own(relaxed, tmp
     assert {n for _, n, _ in c.system.params} >= {"relaxed__w"}
     assert "_block0(" in path.read_text()                # solved by the kernels
     mod = import_module(path)
-    par = import_module(compile_model(MODELS / "pendulum.yaml", tmp_path / "p")[1])
+    par = compiled("pendulum")          # under parasitic: the session's module
     p = mod.PARAMS.copy()
     p[list(mod.PARAM_NAMES).index("relaxed__w")] = 0.25   # any weight: the same forces
     r1 = simulate(mod, t_end=0.3, rtol=1e-8, atol=1e-10, params=p,

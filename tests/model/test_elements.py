@@ -84,25 +84,29 @@ outputs: {v: j.f, f_src: src.f}
 
 
 def test_gy_and_mgy_agree(tmp_path):
-    text = """
-name: NAME
-parameters: {U: 5.0, R: 1.0, L: 1.0e-3, km: 0.1, J: 1.0e-4}
-elements:
-  src: {type: Se, effort: U}
-  a: {type: "1"}
-  r: {type: R, R: R}
-  l: {type: I, I: L}
-  g: {type: KIND, r: km}
-  s: {type: "1"}
-  rotor: {type: I, I: J}
-bonds: [[src, a], [a, r], [a, l], [a, g], [g, s], [s, rotor]]
-outputs: {w: s.f}
+    """The same DC motor twice in one model (one module), through a GY and through an MGY
+    with the same modulus: the two rotors turn alike."""
+    motor = """\
+  src_X: {type: Se, effort: U}
+  a_X: {type: "1"}
+  r_X: {type: R, R: R}
+  l_X: {type: I, I: L}
+  g_X: {type: KIND, r: km}
+  s_X: {type: "1"}
+  rotor_X: {type: I, I: J}
 """
-    gy = make(tmp_path, text.replace("NAME", "gy").replace("KIND", "GY"), "gy")
-    mgy = make(tmp_path, text.replace("NAME", "mgy").replace("KIND", "MGY"), "mgy")
-    r1, r2 = simulate(gy, t_end=0.1, **TIGHT), simulate(mgy, t_end=0.1, **TIGHT)
-    assert rel_err(r2.column("w"), r1.column("w")) < 1e-9
-    assert abs(r1.column("w")[-1] - 5.0 / 0.1) / 50 < 1e-3   # no-load speed U / km
+    bonds = "[src_X, a_X], [a_X, r_X], [a_X, l_X], [a_X, g_X], [g_X, s_X], [s_X, rotor_X]"
+    mod = make(tmp_path, f"""
+name: gy_mgy
+parameters: {{U: 5.0, R: 1.0, L: 1.0e-3, km: 0.1, J: 1.0e-4}}
+elements:
+{motor.replace("X", "gy").replace("KIND", "GY")}{motor.replace("X", "mgy").replace("KIND", "MGY")}
+bonds: [{bonds.replace("X", "gy")}, {bonds.replace("X", "mgy")}]
+outputs: {{w_gy: s_gy.f, w_mgy: s_mgy.f}}
+""", "gy_mgy")
+    r = simulate(mod, t_end=0.1, **TIGHT)
+    assert rel_err(r.column("w_mgy"), r.column("w_gy")) < 1e-9
+    assert abs(r.column("w_gy")[-1] - 5.0 / 0.1) / 50 < 1e-3   # no-load speed U / km
 
 
 def test_signals(tmp_path):

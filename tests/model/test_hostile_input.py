@@ -362,13 +362,25 @@ def test_number_command_line_options(tmp_path, args, key):
 
 
 @pytest.fixture(scope="module")
-def msd(tmp_path_factory):
-    """msd_forced (a 3 Hz sine force) compiled once into a directory of its own."""
-    gen = tmp_path_factory.mktemp("msd") / "gen"
-    proc = bgc("compile", MODELS / "msd_forced.yaml", "-o", gen, cwd=gen.parent,
-               timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return gen
+def msd(tmp_path_factory, compiled, gen_dir):
+    """A working directory for runs of msd_forced (a 3 Hz sine force), whose module is
+    the session's (in ``gen_dir``)."""
+    compiled("msd_forced")
+    return tmp_path_factory.mktemp("msd")
+
+
+def refused_msd(work: Path, gen_dir: Path, *args, **kw) -> re.Match:
+    """``refused`` for ``bgc simulate msd_forced.yaml -o GEN_DIR ARGS`` in ``work``:
+    nothing written there, nor to msd_forced's module in the session's directory (or a
+    temporary file of it: ``fileio.atomic_write``'s; the other files there are the other
+    tests')."""
+    def files():
+        return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in gen_dir.iterdir()
+                if p.name == "msd_forced.py" or p.name.startswith(".msd_forced.py.")}
+    before = files()
+    m = refused(work, "simulate", MODELS / "msd_forced.yaml", "-o", gen_dir, *args, **kw)
+    assert files() == before, "msd_forced's module was written"
+    return m
 
 
 @pytest.mark.parametrize("args, key", [
@@ -376,9 +388,8 @@ def msd(tmp_path_factory):
     (["--t-end", "1e9"], "--t-end"),
     (["--solver", "rk4", "--step", "1e-300"], "--step"),
 ], ids=["param-1e12-Hz", "t-end-1e9", "step-1e-300"])
-def test_number_run_that_would_plan_billions_of_steps(msd, args, key):
-    m = refused(msd.parent, "simulate", MODELS / "msd_forced.yaml", "-o", msd,
-                *args, key=key, option=True)
+def test_number_run_that_would_plan_billions_of_steps(msd, gen_dir, args, key):
+    m = refused_msd(msd, gen_dir, *args, key=key, option=True)
     assert f"{limits.MAX_PLANNED_STEPS:.0e}" in m["msg"]
 
 
@@ -389,11 +400,11 @@ def test_number_run_that_would_plan_billions_of_steps(msd, args, key):
     ("k=-600", "'spring' must be > 0"),
     ("c=-6", "resistance R of R 'damper' must be >= 0"),
 ])
-def test_number_parameter_overrides_obey_the_models_checks(msd, param, rule):
+def test_number_parameter_overrides_obey_the_models_checks(msd, gen_dir, param, rule):
     """-p values go through the same checks as the model file's own values (a mass, a
     capacitance not > 0), refused as the option's error naming the element's line."""
-    m = refused(msd.parent, "simulate", MODELS / "msd_forced.yaml", "-o", msd, "-p", param,
-                "--out", msd.parent / "r.csv", key="--param", option=True)
+    m = refused_msd(msd, gen_dir, "-p", param, "--out", msd / "r.csv", key="--param",
+                    option=True)
     assert m["msg"].startswith(param + ": "), m["msg"]
     assert rule in m["msg"] and "set by -p" in m["msg"], m["msg"]
     assert "msd_forced.yaml:" in m["msg"]

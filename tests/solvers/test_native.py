@@ -22,9 +22,12 @@ from bgc.simulate import SOLVERS, prepare, simulate
 from bgc.solvers import rk4
 
 # (model, method, t_end): smooth and switching inputs, bodies, constraints by each method
+# the four-bar under zcp, a module no other fast test compiles, in make test-all: a closed
+# loop's constraint block stays here with the slider-crank's, zcp's opened loops under
+# native Radau in tests/methods/test_zcp.py (test_slider_crank_loop_is_opened...[native])
 CASES = [("msd_forced", "parasitic", None), ("pendulum", "parasitic", None),
          ("slider_crank", "lagrange", 1.0), ("rectifier", "parasitic", None),
-         ("four_bar", "zcp", 1.0)]
+         pytest.param("four_bar", "zcp", 1.0, marks=pytest.mark.slow)]
 
 
 def _error(r, ref) -> float:
@@ -125,6 +128,7 @@ def test_rk4_stability_region_between_the_axes():
     assert h == pytest.approx(2.6197 / 300, rel=1e-3) and abs(lam) == pytest.approx(300)
 
 
+@pytest.mark.slow       # the same run as tests/mechanics/test_bodies.py's (to 1e-6 there)
 def test_native_guard_stops_at_the_gimbal_lock(tmp_path):
     mod = body_model(tmp_path, "lock", "{mass: 1, com: [0, 0, 0], inertia: [0.1, 0.2, 0.3], "
                      "omega: [0, 2.0, 0]}")

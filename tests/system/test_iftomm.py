@@ -156,7 +156,11 @@ def assert_stopped_at_the_crossing(err, n: int, solver: str = "native"):
     assert r.stats.rhs_calls > 0
 
 
-@pytest.mark.parametrize("method", ["lagrange", "zcp"])
+# zcp's block (its cut joints', solved by the same kernels) refuses the same way: its N = 2
+# run in make test-all (A02 under zcp costs a module no other fast test compiles); zcp's
+# stop at a singular configuration stays in make test with the isosceles slider-crank's
+# (tests/methods/test_loud_failure.py)
+@pytest.mark.parametrize("method", ["lagrange", pytest.param("zcp", marks=pytest.mark.slow)])
 def test_a02_stop_where_the_constraint_block_refuses_is_a_singular_configuration(
         compiled, monkeypatch, method):
     """The generated constraint block, J M^-1 J^T kept at the start's rank, refuses (NaN)

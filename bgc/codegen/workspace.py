@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import sympy as sp
+from scipy import sparse
 
 from bgc.codegen import elimination
 from bgc.codegen.equations import LinearBlock
@@ -94,23 +95,27 @@ class Block:
             a = np.zeros((self.n, self.n), dtype=bool)
             a[tuple(np.array(self.a_at, dtype=np.int64).reshape(-1, 2).T)] = True
             return a
-        k = np.zeros((self.n, self.d), dtype=np.int64)
-        b = np.zeros((self.d, self.n), dtype=np.int64)
-        k[tuple(np.array(self.k_at).T)] = 1
-        b[tuple(np.array(self.b_at).T)] = 1
-        return (k @ b) != 0
+        return product_pattern(self.n, self.d, self.k_at, self.b_at)
+
+
+def product_pattern(n: int, d: int, k_at, b_at) -> np.ndarray:
+    """The structure (n x n, bool) of K B from the places ``(i, j, ...)`` of K's (n x d)
+    and B's (d x n) non-zeros: a sparse product (exact integer counts; a dense one of
+    A02's 40 windows took 0.13 s)."""
+    def ones(at, shape):
+        ij = np.array([(i, j) for i, j, *_ in at], dtype=np.int64).reshape(-1, 2)
+        return sparse.csr_matrix((np.ones(len(ij), dtype=np.int64), (ij[:, 0], ij[:, 1])),
+                                 shape=shape)
+    out = np.zeros((n, n), dtype=bool)
+    coo = (ones(k_at, (n, d)) @ ones(b_at, (d, n))).tocoo()
+    out[coo.row, coo.col] = True
+    return out
 
 
 def factor_pattern(n: int, d: int, K, B) -> np.ndarray:
     """The structure of ``A = -K B`` (n x n) from the non-zeros of K (n x d) and B (d x
     n), as ``(i, j, ...)`` triples, with its diagonal."""
-    k = np.zeros((n, d), dtype=np.int64)
-    b = np.zeros((d, n), dtype=np.int64)
-    for i, j, *_ in K:
-        k[i, j] = 1
-    for i, j, *_ in B:
-        b[i, j] = 1
-    return ((k @ b) != 0) | np.eye(n, dtype=bool)
+    return product_pattern(n, d, K, B) | np.eye(n, dtype=bool)
 
 
 def lstsq_work(n: int, m: int) -> int:

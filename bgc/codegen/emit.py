@@ -17,6 +17,7 @@ from pathlib import Path
 
 import jinja2
 import sympy as sp
+from sympy.core.basic import _args_sortkey
 
 from bgc import __version__, methods, progress
 from bgc.codegen import kernels, start, workspace
@@ -122,7 +123,7 @@ def cone(assignments, targets, memo: dict | None = None):
     see ``_free``)."""
     need = set()
     for e in targets:
-        need |= e.free_symbols
+        need |= e.free_symbols if memo is None else reads(e, memo)
     keep = []
     for item in reversed(assignments):
         if any(v in need for v in _defines(item)):
@@ -167,8 +168,15 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
     if not mapping:
         return system, mapping
 
-    def sub(e):         # only what reads a call: xreplace walks a whole expression
-        return None if e is None else e.xreplace(mapping) if e in reading else e
+    # only what reads a call: xreplace walks a whole expression. The names are new (none
+    # is read anywhere): no term or factor merges with one, and _swap can rebuild
+    named = roots | {v for it in system.assignments for v in _defines(it)}
+    swapped: dict = {}         # (the subexpressions the assignments share: once)
+    swap = (lambda e: _swap(e, mapping, swapped)) if named.isdisjoint(mapping.values()) \
+        else (lambda e: e.xreplace(mapping))
+
+    def sub(e):
+        return None if e is None else swap(e) if e in reading else e
     head = [(v, f) for f, v in mapping.items()]
     body = [it.xreplace(mapping) if isinstance(it, LinearBlock) else (it[0], sub(it[1]))
             for it in system.assignments]
@@ -180,6 +188,31 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
 
 
 _NONE: frozenset = frozenset()
+
+
+def _swap(e, mapping: dict, memo: dict):
+    """``e.xreplace(mapping)`` where every value of ``mapping`` is a symbol that ``e``
+    does not read: no term or factor can merge with it, so a rebuilt sum or product only
+    needs its arguments in sympy's canonical order (``_args_sortkey``, as
+    ``Add.flatten`` and ``Mul.flatten`` sort them, the number first) instead of their
+    general pass (most of the pass's time; the same expressions)."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    out = mapping.get(e)
+    if out is None:
+        if not e.args:
+            out = e
+        else:
+            args = [_swap(a, mapping, memo) for a in e.args]
+            if all(a is b for a, b in zip(args, e.args)):
+                out = e
+            elif e.is_Add or e.is_Mul:
+                out = e.func._from_args(sorted(args, key=_args_sortkey))
+            else:
+                out = e.func(*args)
+    memo[id(e)] = (e, out)
+    return out
 
 
 def _calls(e, roots: set, memo: dict) -> frozenset:
@@ -221,14 +254,17 @@ def programs(system: EquationSystem, memo: dict | None = None
     jac_targets = [e for e, _ in jt.partials] + [
         u for it in rhs_asg if isinstance(it, LinearBlock) and it.index in solved
         for u in it.unknowns]
-    jac_all, _ = cone(system.assignments, jac_targets, memo)
     # the partials read values that rhs computes (all of them, when the tape's inputs
     # are rhs's): program jac runs rhs first and adds only the partials, instead of
     # computing those values again in code of its own (as much code as rhs: half the
-    # instance loops' scheduling, lowering and LLVM's work of a large model)
-    in_rhs = {id(it) for it in rhs_asg}
-    jac = (([], jt.partials, "rhs") if all(id(it) in in_rhs for it in jac_all)
-           else (jac_all, jt.partials))
+    # instance loops' scheduling, lowering and LLVM's work of a large model). rhs's
+    # assignments are a cone, closed under what they read: where every assigned value
+    # the partials read is one of them, so is the partials' whole cone
+    in_rhs = {v for it in rhs_asg for v in _defines(it)}
+    assigned = {v for it in system.assignments for v in _defines(it)}
+    read = set().union(*(reads(e, memo) for e in jac_targets))
+    jac = (([], jt.partials, "rhs") if not (read - in_rhs) & assigned
+           else (cone(system.assignments, jac_targets, memo)[0], jt.partials))
     out_exprs = [e for _, e in system.outputs]
     out_asg, _ = cone(system.assignments, out_exprs, memo)
     guard_exprs = [e for _, e in system.guards]

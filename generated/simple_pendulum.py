@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "simple_pendulum"
 MODEL_FILE = "simple_pendulum.yaml"
-MODEL_HASH = "13993d421df403fd93f5a5b37c959624"
+MODEL_HASH = "c03e1ca55ee3ac9a6eb25aa7bbc2e7de"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624", sys.modules[__name__])
-__name__ = "_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624"
+    sys.modules.setdefault("_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de", sys.modules[__name__])
+__name__ = "_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de"
 
 STATE_NAMES = ("bob.m.px", "bob.m.py", "bob.m.pz", "bob.J.px", "bob.J.py", "bob.J.pz", "bob.x", "bob.ax", "bob.y", "bob.ay", "bob.z", "bob.az", )
 PARAM_NAMES = ("pin__stiffness", "pin__damping", "pin__rot_stiffness", "pin__rot_damping", "pin__tx_load", "pin__ty_load", "pin__tz_load", "pin__ry_load", "pin__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960"
+_KERNEL_PREFIX = "_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,55 +118,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape_ptr = internal constant [70 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 11, i64 13, i64 14, i64 15, i64 20, i64 22, i64 26, i64 28, i64 29, i64 31, i64 36, i64 38, i64 43, i64 45, i64 49, i64 51, i64 52, i64 54, i64 55, i64 57, i64 59, i64 61, i64 62, i64 66, i64 68, i64 69, i64 71, i64 72, i64 73, i64 79, i64 85, i64 89, i64 90, i64 92, i64 94, i64 95, i64 101, i64 105, i64 106, i64 108, i64 110, i64 112, i64 114, i64 116, i64 122, i64 128, i64 130, i64 136, i64 142, i64 148, i64 150, i64 151, i64 152, i64 153, i64 154, i64 155, i64 156, i64 157, i64 162, i64 163, i64 167, i64 168, i64 175]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape_ptr = internal constant [70 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 11, i64 13, i64 14, i64 15, i64 20, i64 22, i64 26, i64 28, i64 29, i64 31, i64 36, i64 38, i64 43, i64 45, i64 49, i64 51, i64 52, i64 54, i64 55, i64 57, i64 59, i64 61, i64 62, i64 66, i64 68, i64 69, i64 71, i64 72, i64 73, i64 79, i64 85, i64 89, i64 90, i64 92, i64 94, i64 95, i64 101, i64 105, i64 106, i64 108, i64 110, i64 112, i64 114, i64 116, i64 122, i64 128, i64 130, i64 136, i64 142, i64 148, i64 150, i64 151, i64 152, i64 153, i64 154, i64 155, i64 156, i64 157, i64 162, i64 163, i64 167, i64 168, i64 175]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape_src = internal constant [175 x i64] [i64 -6, i64 -3, i64 -2, i64 -6, i64 -3, i64 -2, i64 3, i64 5, i64 0, i64 1, i64 2, i64 6, i64 -10, i64 -4, i64 -1, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 9, i64 8, i64 10, i64 11, i64 12, i64 -7, i64 13, i64 7, i64 14, i64 3, i64 5, i64 0, i64 1, i64 2, i64 16, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 8, i64 18, i64 19, i64 20, i64 -8, i64 21, i64 17, i64 22, i64 23, i64 4, i64 2, i64 25, i64 -12, i64 4, i64 5, i64 1, i64 9, i64 8, i64 27, i64 28, i64 29, i64 -9, i64 30, i64 26, i64 31, i64 -5, i64 18, i64 9, i64 33, i64 8, i64 10, i64 6, i64 11, i64 9, i64 33, i64 8, i64 27, i64 25, i64 28, i64 35, i64 36, i64 10, i64 27, i64 37, i64 34, i64 38, i64 39, i64 27, i64 10, i64 9, i64 33, i64 8, i64 18, i64 16, i64 19, i64 42, i64 36, i64 18, i64 27, i64 43, i64 41, i64 44, i64 45, i64 27, i64 39, i64 10, i64 45, i64 18, i64 47, i64 48, i64 49, i64 40, i64 46, i64 10, i64 18, i64 27, i64 15, i64 23, i64 32, i64 11, i64 19, i64 28, i64 51, i64 50, i64 49, i64 40, i64 46, i64 6, i64 16, i64 25, i64 49, i64 40, i64 46, i64 11, i64 19, i64 28, i64 15, i64 23, i64 32, i64 10, i64 18, i64 27, i64 55, i64 54, i64 15, i64 24, i64 32, i64 52, i64 53, i64 56, i64 -7, i64 4, i64 5, i64 9, i64 33, i64 2, i64 -8, i64 5, i64 9, i64 33, i64 2, i64 -9, i64 4, i64 5, i64 9, i64 33, i64 8, i64 1, i64 2]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape_src = internal constant [175 x i64] [i64 -6, i64 -3, i64 -2, i64 -6, i64 -3, i64 -2, i64 3, i64 5, i64 0, i64 1, i64 2, i64 6, i64 -10, i64 -4, i64 -1, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 9, i64 8, i64 10, i64 11, i64 12, i64 -7, i64 13, i64 7, i64 14, i64 3, i64 5, i64 0, i64 1, i64 2, i64 16, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 8, i64 18, i64 19, i64 20, i64 -8, i64 21, i64 17, i64 22, i64 23, i64 4, i64 2, i64 25, i64 -12, i64 4, i64 5, i64 1, i64 9, i64 8, i64 27, i64 28, i64 29, i64 -9, i64 30, i64 26, i64 31, i64 -5, i64 18, i64 9, i64 33, i64 8, i64 10, i64 6, i64 11, i64 9, i64 33, i64 8, i64 27, i64 25, i64 28, i64 35, i64 36, i64 10, i64 27, i64 37, i64 34, i64 38, i64 39, i64 27, i64 10, i64 9, i64 33, i64 8, i64 18, i64 16, i64 19, i64 42, i64 36, i64 18, i64 27, i64 43, i64 41, i64 44, i64 45, i64 27, i64 39, i64 10, i64 45, i64 18, i64 47, i64 48, i64 49, i64 40, i64 46, i64 10, i64 18, i64 27, i64 15, i64 23, i64 32, i64 11, i64 19, i64 28, i64 51, i64 50, i64 49, i64 40, i64 46, i64 6, i64 16, i64 25, i64 49, i64 40, i64 46, i64 11, i64 19, i64 28, i64 15, i64 23, i64 32, i64 10, i64 18, i64 27, i64 55, i64 54, i64 15, i64 24, i64 32, i64 52, i64 53, i64 56, i64 -7, i64 4, i64 5, i64 9, i64 33, i64 2, i64 -8, i64 5, i64 9, i64 33, i64 2, i64 -9, i64 4, i64 5, i64 9, i64 33, i64 8, i64 1, i64 2]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_row = internal constant [65 x i64] [i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 59, i64 59, i64 59, i64 59, i64 59, i64 59, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 61, i64 61, i64 61, i64 61, i64 61, i64 61, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 63, i64 64, i64 64, i64 64, i64 64, i64 65, i64 66, i64 66, i64 66, i64 67, i64 68, i64 68, i64 68, i64 68, i64 68]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_row = internal constant [65 x i64] [i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 58, i64 59, i64 59, i64 59, i64 59, i64 59, i64 59, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 60, i64 61, i64 61, i64 61, i64 61, i64 61, i64 61, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 62, i64 63, i64 64, i64 64, i64 64, i64 64, i64 65, i64 66, i64 66, i64 66, i64 67, i64 68, i64 68, i64 68, i64 68, i64 68]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_col = internal constant [65 x i64] [i64 6, i64 0, i64 3, i64 9, i64 5, i64 2, i64 1, i64 7, i64 0, i64 3, i64 5, i64 10, i64 2, i64 1, i64 8, i64 0, i64 3, i64 2, i64 11, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 0, i64 4, i64 3, i64 5, i64 2, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 6, i64 0, i64 4, i64 2, i64 1, i64 7, i64 0, i64 4, i64 1, i64 8, i64 0, i64 4, i64 3, i64 2, i64 1]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_col = internal constant [65 x i64] [i64 6, i64 0, i64 3, i64 9, i64 5, i64 2, i64 1, i64 7, i64 0, i64 3, i64 5, i64 10, i64 2, i64 1, i64 8, i64 0, i64 3, i64 2, i64 11, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 0, i64 4, i64 3, i64 5, i64 2, i64 1, i64 6, i64 7, i64 8, i64 0, i64 4, i64 3, i64 9, i64 5, i64 10, i64 2, i64 11, i64 1, i64 6, i64 0, i64 4, i64 2, i64 1, i64 7, i64 0, i64 4, i64 1, i64 8, i64 0, i64 4, i64 3, i64 2, i64 1]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_zero = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_zero = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_k = internal constant [65 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_k = internal constant [65 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_i = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_i = internal constant [65 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
 
-@_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_j = internal constant [65 x i64] [i64 0, i64 3, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 5, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 3, i64 4, i64 5, i64 7, i64 9, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_j = internal constant [65 x i64] [i64 0, i64 3, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 5, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 3, i64 4, i64 5, i64 7, i64 9, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 1073
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -225,7 +225,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -256,7 +256,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -314,83 +314,83 @@ ends:
 }
 
 
-define internal void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 70
   %v2 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 245
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 6624, i1 false)
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_tape_src, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
@@ -406,7 +406,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -414,15 +414,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -435,33 +435,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -824,7 +824,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1498,7 +1498,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 6
   %v2 = load double, double* %v1, align 8
@@ -1524,7 +1524,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1536,7 +1536,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_13993d421df403fd93f5a5b37c959624_b5dc7a027960_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_c03e1ca55ee3ac9a6eb25aa7bbc2e7de_b5dc7a027960_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import jinja2
 import sympy as sp
-from sympy.core.basic import _args_sortkey
 
 from bgc import __version__, methods, progress
 from bgc.codegen import kernels, start, workspace
@@ -36,7 +35,7 @@ from bgc.codegen.printer import code
 from bgc.errors import BgcError
 from bgc.fileio import atomic_write
 from bgc.model import symbols
-from bgc.symbolic.algorithms import reads
+from bgc.symbolic.algorithms import reads, substitute
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("bgc.codegen", "templates"),
                           trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
@@ -168,15 +167,10 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
     if not mapping:
         return system, mapping
 
-    # only what reads a call: xreplace walks a whole expression. The names are new (none
-    # is read anywhere): no term or factor merges with one, and _swap can rebuild
-    named = roots | {v for it in system.assignments for v in _defines(it)}
     swapped: dict = {}         # (the subexpressions the assignments share: once)
-    swap = (lambda e: _swap(e, mapping, swapped)) if named.isdisjoint(mapping.values()) \
-        else (lambda e: e.xreplace(mapping))
 
-    def sub(e):
-        return None if e is None else swap(e) if e in reading else e
+    def sub(e):         # only what reads a call: a substitution walks a whole expression
+        return None if e is None else substitute(e, mapping, swapped) if e in reading else e
     head = [(v, f) for f, v in mapping.items()]
     body = [it.xreplace(mapping) if isinstance(it, LinearBlock) else (it[0], sub(it[1]))
             for it in system.assignments]
@@ -188,31 +182,6 @@ def hoist_calls(system: EquationSystem) -> tuple[EquationSystem, dict]:
 
 
 _NONE: frozenset = frozenset()
-
-
-def _swap(e, mapping: dict, memo: dict):
-    """``e.xreplace(mapping)`` where every value of ``mapping`` is a symbol that ``e``
-    does not read: no term or factor can merge with it, so a rebuilt sum or product only
-    needs its arguments in sympy's canonical order (``_args_sortkey``, as
-    ``Add.flatten`` and ``Mul.flatten`` sort them, the number first) instead of their
-    general pass (most of the pass's time; the same expressions)."""
-    hit = memo.get(id(e))
-    if hit is not None and hit[0] is e:
-        return hit[1]
-    out = mapping.get(e)
-    if out is None:
-        if not e.args:
-            out = e
-        else:
-            args = [_swap(a, mapping, memo) for a in e.args]
-            if all(a is b for a, b in zip(args, e.args)):
-                out = e
-            elif e.is_Add or e.is_Mul:
-                out = e.func._from_args(sorted(args, key=_args_sortkey))
-            else:
-                out = e.func(*args)
-    memo[id(e)] = (e, out)
-    return out
 
 
 def _calls(e, roots: set, memo: dict) -> frozenset:

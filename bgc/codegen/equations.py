@@ -29,7 +29,7 @@ from bgc.codegen.system import EquationSystem, Loop
 from bgc.graph.causality import CausalGraph
 from bgc.graph.expand import AXES
 from bgc.model import symbols
-from bgc.symbolic.algorithms import is_cyclic, strongly_connected
+from bgc.symbolic.algorithms import is_cyclic, strongly_connected, substitute
 from bgc.symbolic.forward_mode import trivial
 from bgc.symbolic.linear import LinearBlock, Regularized
 
@@ -154,7 +154,7 @@ def _drop_aliases(assignments):
             kept.append(item)
             continue
         v, e = item
-        e = e.xreplace(aliases)
+        e = substitute(e, aliases, {})    # (a memo of its own: the map grows)
         if trivial(e) and symbols.kind(v) != "rate":
             aliases[v] = e
         else:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Hashable, Iterable, Mapping
 
+from sympy.core.basic import _args_sortkey
+
 
 def strongly_connected(nodes: Iterable[Hashable],
                        deps: Mapping[Hashable, Iterable[Hashable]]) -> list[list[Hashable]]:
@@ -94,3 +96,44 @@ def reads(e, memo: dict) -> frozenset:
         out = frozenset().union(*(reads(a, memo) for a in e.args))
     memo[id(e)] = (e, out)
     return out
+
+
+def substitute(e, mapping: Mapping, memo: dict):
+    """``e.xreplace(mapping)`` (``memo``: by identity, for expressions that share
+    subtrees), the same expression, faster where the replacements only rename: a sum or
+    product rebuilt with its arguments still distinct (no two terms of one monomial, no
+    two factors of one base) and none of the new ones a number, a sum in a sum or a
+    product in a product, keeps all its terms, so it only needs them in the order
+    ``Add.flatten`` and ``Mul.flatten`` sort them (``_args_sortkey``, the number first),
+    not their general pass (most of xreplace's time); any other node by its
+    constructor, as xreplace does."""
+    hit = memo.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    out = mapping.get(e)
+    if out is None:
+        if not e.args:
+            out = e
+        else:
+            args = [substitute(a, mapping, memo) for a in e.args]
+            new = [a for a, old in zip(args, e.args) if a is not old]
+            if not new:
+                out = e
+            elif (e.is_Add or e.is_Mul) and _keeps_terms(e, args, new):
+                out = e.func._from_args(sorted(args, key=_args_sortkey))
+            else:
+                out = e.func(*args)
+    memo[id(e)] = (e, out)
+    return out
+
+
+def _keeps_terms(e, args: list, new: list) -> bool:
+    """Whether flattening sum or product ``e`` rebuilt of ``args`` (``new``: those that
+    changed) would keep every argument as it is."""
+    if any(a.is_Number or a.func is e.func or (e.is_Mul and a.is_Add) for a in new):
+        return False
+    if e.is_Add:
+        keys = [a.as_coeff_Mul()[1] for a in args if not a.is_Number]
+    else:
+        keys = [a.as_base_exp()[0] for a in args if not a.is_Number]
+    return len(set(keys)) == len(keys)

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "9d0e579c038ef50cf9e396198d815f0a"
+MODEL_HASH = "fba7051ee1c0210e7d07348c617ac722"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a", sys.modules[__name__])
-__name__ = "_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a"
+    sys.modules.setdefault("_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722", sys.modules[__name__])
+__name__ = "_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722"
 
 STATE_NAMES = ("rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", )
 PARAM_NAMES = ("shoulder__stiffness", "shoulder__damping", "shoulder__rot_stiffness", "shoulder__rot_damping", "shoulder__tx_load", "shoulder__ty_load", "shoulder__tz_load", "shoulder__ry_load", "shoulder__rz_load", "elbow__stiffness", "elbow__damping", "elbow__rot_stiffness", "elbow__rot_damping", "elbow__tx_load", "elbow__ty_load", "elbow__tz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b"
+_KERNEL_PREFIX = "_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape_ptr = internal constant [162 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 17, i64 20, i64 22, i64 23, i64 29, i64 30, i64 31, i64 33, i64 34, i64 35, i64 36, i64 41, i64 47, i64 49, i64 50, i64 51, i64 53, i64 54, i64 55, i64 56, i64 58, i64 64, i64 65, i64 67, i64 69, i64 70, i64 72, i64 75, i64 77, i64 78, i64 79, i64 85, i64 87, i64 88, i64 90, i64 92, i64 94, i64 95, i64 100, i64 103, i64 109, i64 111, i64 117, i64 119, i64 124, i64 130, i64 131, i64 133, i64 135, i64 136, i64 138, i64 141, i64 147, i64 149, i64 150, i64 152, i64 154, i64 159, i64 162, i64 167, i64 170, i64 176, i64 181, i64 187, i64 189, i64 194, i64 200, i64 201, i64 203, i64 205, i64 206, i64 208, i64 211, i64 217, i64 219, i64 220, i64 222, i64 224, i64 226, i64 227, i64 233, i64 239, i64 243, i64 244, i64 246, i64 248, i64 250, i64 251, i64 257, i64 261, i64 262, i64 264, i64 266, i64 268, i64 270, i64 276, i64 282, i64 288, i64 290, i64 296, i64 302, i64 304, i64 308, i64 310, i64 316, i64 322, i64 323, i64 329, i64 330, i64 334, i64 340, i64 341, i64 342, i64 345, i64 346, i64 347, i64 348, i64 349, i64 350, i64 351, i64 352, i64 354, i64 360, i64 366, i64 368, i64 370, i64 372, i64 378, i64 379, i64 381, i64 382, i64 383, i64 384, i64 385, i64 386, i64 387, i64 388, i64 389, i64 394, i64 395, i64 399, i64 400, i64 407, i64 408, i64 413, i64 414, i64 418, i64 419, i64 426]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_ptr = external constant [162 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape_src = internal constant [426 x i64] [i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 -11, i64 -7, i64 -5, i64 -12, i64 -8, i64 -6, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 10, i64 5, i64 4, i64 12, i64 13, i64 14, i64 15, i64 -19, i64 -22, i64 -2, i64 -9, i64 17, i64 18, i64 -1, i64 20, i64 20, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 23, i64 12, i64 13, i64 24, i64 -13, i64 -4, i64 -10, i64 26, i64 27, i64 -3, i64 29, i64 29, i64 10, i64 11, i64 28, i64 30, i64 31, i64 32, i64 14, i64 15, i64 -16, i64 33, i64 34, i64 25, i64 35, i64 36, i64 16, i64 37, i64 12, i64 13, i64 -19, i64 17, i64 18, i64 20, i64 20, i64 40, i64 41, i64 42, i64 23, i64 12, i64 13, i64 43, i64 -13, i64 44, i64 39, i64 45, i64 38, i64 46, i64 7, i64 2, i64 1, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 48, i64 49, i64 50, i64 51, i64 -20, i64 -23, i64 7, i64 8, i64 19, i64 21, i64 22, i64 53, i64 48, i64 49, i64 54, i64 -14, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 56, i64 50, i64 51, i64 -17, i64 57, i64 58, i64 55, i64 59, i64 60, i64 52, i64 61, i64 48, i64 49, i64 -20, i64 40, i64 41, i64 42, i64 53, i64 48, i64 49, i64 64, i64 -14, i64 65, i64 63, i64 66, i64 62, i64 67, i64 6, i64 8, i64 0, i64 1, i64 2, i64 6, i64 7, i64 0, i64 9, i64 11, i64 3, i64 4, i64 5, i64 9, i64 10, i64 3, i64 69, i64 70, i64 71, i64 72, i64 -21, i64 -24, i64 6, i64 8, i64 0, i64 1, i64 2, i64 19, i64 21, i64 22, i64 74, i64 69, i64 70, i64 75, i64 -15, i64 9, i64 11, i64 3, i64 4, i64 5, i64 28, i64 30, i64 31, i64 77, i64 71, i64 72, i64 -18, i64 78, i64 79, i64 76, i64 80, i64 81, i64 73, i64 82, i64 69, i64 70, i64 -21, i64 40, i64 41, i64 42, i64 74, i64 69, i64 70, i64 85, i64 -15, i64 86, i64 84, i64 87, i64 83, i64 88, i64 17, i64 18, i64 74, i64 20, i64 17, i64 18, i64 23, i64 12, i64 13, i64 20, i64 17, i64 18, i64 53, i64 48, i64 49, i64 92, i64 93, i64 23, i64 53, i64 94, i64 91, i64 95, i64 96, i64 53, i64 96, i64 23, i64 23, i64 20, i64 17, i64 18, i64 74, i64 69, i64 70, i64 93, i64 100, i64 53, i64 74, i64 101, i64 99, i64 102, i64 103, i64 74, i64 98, i64 104, i64 103, i64 53, i64 105, i64 97, i64 106, i64 23, i64 53, i64 74, i64 38, i64 62, i64 83, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 13, i64 49, i64 70, i64 108, i64 109, i64 46, i64 67, i64 88, i64 12, i64 48, i64 69, i64 46, i64 67, i64 88, i64 13, i64 49, i64 70, i64 111, i64 112, i64 90, i64 107, i64 110, i64 113, i64 20, i64 18, i64 105, i64 97, i64 106, i64 12, i64 48, i64 69, i64 38, i64 62, i64 83, i64 23, i64 53, i64 74, i64 117, i64 46, i64 67, i64 88, i64 23, i64 53, i64 74, i64 119, i64 115, i64 116, i64 118, i64 120, i64 105, i64 97, i64 106, i64 13, i64 49, i64 70, i64 117, i64 119, i64 122, i64 123, i64 124, i64 47, i64 68, i64 89, i64 114, i64 121, i64 125, i64 83, i64 26, i64 27, i64 38, i64 62, i64 83, i64 14, i64 50, i64 71, i64 38, i64 62, i64 83, i64 15, i64 51, i64 72, i64 134, i64 135, i64 133, i64 136, i64 29, i64 27, i64 38, i64 62, i64 83, i64 32, i64 56, i64 77, i64 139, i64 138, i64 140, i64 139, i64 38, i64 62, i64 132, i64 137, i64 141, i64 142, i64 -13, i64 7, i64 8, i64 20, i64 17, i64 2, i64 -14, i64 8, i64 20, i64 17, i64 2, i64 -15, i64 7, i64 8, i64 20, i64 17, i64 18, i64 1, i64 2, i64 34, i64 10, i64 11, i64 29, i64 26, i64 5, i64 58, i64 11, i64 29, i64 26, i64 5, i64 79, i64 10, i64 11, i64 29, i64 26, i64 27, i64 4, i64 5]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_src = external constant [426 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_row = internal constant [266 x i64] [i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 126, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 127, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 128, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 129, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 130, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 131, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 143, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 144, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 145, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 146, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 147, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 148, i64 149, i64 150, i64 150, i64 150, i64 150, i64 151, i64 152, i64 152, i64 152, i64 153, i64 154, i64 154, i64 154, i64 154, i64 154, i64 155, i64 156, i64 156, i64 156, i64 156, i64 157, i64 158, i64 158, i64 158, i64 159, i64 160, i64 160, i64 160, i64 160, i64 160]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row = external constant [266 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_col = internal constant [266 x i64] [i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 8, i64 15, i64 2, i64 3, i64 9, i64 18, i64 10, i64 6, i64 4, i64 21, i64 7, i64 5, i64 13, i64 0, i64 1, i64 8, i64 16, i64 2, i64 3, i64 9, i64 19, i64 6, i64 4, i64 11, i64 22, i64 7, i64 5, i64 14, i64 0, i64 1, i64 8, i64 17, i64 2, i64 3, i64 9, i64 10, i64 6, i64 20, i64 4, i64 11, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 13, i64 14, i64 0, i64 1, i64 8, i64 15, i64 16, i64 17, i64 2, i64 3, i64 9, i64 18, i64 10, i64 19, i64 6, i64 20, i64 4, i64 21, i64 11, i64 22, i64 7, i64 23, i64 5, i64 12, i64 0, i64 1, i64 6, i64 4, i64 13, i64 0, i64 1, i64 4, i64 14, i64 0, i64 1, i64 8, i64 6, i64 4, i64 15, i64 2, i64 3, i64 7, i64 5, i64 16, i64 2, i64 3, i64 5, i64 17, i64 2, i64 3, i64 9, i64 7, i64 5]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col = external constant [266 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_zero = internal constant [266 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_zero = external constant [266 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_k = internal constant [266 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73, i64 74, i64 75, i64 76, i64 77, i64 78, i64 79, i64 80, i64 81, i64 82, i64 83, i64 84, i64 85, i64 86, i64 87, i64 88, i64 89, i64 90, i64 91, i64 92, i64 93, i64 94, i64 95, i64 96, i64 97, i64 98, i64 99, i64 100, i64 101, i64 102, i64 103, i64 104, i64 105, i64 106, i64 107, i64 108, i64 109, i64 110, i64 111, i64 112, i64 113, i64 114, i64 115, i64 116, i64 117, i64 118, i64 119, i64 120, i64 121, i64 122, i64 123, i64 124, i64 125, i64 126, i64 127, i64 128, i64 129, i64 130, i64 131, i64 132, i64 133, i64 134, i64 135, i64 136, i64 137, i64 138, i64 139, i64 140, i64 141, i64 142, i64 143, i64 144, i64 145, i64 146, i64 147, i64 148, i64 149, i64 150, i64 151, i64 152, i64 153, i64 154, i64 155, i64 156, i64 157, i64 158, i64 159, i64 160, i64 161, i64 162, i64 163, i64 164, i64 165, i64 166, i64 167, i64 168, i64 169, i64 170, i64 171, i64 172, i64 173, i64 174, i64 175, i64 176, i64 177, i64 178, i64 179, i64 180, i64 181, i64 182, i64 183, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 192, i64 193, i64 194, i64 195, i64 196, i64 197, i64 198, i64 199, i64 200, i64 201, i64 202, i64 203, i64 204, i64 205, i64 206, i64 207, i64 208, i64 209, i64 210, i64 211, i64 212, i64 213, i64 214, i64 215, i64 216, i64 217, i64 218, i64 219, i64 220, i64 221, i64 222, i64 223, i64 224, i64 225, i64 226, i64 227, i64 228, i64 229, i64 230, i64 231, i64 232, i64 233, i64 234, i64 235, i64 236, i64 237, i64 238, i64 239, i64 240, i64 241, i64 242, i64 243, i64 244, i64 245, i64 246, i64 247, i64 248, i64 249, i64 250, i64 251, i64 252, i64 253, i64 254, i64 255, i64 256, i64 257, i64 258, i64 259, i64 260, i64 261, i64 262, i64 263, i64 264, i64 265]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_k = external constant [266 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_i = internal constant [266 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 6, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 7, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 8, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 9, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 11, i64 12, i64 13, i64 13, i64 13, i64 13, i64 14, i64 15, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 22, i64 23, i64 23, i64 23, i64 23, i64 23]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_i = external constant [266 x i64]
 
-@_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_j = internal constant [266 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 5, i64 6, i64 9, i64 10, i64 11, i64 12, i64 13, i64 15, i64 17, i64 18, i64 21, i64 23, i64 1, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 14, i64 15, i64 17, i64 19, i64 20, i64 21, i64 23, i64 2, i64 3, i64 4, i64 5, i64 8, i64 9, i64 10, i64 11, i64 13, i64 15, i64 16, i64 17, i64 19, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 0, i64 3, i64 4, i64 15, i64 17, i64 1, i64 3, i64 4, i64 17, i64 2, i64 3, i64 4, i64 5, i64 15, i64 17, i64 6, i64 9, i64 10, i64 21, i64 23, i64 7, i64 9, i64 10, i64 23, i64 8, i64 9, i64 10, i64 11, i64 21, i64 23]
+@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_j = external constant [266 x i64]
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 4451
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 161
   %v2 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 587
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 30912, i1 false)
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_tape_src, i64 0, i64 0))
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 4608, i1 false)
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -1401,7 +1401,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3237,7 +3237,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3534,7 +3534,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 15
   %v2 = load double, double* %v1, align 8
@@ -3553,11 +3553,24 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_9d0e579c038ef50cf9e396198d815f0a_fde76ee2833b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
+# the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
+# numpy parses: as IR they were most of a large model's text and of its parse)
+_KERNEL_DATA = {
+    "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 17 20 22 23 29 30 31 33 34 35 36 41 47 49 50 51 53 54 55 56 58 64 65 67 69 70 72 75 77 78 79 85 87 88 90 92 94 95 100 103 109 111 117 119 124 130 131 133 135 136 138 141 147 149 150 152 154 159 162 167 170 176 181 187 189 194 200 201 203 205 206 208 211 217 219 220 222 224 226 227 233 239 243 244 246 248 250 251 257 261 262 264 266 268 270 276 282 288 290 296 302 304 308 310 316 322 323 329 330 334 340 341 342 345 346 347 348 349 350 351 352 354 360 366 368 370 372 378 379 381 382 383 384 385 386 387 388 389 394 395 399 400 407 408 413 414 418 419 426", dtype=np.int64, sep=" "),
+    "tape_src": np.fromstring("-11 -7 -5 -12 -8 -6 -11 -7 -5 -12 -8 -6 6 8 0 1 2 6 7 0 10 5 4 12 13 14 15 -19 -22 -2 -9 17 18 -1 20 20 6 8 0 1 2 19 21 22 23 12 13 24 -13 -4 -10 26 27 -3 29 29 10 11 28 30 31 32 14 15 -16 33 34 25 35 36 16 37 12 13 -19 17 18 20 20 40 41 42 23 12 13 43 -13 44 39 45 38 46 7 2 1 9 11 3 4 5 9 10 3 48 49 50 51 -20 -23 7 8 19 21 22 53 48 49 54 -14 9 11 3 4 5 28 30 31 56 50 51 -17 57 58 55 59 60 52 61 48 49 -20 40 41 42 53 48 49 64 -14 65 63 66 62 67 6 8 0 1 2 6 7 0 9 11 3 4 5 9 10 3 69 70 71 72 -21 -24 6 8 0 1 2 19 21 22 74 69 70 75 -15 9 11 3 4 5 28 30 31 77 71 72 -18 78 79 76 80 81 73 82 69 70 -21 40 41 42 74 69 70 85 -15 86 84 87 83 88 17 18 74 20 17 18 23 12 13 20 17 18 53 48 49 92 93 23 53 94 91 95 96 53 96 23 23 20 17 18 74 69 70 93 100 53 74 101 99 102 103 74 98 104 103 53 105 97 106 23 53 74 38 62 83 12 48 69 38 62 83 13 49 70 108 109 46 67 88 12 48 69 46 67 88 13 49 70 111 112 90 107 110 113 20 18 105 97 106 12 48 69 38 62 83 23 53 74 117 46 67 88 23 53 74 119 115 116 118 120 105 97 106 13 49 70 117 119 122 123 124 47 68 89 114 121 125 83 26 27 38 62 83 14 50 71 38 62 83 15 51 72 134 135 133 136 29 27 38 62 83 32 56 77 139 138 140 139 38 62 132 137 141 142 -13 7 8 20 17 2 -14 8 20 17 2 -15 7 8 20 17 18 1 2 34 10 11 29 26 5 58 11 29 26 5 79 10 11 29 26 27 4 5", dtype=np.int64, sep=" "),
+    "jac_row": np.fromstring("126 126 126 126 126 126 126 126 126 126 126 126 126 126 126 127 127 127 127 127 127 127 127 127 127 127 127 127 127 127 128 128 128 128 128 128 128 128 128 128 128 128 128 128 128 128 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 129 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 130 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 131 143 143 143 143 143 143 143 143 143 143 143 143 143 143 143 144 144 144 144 144 144 144 144 144 144 144 144 144 144 144 145 145 145 145 145 145 145 145 145 145 145 145 145 145 145 145 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 146 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 147 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 148 149 150 150 150 150 151 152 152 152 153 154 154 154 154 154 155 156 156 156 156 157 158 158 158 159 160 160 160 160 160", dtype=np.int64, sep=" "),
+    "jac_col": np.fromstring("12 0 1 8 15 2 3 9 18 10 6 4 21 7 5 13 0 1 8 16 2 3 9 19 6 4 11 22 7 5 14 0 1 8 17 2 3 9 10 6 20 4 11 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 0 1 8 15 2 3 9 18 10 6 4 21 7 5 13 0 1 8 16 2 3 9 19 6 4 11 22 7 5 14 0 1 8 17 2 3 9 10 6 20 4 11 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 13 14 0 1 8 15 16 17 2 3 9 18 10 19 6 20 4 21 11 22 7 23 5 12 0 1 6 4 13 0 1 4 14 0 1 8 6 4 15 2 3 7 5 16 2 3 5 17 2 3 9 7 5", dtype=np.int64, sep=" "),
+    "jac_zero": np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0", dtype=np.int64, sep=" "),
+    "jac_k": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 66 67 68 69 70 71 72 73 74 75 76 77 78 79 80 81 82 83 84 85 86 87 88 89 90 91 92 93 94 95 96 97 98 99 100 101 102 103 104 105 106 107 108 109 110 111 112 113 114 115 116 117 118 119 120 121 122 123 124 125 126 127 128 129 130 131 132 133 134 135 136 137 138 139 140 141 142 143 144 145 146 147 148 149 150 151 152 153 154 155 156 157 158 159 160 161 162 163 164 165 166 167 168 169 170 171 172 173 174 175 176 177 178 179 180 181 182 183 184 185 186 187 188 189 190 191 192 193 194 195 196 197 198 199 200 201 202 203 204 205 206 207 208 209 210 211 212 213 214 215 216 217 218 219 220 221 222 223 224 225 226 227 228 229 230 231 232 233 234 235 236 237 238 239 240 241 242 243 244 245 246 247 248 249 250 251 252 253 254 255 256 257 258 259 260 261 262 263 264 265", dtype=np.int64, sep=" "),
+    "jac_i": np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 13 13 13 13 14 15 15 15 16 17 17 17 17 17 18 19 19 19 19 20 21 21 21 22 23 23 23 23 23", dtype=np.int64, sep=" "),
+    "jac_j": np.fromstring("0 3 4 5 6 9 10 11 12 13 15 17 18 21 23 1 3 4 5 7 9 10 11 14 15 17 19 20 21 23 2 3 4 5 8 9 10 11 13 15 16 17 19 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 3 4 5 6 9 10 11 12 13 15 17 18 21 23 1 3 4 5 7 9 10 11 14 15 17 19 20 21 23 2 3 4 5 8 9 10 11 13 15 16 17 19 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 3 4 15 17 1 3 4 17 2 3 4 5 15 17 6 9 10 21 23 7 9 10 23 8 9 10 11 21 23", dtype=np.int64, sep=" "),
+}
 N_WORK, N_EVAL = 4475, 161   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 24, 16, 2
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
@@ -3640,6 +3653,8 @@ def _load_kernels():
                 break
             except OSError:
                 continue                # no cache here: try the next one
+    for name, values in _KERNEL_DATA.items():
+        llvm.add_symbol(f"{_KERNEL_PREFIX}_{name}", values.ctypes.data)
     engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
     for obj in objs:
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
@@ -3656,6 +3671,7 @@ def _load_kernels():
 _LOADED = sys.modules.setdefault("_bgc_kernels", ModuleType("_bgc_kernels"))
 if _KERNEL_PREFIX not in vars(_LOADED):
     setattr(_LOADED, _KERNEL_PREFIX, _load_kernels())
+    setattr(_LOADED, _KERNEL_PREFIX + "_data", _KERNEL_DATA)    # (alive as long)
 _ENGINE = getattr(_LOADED, _KERNEL_PREFIX)
 
 

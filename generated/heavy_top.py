@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "003420466b7a61816f75799491903167"
+MODEL_HASH = "951cb02b14c689b01a280b1e65a5d473"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 3.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_003420466b7a61816f75799491903167", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_003420466b7a61816f75799491903167"
+    sys.modules.setdefault("_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8"
+_KERNEL_PREFIX = "_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape_ptr = internal constant [60 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 12, i64 15, i64 18, i64 19, i64 20, i64 21, i64 22, i64 24, i64 25, i64 31, i64 37, i64 39, i64 40, i64 42, i64 47, i64 49, i64 52, i64 57, i64 63, i64 65, i64 66, i64 68, i64 74, i64 77, i64 80, i64 86, i64 92, i64 94, i64 95, i64 97, i64 98, i64 100, i64 106, i64 107, i64 109, i64 111, i64 117, i64 123, i64 125, i64 127, i64 128, i64 129, i64 130, i64 131, i64 132, i64 133, i64 134, i64 135, i64 140, i64 141, i64 145, i64 146, i64 153]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape_ptr = external constant [60 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape_src = internal constant [153 x i64] [i64 -6, i64 -4, i64 -3, i64 -6, i64 -4, i64 -3, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 6, i64 7, i64 -10, i64 -2, i64 9, i64 -1, i64 -5, i64 11, i64 12, i64 9, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 6, i64 15, i64 7, i64 16, i64 -7, i64 17, i64 8, i64 18, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 20, i64 21, i64 -11, i64 3, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 20, i64 23, i64 21, i64 24, i64 -8, i64 25, i64 22, i64 26, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 1, i64 28, i64 29, i64 -12, i64 3, i64 4, i64 5, i64 0, i64 1, i64 2, i64 10, i64 13, i64 14, i64 28, i64 31, i64 29, i64 32, i64 -9, i64 33, i64 30, i64 34, i64 35, i64 9, i64 12, i64 19, i64 27, i64 35, i64 15, i64 23, i64 31, i64 38, i64 37, i64 39, i64 11, i64 12, i64 19, i64 27, i64 35, i64 6, i64 20, i64 28, i64 19, i64 27, i64 35, i64 7, i64 21, i64 29, i64 42, i64 43, i64 41, i64 44, i64 38, i64 19, i64 27, i64 36, i64 40, i64 45, i64 46, i64 -7, i64 4, i64 5, i64 11, i64 9, i64 2, i64 -8, i64 5, i64 11, i64 9, i64 2, i64 -9, i64 4, i64 5, i64 11, i64 9, i64 12, i64 1, i64 2]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape_src = external constant [153 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_row = internal constant [75 x i64] [i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 47, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 48, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 49, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 50, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 51, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 52, i64 53, i64 54, i64 54, i64 54, i64 54, i64 55, i64 56, i64 56, i64 56, i64 57, i64 58, i64 58, i64 58, i64 58, i64 58]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_row = external constant [75 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_col = internal constant [75 x i64] [i64 6, i64 0, i64 1, i64 4, i64 9, i64 5, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 5, i64 10, i64 3, i64 2, i64 8, i64 0, i64 1, i64 4, i64 5, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 7, i64 8, i64 0, i64 1, i64 4, i64 9, i64 5, i64 10, i64 3, i64 11, i64 2, i64 6, i64 0, i64 1, i64 3, i64 2, i64 7, i64 0, i64 1, i64 2, i64 8, i64 0, i64 1, i64 4, i64 3, i64 2]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_col = external constant [75 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_zero = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_zero = external constant [75 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_k = internal constant [75 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73, i64 74]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_k = external constant [75 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_i = internal constant [75 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_i = external constant [75 x i64]
 
-@_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_j = internal constant [75 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 7, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_j = external constant [75 x i64]
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 920
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 59
   %v2 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 212
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 5664, i1 false)
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_tape_src, i64 0, i64 0))
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 4
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -807,7 +807,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1455,7 +1455,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1560,7 +1560,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1572,11 +1572,24 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_003420466b7a61816f75799491903167_eb4fc42aacd8_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_951cb02b14c689b01a280b1e65a5d473_9d1f08a414c9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
+# the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
+# numpy parses: as IR they were most of a large model's text and of its parse)
+_KERNEL_DATA = {
+    "tape_ptr": np.fromstring("0 1 2 3 4 5 6 12 15 18 19 20 21 22 24 25 31 37 39 40 42 47 49 52 57 63 65 66 68 74 77 80 86 92 94 95 97 98 100 106 107 109 111 117 123 125 127 128 129 130 131 132 133 134 135 140 141 145 146 153", dtype=np.int64, sep=" "),
+    "tape_src": np.fromstring("-6 -4 -3 -6 -4 -3 3 4 5 0 1 2 3 4 1 6 7 -10 -2 9 -1 -5 11 12 9 3 4 5 0 1 2 10 13 14 6 15 7 16 -7 17 8 18 3 5 0 1 2 4 0 20 21 -11 3 5 0 1 2 10 13 14 20 23 21 24 -8 25 22 26 3 4 5 0 1 2 3 4 1 28 29 -12 3 4 5 0 1 2 10 13 14 28 31 29 32 -9 33 30 34 35 9 12 19 27 35 15 23 31 38 37 39 11 12 19 27 35 6 20 28 19 27 35 7 21 29 42 43 41 44 38 19 27 36 40 45 46 -7 4 5 11 9 2 -8 5 11 9 2 -9 4 5 11 9 12 1 2", dtype=np.int64, sep=" "),
+    "jac_row": np.fromstring("47 47 47 47 47 47 47 47 48 48 48 48 48 48 48 48 49 49 49 49 49 49 49 49 50 50 50 50 50 50 50 50 50 50 50 50 51 51 51 51 51 51 51 51 51 51 51 51 52 52 52 52 52 52 52 52 52 52 52 52 53 54 54 54 54 55 56 56 56 57 58 58 58 58 58", dtype=np.int64, sep=" "),
+    "jac_col": np.fromstring("6 0 1 4 9 5 3 2 7 0 1 4 5 10 3 2 8 0 1 4 5 3 11 2 6 7 8 0 1 4 9 5 10 3 11 2 6 7 8 0 1 4 9 5 10 3 11 2 6 7 8 0 1 4 9 5 10 3 11 2 6 0 1 3 2 7 0 1 2 8 0 1 4 3 2", dtype=np.int64, sep=" "),
+    "jac_zero": np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0", dtype=np.int64, sep=" "),
+    "jac_k": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 66 67 68 69 70 71 72 73 74", dtype=np.int64, sep=" "),
+    "jac_i": np.fromstring("0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" "),
+    "jac_j": np.fromstring("0 3 4 5 6 7 9 11 1 3 4 5 7 8 9 11 2 3 4 5 7 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" "),
+}
 N_WORK, N_EVAL = 932, 59   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 7, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
@@ -1659,6 +1672,8 @@ def _load_kernels():
                 break
             except OSError:
                 continue                # no cache here: try the next one
+    for name, values in _KERNEL_DATA.items():
+        llvm.add_symbol(f"{_KERNEL_PREFIX}_{name}", values.ctypes.data)
     engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
     for obj in objs:
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
@@ -1675,6 +1690,7 @@ def _load_kernels():
 _LOADED = sys.modules.setdefault("_bgc_kernels", ModuleType("_bgc_kernels"))
 if _KERNEL_PREFIX not in vars(_LOADED):
     setattr(_LOADED, _KERNEL_PREFIX, _load_kernels())
+    setattr(_LOADED, _KERNEL_PREFIX + "_data", _KERNEL_DATA)    # (alive as long)
 _ENGINE = getattr(_LOADED, _KERNEL_PREFIX)
 
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "81d497d3cac390482e588624d6f29158"
+MODEL_HASH = "2860c68a028b1d74ba34024d7bb4a634"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 4.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_81d497d3cac390482e588624d6f29158", sys.modules[__name__])
-__name__ = "_bgc_pendulum_81d497d3cac390482e588624d6f29158"
+    sys.modules.setdefault("_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634", sys.modules[__name__])
+__name__ = "_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec"
+_KERNEL_PREFIX = "_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape_ptr = internal constant [83 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 14, i64 16, i64 19, i64 20, i64 21, i64 23, i64 24, i64 25, i64 26, i64 31, i64 37, i64 39, i64 40, i64 42, i64 44, i64 45, i64 48, i64 50, i64 56, i64 58, i64 59, i64 61, i64 66, i64 68, i64 71, i64 76, i64 82, i64 84, i64 85, i64 87, i64 88, i64 90, i64 91, i64 97, i64 103, i64 107, i64 108, i64 110, i64 112, i64 114, i64 115, i64 121, i64 125, i64 126, i64 128, i64 130, i64 132, i64 134, i64 140, i64 146, i64 152, i64 154, i64 157, i64 159, i64 165, i64 171, i64 172, i64 175, i64 181, i64 182, i64 184, i64 185, i64 186, i64 187, i64 188, i64 189, i64 190, i64 191, i64 196, i64 197, i64 201, i64 202, i64 209]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape_ptr = external constant [83 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape_src = internal constant [209 x i64] [i64 -9, i64 -4, i64 -3, i64 -9, i64 -4, i64 -3, i64 -6, i64 -7, i64 -8, i64 3, i64 5, i64 0, i64 1, i64 2, i64 3, i64 4, i64 9, i64 10, i64 -10, i64 -2, i64 -5, i64 12, i64 13, i64 -1, i64 15, i64 15, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 18, i64 9, i64 10, i64 19, i64 6, i64 20, i64 11, i64 21, i64 4, i64 2, i64 1, i64 23, i64 24, i64 -11, i64 4, i64 5, i64 14, i64 16, i64 17, i64 26, i64 23, i64 24, i64 27, i64 7, i64 28, i64 25, i64 29, i64 3, i64 5, i64 0, i64 1, i64 2, i64 4, i64 0, i64 31, i64 32, i64 -12, i64 3, i64 5, i64 0, i64 1, i64 2, i64 14, i64 16, i64 17, i64 34, i64 31, i64 32, i64 35, i64 8, i64 36, i64 33, i64 37, i64 38, i64 12, i64 13, i64 34, i64 15, i64 12, i64 13, i64 18, i64 9, i64 10, i64 15, i64 12, i64 13, i64 26, i64 23, i64 24, i64 42, i64 43, i64 18, i64 26, i64 44, i64 41, i64 45, i64 46, i64 26, i64 46, i64 18, i64 18, i64 15, i64 12, i64 13, i64 34, i64 31, i64 32, i64 43, i64 50, i64 26, i64 34, i64 51, i64 49, i64 52, i64 53, i64 34, i64 48, i64 54, i64 53, i64 26, i64 55, i64 47, i64 56, i64 18, i64 26, i64 34, i64 22, i64 30, i64 38, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 10, i64 24, i64 32, i64 58, i64 59, i64 40, i64 57, i64 60, i64 15, i64 13, i64 55, i64 47, i64 56, i64 9, i64 23, i64 31, i64 22, i64 30, i64 38, i64 18, i64 26, i64 34, i64 64, i64 62, i64 63, i64 65, i64 55, i64 47, i64 56, i64 10, i64 24, i64 32, i64 64, i64 67, i64 68, i64 22, i64 30, i64 39, i64 61, i64 66, i64 69, i64 6, i64 4, i64 5, i64 15, i64 12, i64 2, i64 7, i64 5, i64 15, i64 12, i64 2, i64 8, i64 4, i64 5, i64 15, i64 12, i64 13, i64 1, i64 2]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape_src = external constant [209 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_row = internal constant [74 x i64] [i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 70, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 71, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 72, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 73, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 74, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 75, i64 76, i64 77, i64 77, i64 77, i64 77, i64 78, i64 79, i64 79, i64 79, i64 80, i64 81, i64 81, i64 81, i64 81, i64 81]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_row = external constant [74 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_col = internal constant [74 x i64] [i64 5, i64 0, i64 1, i64 4, i64 9, i64 8, i64 3, i64 2, i64 6, i64 0, i64 1, i64 4, i64 10, i64 3, i64 2, i64 7, i64 0, i64 1, i64 4, i64 8, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 6, i64 7, i64 0, i64 1, i64 4, i64 9, i64 8, i64 10, i64 3, i64 11, i64 2, i64 5, i64 0, i64 1, i64 3, i64 2, i64 6, i64 0, i64 1, i64 2, i64 7, i64 0, i64 1, i64 4, i64 3, i64 2]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_col = external constant [74 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_zero = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_zero = external constant [74 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_k = internal constant [74 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 21, i64 22, i64 23, i64 24, i64 25, i64 26, i64 27, i64 28, i64 29, i64 30, i64 31, i64 32, i64 33, i64 34, i64 35, i64 36, i64 37, i64 38, i64 39, i64 40, i64 41, i64 42, i64 43, i64 44, i64 45, i64 46, i64 47, i64 48, i64 49, i64 50, i64 51, i64 52, i64 53, i64 54, i64 55, i64 56, i64 57, i64 58, i64 59, i64 60, i64 61, i64 62, i64 63, i64 64, i64 65, i64 66, i64 67, i64 68, i64 69, i64 70, i64 71, i64 72, i64 73]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_k = external constant [74 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_i = internal constant [74 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 1, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 2, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 3, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 4, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_i = external constant [74 x i64]
 
-@_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_j = internal constant [74 x i64] [i64 0, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 1, i64 3, i64 4, i64 5, i64 8, i64 9, i64 11, i64 2, i64 3, i64 4, i64 5, i64 7, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_j = external constant [74 x i64]
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 1275
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 82
   %v2 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 291
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 7872, i1 false)
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_tape_src, i64 0, i64 0))
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 6
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -894,7 +894,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1705,7 +1705,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -2153,7 +2153,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -2165,11 +2165,24 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_81d497d3cac390482e588624d6f29158_5add97d4adec_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_2860c68a028b1d74ba34024d7bb4a634_df0721dda9f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
+# the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
+# numpy parses: as IR they were most of a large model's text and of its parse)
+_KERNEL_DATA = {
+    "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 14 16 19 20 21 23 24 25 26 31 37 39 40 42 44 45 48 50 56 58 59 61 66 68 71 76 82 84 85 87 88 90 91 97 103 107 108 110 112 114 115 121 125 126 128 130 132 134 140 146 152 154 157 159 165 171 172 175 181 182 184 185 186 187 188 189 190 191 196 197 201 202 209", dtype=np.int64, sep=" "),
+    "tape_src": np.fromstring("-9 -4 -3 -9 -4 -3 -6 -7 -8 3 5 0 1 2 3 4 9 10 -10 -2 -5 12 13 -1 15 15 3 5 0 1 2 14 16 17 18 9 10 19 6 20 11 21 4 2 1 23 24 -11 4 5 14 16 17 26 23 24 27 7 28 25 29 3 5 0 1 2 4 0 31 32 -12 3 5 0 1 2 14 16 17 34 31 32 35 8 36 33 37 38 12 13 34 15 12 13 18 9 10 15 12 13 26 23 24 42 43 18 26 44 41 45 46 26 46 18 18 15 12 13 34 31 32 43 50 26 34 51 49 52 53 34 48 54 53 26 55 47 56 18 26 34 22 30 38 9 23 31 22 30 38 10 24 32 58 59 40 57 60 15 13 55 47 56 9 23 31 22 30 38 18 26 34 64 62 63 65 55 47 56 10 24 32 64 67 68 22 30 39 61 66 69 6 4 5 15 12 2 7 5 15 12 2 8 4 5 15 12 13 1 2", dtype=np.int64, sep=" "),
+    "jac_row": np.fromstring("70 70 70 70 70 70 70 70 71 71 71 71 71 71 71 72 72 72 72 72 72 72 72 73 73 73 73 73 73 73 73 73 73 73 73 74 74 74 74 74 74 74 74 74 74 74 74 75 75 75 75 75 75 75 75 75 75 75 75 76 77 77 77 77 78 79 79 79 80 81 81 81 81 81", dtype=np.int64, sep=" "),
+    "jac_col": np.fromstring("5 0 1 4 9 8 3 2 6 0 1 4 10 3 2 7 0 1 4 8 3 11 2 5 6 7 0 1 4 9 8 10 3 11 2 5 6 7 0 1 4 9 8 10 3 11 2 5 6 7 0 1 4 9 8 10 3 11 2 5 0 1 3 2 6 0 1 2 7 0 1 4 3 2", dtype=np.int64, sep=" "),
+    "jac_zero": np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0", dtype=np.int64, sep=" "),
+    "jac_k": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 66 67 68 69 70 71 72 73", dtype=np.int64, sep=" "),
+    "jac_i": np.fromstring("0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" "),
+    "jac_j": np.fromstring("0 3 4 5 6 7 9 11 1 3 4 5 8 9 11 2 3 4 5 7 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" "),
+}
 N_WORK, N_EVAL = 1287, 82   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 9, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
@@ -2252,6 +2265,8 @@ def _load_kernels():
                 break
             except OSError:
                 continue                # no cache here: try the next one
+    for name, values in _KERNEL_DATA.items():
+        llvm.add_symbol(f"{_KERNEL_PREFIX}_{name}", values.ctypes.data)
     engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
     for obj in objs:
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
@@ -2268,6 +2283,7 @@ def _load_kernels():
 _LOADED = sys.modules.setdefault("_bgc_kernels", ModuleType("_bgc_kernels"))
 if _KERNEL_PREFIX not in vars(_LOADED):
     setattr(_LOADED, _KERNEL_PREFIX, _load_kernels())
+    setattr(_LOADED, _KERNEL_PREFIX + "_data", _KERNEL_DATA)    # (alive as long)
 _ENGINE = getattr(_LOADED, _KERNEL_PREFIX)
 
 

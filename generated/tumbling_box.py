@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "80b77d42e0a41986aedc2916ea700f79"
+MODEL_HASH = "90e086e36ee10a1a2297f6efe2ba1729"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 5.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79", sys.modules[__name__])
-__name__ = "_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79"
+    sys.modules.setdefault("_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729", sys.modules[__name__])
+__name__ = "_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729"
 
 STATE_NAMES = ("box.m.px", "box.m.py", "box.m.pz", "box.J.px", "box.J.py", "box.J.pz", "box.x", "box.ax", "box.y", "box.ay", "box.z", "box.az", )
 PARAM_NAMES = ()
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be"
+_KERNEL_PREFIX = "_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,55 +118,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape_ptr = internal constant [23 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 9, i64 11, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20, i64 25, i64 26, i64 30, i64 31, i64 38]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape_ptr = external constant [23 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape_src = internal constant [38 x i64] [i64 -5, i64 -4, i64 -5, i64 -4, i64 -1, i64 -2, i64 -3, i64 5, i64 6, i64 4, i64 6, i64 4, i64 5, i64 -1, i64 -1, i64 -1, i64 7, i64 8, i64 9, i64 10, i64 2, i64 3, i64 4, i64 5, i64 1, i64 11, i64 3, i64 4, i64 5, i64 1, i64 12, i64 2, i64 3, i64 4, i64 5, i64 6, i64 0, i64 1]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape_src = external constant [38 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_row = internal constant [21 x i64] [i64 13, i64 13, i64 14, i64 14, i64 15, i64 15, i64 16, i64 17, i64 17, i64 17, i64 17, i64 18, i64 19, i64 19, i64 19, i64 20, i64 21, i64 21, i64 21, i64 21, i64 21]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_row = external constant [21 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_col = internal constant [21 x i64] [i64 1, i64 2, i64 0, i64 2, i64 0, i64 1, i64 0, i64 0, i64 1, i64 4, i64 3, i64 0, i64 0, i64 1, i64 3, i64 0, i64 0, i64 1, i64 2, i64 4, i64 3]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_col = external constant [21 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_zero = internal constant [21 x i64] [i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0, i64 0]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_zero = external constant [21 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_k = internal constant [21 x i64] [i64 0, i64 1, i64 2, i64 3, i64 4, i64 5, i64 6, i64 7, i64 8, i64 9, i64 10, i64 11, i64 12, i64 13, i64 14, i64 15, i64 16, i64 17, i64 18, i64 19, i64 20]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_k = external constant [21 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_i = internal constant [21 x i64] [i64 3, i64 3, i64 4, i64 4, i64 5, i64 5, i64 6, i64 7, i64 7, i64 7, i64 7, i64 8, i64 9, i64 9, i64 9, i64 10, i64 11, i64 11, i64 11, i64 11, i64 11]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_i = external constant [21 x i64]
 
-@_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_j = internal constant [21 x i64] [i64 4, i64 5, i64 3, i64 5, i64 3, i64 4, i64 0, i64 3, i64 4, i64 9, i64 11, i64 1, i64 3, i64 4, i64 11, i64 2, i64 3, i64 4, i64 5, i64 9, i64 11]
+@_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_j = external constant [21 x i64]
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 184
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -225,7 +225,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -256,7 +256,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -314,83 +314,83 @@ ends:
 }
 
 
-define internal void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 36
   %v2 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 74
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 880, i1 false)
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_tape_src, i64 0, i64 0))
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
@@ -406,7 +406,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -414,15 +414,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -435,33 +435,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -587,7 +587,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -773,7 +773,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 3
   %v2 = load double, double* %v1, align 8
@@ -837,7 +837,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -849,11 +849,24 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_80b77d42e0a41986aedc2916ea700f79_d8da16df88be_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_90e086e36ee10a1a2297f6efe2ba1729_21617e618f4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
+# the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
+# numpy parses: as IR they were most of a large model's text and of its parse)
+_KERNEL_DATA = {
+    "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 9 11 13 14 15 16 17 18 19 20 25 26 30 31 38", dtype=np.int64, sep=" "),
+    "tape_src": np.fromstring("-5 -4 -5 -4 -1 -2 -3 5 6 4 6 4 5 -1 -1 -1 7 8 9 10 2 3 4 5 1 11 3 4 5 1 12 2 3 4 5 6 0 1", dtype=np.int64, sep=" "),
+    "jac_row": np.fromstring("13 13 14 14 15 15 16 17 17 17 17 18 19 19 19 20 21 21 21 21 21", dtype=np.int64, sep=" "),
+    "jac_col": np.fromstring("1 2 0 2 0 1 0 0 1 4 3 0 0 1 3 0 0 1 2 4 3", dtype=np.int64, sep=" "),
+    "jac_zero": np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0", dtype=np.int64, sep=" "),
+    "jac_k": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20", dtype=np.int64, sep=" "),
+    "jac_i": np.fromstring("3 3 4 4 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" "),
+    "jac_j": np.fromstring("4 5 3 5 3 4 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" "),
+}
 N_WORK, N_EVAL = 196, 36   # the Jacobian's workspace, the others'
 _N, _NP, _NG = 12, 0, 1
 # the Jacobian's sparsity pattern: J[JAC_I[k], JAC_J[k]] are its structural non-zeros.
@@ -936,6 +949,8 @@ def _load_kernels():
                 break
             except OSError:
                 continue                # no cache here: try the next one
+    for name, values in _KERNEL_DATA.items():
+        llvm.add_symbol(f"{_KERNEL_PREFIX}_{name}", values.ctypes.data)
     engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
     for obj in objs:
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
@@ -952,6 +967,7 @@ def _load_kernels():
 _LOADED = sys.modules.setdefault("_bgc_kernels", ModuleType("_bgc_kernels"))
 if _KERNEL_PREFIX not in vars(_LOADED):
     setattr(_LOADED, _KERNEL_PREFIX, _load_kernels())
+    setattr(_LOADED, _KERNEL_PREFIX + "_data", _KERNEL_DATA)    # (alive as long)
 _ENGINE = getattr(_LOADED, _KERNEL_PREFIX)
 
 

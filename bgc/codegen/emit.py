@@ -267,10 +267,13 @@ def render(system: EquationSystem) -> str:
                 + dx + [v for it in system.assignments for v in _defines(it)]):
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
-    kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt, memo)
-    # the kernels' names: the module's and its IR's digest (one model compiled with other
-    # options is other code; two such modules in one process must not share a name)
-    digest = hashlib.sha256(f"{kern.ir}\n{kern.ir_straight}".encode()).hexdigest()[:12]
+    kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt, memo, data=True)
+    data = [(name, " ".join(map(str, values))) for name, values in kern.data.items()]
+    # the kernels' names: the module's and its IR's digest, with their tables' (one model
+    # compiled with other options is other code; two such modules in one process must not
+    # share a name)
+    digest = hashlib.sha256("\n".join([kern.ir, kern.ir_straight] + [
+        f"{name} {text}" for name, text in data]).encode()).hexdigest()[:12]
     prefix = f"{canonical}_{digest}"
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ir_straight = kern.ir_straight.replace(kernels.PLACEHOLDER, prefix)
@@ -280,7 +283,7 @@ def render(system: EquationSystem) -> str:
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         settings=[(f.name, _literal(getattr(m.settings, f.name))) for f in fields(m.settings)],
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight,
+        canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight, data=data,
         n_functions=ir.count("\ndefine ") + ir_straight.count("\ndefine "),
         n_work=kern.n_work, n_eval=kern.n_eval, n_schur=kern.n_schur,
         lstsq=any(b.rank >= 0 for b in kern.blocks),

@@ -90,6 +90,9 @@ class Kernels:
     n_eval: int         # the other programs' (its first n_eval slots)
     n_schur: int        # ``jac_schur``'s (the Jacobian's and its scratch; 0: none)
     blocks: list[Block]
+    # ``lower(data=True)``: the integer tables (name -> values; ``<prefix>_<name>`` in the
+    # IR, external there), which the module defines itself
+    data: dict | None = None
 
 
 class Module(linalg.LinearBlocks):
@@ -97,8 +100,12 @@ class Module(linalg.LinearBlocks):
     the linear blocks' functions (``linalg.LinearBlocks``) and the C entry points of the
     native integrators."""
 
-    def __init__(self, prefix: str, system, layout: Layout, memo: dict | None = None):
+    def __init__(self, prefix: str, system, layout: Layout, memo: dict | None = None,
+                 data: dict | None = None):
         self.prefix, self.layout = prefix, layout
+        # where given, the integer tables' values go here (name -> values) and the IR
+        # declares them external (a generated module hands them over as numpy arrays)
+        self.data = data
         self.states = {st.sym: i for i, st in enumerate(system.states)}
         self.params = {s: i for i, (s, _, _) in enumerate(system.params)}
         self.decls: set[str] = set()
@@ -240,13 +247,18 @@ class Module(linalg.LinearBlocks):
              "entry:", *body, "  ret void", "}"]))
 
     def array(self, name: str, kind: str, values) -> str:
-        """A constant global array; returns a pointer to its first element."""
+        """A constant global array; returns a pointer to its first element. An integer
+        one is external where ``data`` is kept (its values there)."""
         values = list(values) or [0]
         n = len(values)
-        text = map(double, values) if kind == DBL else map(str, map(int, values))
-        items = f"{kind} " + f", {kind} ".join(text)
-        self.globals.append(f"@{self.prefix}_{name} = internal constant [{n} x {kind}] "
-                            f"[{items}]")
+        if self.data is not None and kind == "i64":
+            self.data[name] = [int(v) for v in values]
+            self.globals.append(f"@{self.prefix}_{name} = external constant [{n} x {kind}]")
+        else:
+            text = map(double, values) if kind == DBL else map(str, map(int, values))
+            items = f"{kind} " + f", {kind} ".join(text)
+            self.globals.append(f"@{self.prefix}_{name} = internal constant [{n} x {kind}] "
+                                f"[{items}]")
         return (f"{kind}* getelementptr inbounds ([{n} x {kind}], [{n} x {kind}]* "
                 f"@{self.prefix}_{name}, i64 0, i64 0)")
 
@@ -401,20 +413,23 @@ ENTRIES = (("rhs_entry", "rhs"), ("jac_entry", "jac_full"), ("guard_entry", "gua
            ("proj_entry", "proj"), ("jacv_entry", "jac_vals"), ("con_entry", "con"))
 
 
-def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None) -> Kernels:
+def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None,
+          data: bool = False) -> Kernels:
     """IR for ``programs`` (name -> (assignments in causal order, [(out index, expr)])
     or (those, the name of a program run first, as the Jacobian runs rhs):
     ``PROGRAMS``, and any other, e.g. an FMU's event indicators) and for the Jacobian
     from its tape ``jt`` (program ``jac`` computes the tape's partials); functions named
     ``<prefix>_<name>``, ``prefix`` an identifier. ``memo``: ``emit.programs``' (the
-    symbols each expression reads), for the instance loops."""
+    symbols each expression reads), for the instance loops. ``data``: the integer tables
+    (the instance loops' rows, the tape, the blocks' plans: most of a large model's IR
+    as text) left out of the IR, declared external, their values in ``Kernels.data``."""
     layout = Layout(system, max(jt.n_colours, 1))
     n_eval = layout.size
     layout.pv = layout.region(max(len(jt.src), 1))
     layout.d = layout.region(jt.n_rows * jt.n_colours)
     if any(len(p) > 2 for p in programs.values()):     # a program run after another
         layout.scratch = layout.region(len(system.states))
-    mod = Module(prefix, system, layout, memo)
+    mod = Module(prefix, system, layout, memo, {} if data else None)
     blocks = layout.blocks.values()
     if blocks:
         mod.decls |= {MEMCPY, "declare double @llvm.fabs.f64(double)"}
@@ -448,7 +463,7 @@ def lower(system, prefix: str, programs: dict, jt, memo: dict | None = None) -> 
         mod.entry_at(n, len(programs["out"][1]), n_eval)
     n_schur = layout.size + linalg.schur_work(n, jt.n_aug) if jt.n_aug else 0
     return Kernels(mod.text(), mod.straight_text(), layout.size, n_eval, n_schur,
-                   [layout.blocks[k] for k in sorted(layout.blocks)])
+                   [layout.blocks[k] for k in sorted(layout.blocks)], mod.data)
 
 
 def program_functions(source: str, program: str) -> list[str]:

@@ -7,6 +7,7 @@ modules LLVM accepts, the programs and entry points there). ``linalg``'s: test_l
 from __future__ import annotations
 
 import ctypes
+import re
 
 import llvmlite.binding as llvm
 import numpy as np
@@ -152,3 +153,23 @@ def test_assembly_gives_two_modules_llvm_accepts(loop_system):
             "m_rhs_entry", "m_jac_entry"} <= defined
     assert {f.name for f in straight.functions if not f.is_declaration} >= {"m_rhs_0"}
     assert kern.n_eval <= kern.n_work and [b.index for b in kern.blocks] == [0]
+
+
+def test_integer_tables_kept_apart_are_declared_external_with_the_same_values(loop_system):
+    """``lower(data=True)`` (a generated module's): every integer table leaves the IR,
+    declared external with its length, its values in ``Kernels.data`` as the IR held them;
+    the doubles stay in the IR."""
+    system, progs, jt = programs(loop_system)
+    inline = kernels.lower(system, "m", progs, jt)
+    apart = kernels.lower(system, "m", progs, jt, data=True)
+    assert inline.data is None and apart.data
+    assert "x i64] [" not in apart.ir and "external" not in inline.ir
+    loops = llvm.parse_assembly(apart.ir)
+    loops.verify()
+    for name, values in apart.data.items():
+        g = loops.get_global_variable(f"m_{name}")
+        assert g.is_declaration and f"[{len(values)} x i64]" in str(g.global_value_type)
+        held = re.search(rf"@m_{name} = internal constant \[\d+ x i64\] \[([^\]]*)\]",
+                         inline.ir)[1]
+        assert [int(v.split()[1]) for v in held.split(", ")] == values
+    assert apart.ir_straight == inline.ir_straight

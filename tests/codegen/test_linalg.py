@@ -157,11 +157,12 @@ def test_schur_template_is_the_jacobian_of_the_states_and_nan_when_singular(n, k
 
 class _Module(linalg.LinearBlocks):
     """What ``LinearBlocks`` uses of the module assembly: a prefix, its functions, their
-    declarations and constant tables."""
+    declarations and constant tables (in the IR: no ``data`` kept apart)."""
     array = kernels.Module.array
 
     def __init__(self):
         self.prefix, self.functions, self.decls, self.globals = "t", [], set(), []
+        self.data = None
 
     def text(self) -> str:
         routines = [linalg.lu_ir("t"), linalg.assemble_ir("t"), linalg.splu_ir("t"),

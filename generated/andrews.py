@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "bf0c788ef5fea31c9b83b84bd823bd1e"
+MODEL_HASH = "276fe5b0b047b32b24779eede564783b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 0.03, "rtol": 1e-10, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e", sys.modules[__name__])
-__name__ = "_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e"
+    sys.modules.setdefault("_bgc_andrews_276fe5b0b047b32b24779eede564783b", sys.modules[__name__])
+__name__ = "_bgc_andrews_276fe5b0b047b32b24779eede564783b"
 
 STATE_NAMES = ("body1.m.px", "body1.m.py", "body1.m.pz", "body1.J.px", "body1.J.py", "body1.J.pz", "body2.m.px", "body2.m.py", "body2.m.pz", "body2.J.px", "body2.J.py", "body2.J.pz", "body3.m.px", "body3.m.py", "body3.m.pz", "body3.J.px", "body3.J.py", "body3.J.pz", "body4.m.px", "body4.m.py", "body4.m.pz", "body4.J.px", "body4.J.py", "body4.J.pz", "body5.m.px", "body5.m.py", "body5.m.pz", "body5.J.px", "body5.J.py", "body5.J.pz", "body6.m.px", "body6.m.py", "body6.m.pz", "body6.J.px", "body6.J.py", "body6.J.pz", "body7.m.px", "body7.m.py", "body7.m.pz", "body7.J.px", "body7.J.py", "body7.J.pz", "body1.x", "body1.ax", "body1.y", "body1.ay", "body1.z", "body1.az", "body2.x", "body2.ax", "body2.y", "body2.ay", "body2.z", "body2.az", "body3.x", "body3.ax", "body3.y", "body3.ay", "body3.z", "body3.az", "body4.x", "body4.ax", "body4.y", "body4.ay", "body4.z", "body4.az", "body5.x", "body5.ax", "body5.y", "body5.ay", "body5.z", "body5.az", "body6.x", "body6.ax", "body6.y", "body6.ay", "body6.z", "body6.az", "body7.x", "body7.ax", "body7.y", "body7.ay", "body7.z", "body7.az", )
 PARAM_NAMES = ("mom", "beta0", "Theta0", "gamma0", "Phi0", "delta0", "Omega0", "epsilon0", "c0", "l0", "xb", "yb", "xc", "yc", "sc", "sd", "pivot_O__stiffness", "pivot_O__damping", "pivot_O__rot_stiffness", "pivot_O__rot_damping", "pivot_O__tx_load", "pivot_O__ty_load", "pivot_O__tz_load", "pivot_O__ry_load", "pivot_O__rz_load", "pivot_O__rx_k", "pivot_O__rx_c", "pivot_O__rx_preload", "pin_F__stiffness", "pin_F__damping", "pin_F__rot_stiffness", "pin_F__rot_damping", "pin_F__ty_load", "pin_F__tz_load", "pin_E3__stiffness", "pin_E3__damping", "pin_E3__rot_stiffness", "pin_E3__rot_damping", "pin_E3__ty_load", "pin_E3__tz_load", "pin_E4__stiffness", "pin_E4__damping", "pin_E4__rot_stiffness", "pin_E4__rot_damping", "pin_E4__ty_load", "pin_E4__tz_load", "pin_E6__stiffness", "pin_E6__damping", "pin_E6__rot_stiffness", "pin_E6__rot_damping", "pin_E6__ty_load", "pin_E6__tz_load", "pivot_B__stiffness", "pivot_B__damping", "pivot_B__rot_stiffness", "pivot_B__rot_damping", "pivot_B__tx_load", "pivot_B__ty_load", "pivot_B__tz_load", "pivot_B__ry_load", "pivot_B__rz_load", "pivot_B__rx_k", "pivot_B__rx_c", "pivot_B__rx_preload", "pivot_A5__stiffness", "pivot_A5__damping", "pivot_A5__rot_stiffness", "pivot_A5__rot_damping", "pivot_A5__tx_load", "pivot_A5__ty_load", "pivot_A5__tz_load", "pivot_A5__ry_load", "pivot_A5__rz_load", "pin_H__stiffness", "pin_H__damping", "pin_H__rot_stiffness", "pin_H__rot_damping", "pin_H__ty_load", "pin_H__tz_load", "pivot_A7__stiffness", "pivot_A7__damping", "pivot_A7__rot_stiffness", "pivot_A7__rot_damping", "pivot_A7__tx_load", "pivot_A7__ty_load", "pivot_A7__tz_load", "pivot_A7__ry_load", "pivot_A7__rz_load", "pin_G__stiffness", "pin_G__damping", "pin_G__rot_stiffness", "pin_G__rot_damping", "pin_G__ty_load", "pin_G__tz_load", "plane_2__stiffness", "plane_2__damping", "plane_2__rot_stiffness", "plane_2__rot_damping", "plane_2__tx_load", "plane_2__ry_load", "plane_2__rz_load", "plane_4__stiffness", "plane_4__damping", "plane_4__rot_stiffness", "plane_4__rot_damping", "plane_4__tx_load", "plane_4__ry_load", "plane_4__rz_load", "plane_6__stiffness", "plane_6__damping", "plane_6__rot_stiffness", "plane_6__rot_damping", "plane_6__tx_load", "plane_6__ry_load", "plane_6__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d"
+_KERNEL_PREFIX = "_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d"
 KERNEL_FUNCTIONS = 30
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -122,63 +122,63 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape_ptr = external constant [1074 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_ptr = external constant [1074 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape_src = external constant [3490 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_src = external constant [3490 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_row = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row = external constant [1473 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_col = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col = external constant [1473 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_zero = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_zero = external constant [1473 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_k = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_k = external constant [1473 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_i = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_i = external constant [1473 x i64]
 
-@_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_j = external constant [1473 x i64]
+@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_j = external constant [1473 x i64]
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 68955
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -237,7 +237,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -268,7 +268,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -326,83 +326,83 @@ ends:
 }
 
 
-define internal void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1085
   %v2 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 4575
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 515040, i1 false)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape(double* %v2, double* %v1, i64 0, i64 1073, i64 60, i64* getelementptr inbounds ([1074 x i64], [1074 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([3490 x i64], [3490 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_tape_src, i64 0, i64 0))
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape(double* %v2, double* %v1, i64 0, i64 1073, i64 60, i64* getelementptr inbounds ([1074 x i64], [1074 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([3490 x i64], [3490 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 56448, i1 false)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 84, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_col, i64 0, i64 0))
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 84, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 0, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_col, i64 0, i64 0))
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 0, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 552312)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 552312)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
@@ -418,7 +418,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 7
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -426,31 +426,31 @@ exit:
   ret void
 }
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -467,33 +467,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 43
   %v2 = load double, double* %v1, align 8
@@ -2203,7 +2203,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 77
   %v2 = load double, double* %v1, align 8
@@ -4079,7 +4079,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 598
   %v2 = load double, double* %v1, align 8
@@ -5767,7 +5767,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 897
   %v2 = load double, double* %v1, align 8
@@ -7033,7 +7033,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 43
   %v2 = load double, double* %v1, align 8
@@ -9710,7 +9710,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 17
   %v2 = load double, double* %v1, align 8
@@ -12343,7 +12343,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 37
   %v2 = load double, double* %v1, align 8
@@ -15052,7 +15052,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 537
   %v2 = load double, double* %v1, align 8
@@ -17785,7 +17785,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 18
   %v2 = load double, double* %v1, align 8
@@ -20511,7 +20511,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %out, i64 3395
   store double 0x3FF0000000000000, double* %v1, align 8
@@ -20956,7 +20956,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 1
   %v2 = load double, double* %v1, align 8
@@ -21016,7 +21016,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 45
   %v2 = load double, double* %v1, align 8
@@ -21070,7 +21070,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_bf0c788ef5fea31c9b83b84bd823bd1e_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

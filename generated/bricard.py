@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "c3ef48e4e52b5b95ae9da37ab5901827"
+MODEL_HASH = "f445e7c95d36bdac95f599eb57883eba"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827", sys.modules[__name__])
-__name__ = "_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827"
+    sys.modules.setdefault("_bgc_bricard_f445e7c95d36bdac95f599eb57883eba", sys.modules[__name__])
+__name__ = "_bgc_bricard_f445e7c95d36bdac95f599eb57883eba"
 
 STATE_NAMES = ("bar1.m.px", "bar1.m.py", "bar1.m.pz", "bar1.J.px", "bar1.J.py", "bar1.J.pz", "bar2.m.px", "bar2.m.py", "bar2.m.pz", "bar2.J.px", "bar2.J.py", "bar2.J.pz", "bar3.m.px", "bar3.m.py", "bar3.m.pz", "bar3.J.px", "bar3.J.py", "bar3.J.pz", "bar4.m.px", "bar4.m.py", "bar4.m.pz", "bar4.J.px", "bar4.J.py", "bar4.J.pz", "bar5.m.px", "bar5.m.py", "bar5.m.pz", "bar5.J.px", "bar5.J.py", "bar5.J.pz", "bar1.x", "bar1.ax", "bar1.y", "bar1.ay", "bar1.z", "bar1.az", "bar2.x", "bar2.ax", "bar2.y", "bar2.ay", "bar2.z", "bar2.az", "bar3.x", "bar3.ax", "bar3.y", "bar3.ay", "bar3.z", "bar3.az", "bar4.x", "bar4.ax", "bar4.y", "bar4.ay", "bar4.z", "bar4.az", "bar5.x", "bar5.ax", "bar5.y", "bar5.ay", "bar5.z", "bar5.az", )
 PARAM_NAMES = ("J1__stiffness", "J1__damping", "J1__rot_stiffness", "J1__rot_damping", "J1__tx_load", "J1__ty_load", "J1__tz_load", "J1__ry_load", "J1__rz_load", "J2__stiffness", "J2__damping", "J2__rot_stiffness", "J2__rot_damping", "J2__tx_load", "J2__ty_load", "J2__tz_load", "J2__ry_load", "J2__rz_load", "J3__stiffness", "J3__damping", "J3__rot_stiffness", "J3__rot_damping", "J3__tx_load", "J3__ty_load", "J3__tz_load", "J3__ry_load", "J3__rz_load", "J4__stiffness", "J4__damping", "J4__rot_stiffness", "J4__rot_damping", "J4__tx_load", "J4__ty_load", "J4__tz_load", "J4__ry_load", "J4__rz_load", "J5__stiffness", "J5__damping", "J5__rot_stiffness", "J5__rot_damping", "J5__tx_load", "J5__ty_load", "J5__tz_load", "J5__ry_load", "J5__rz_load", "J6__stiffness", "J6__damping", "J6__rot_stiffness", "J6__rot_damping", "J6__tx_load", "J6__ty_load", "J6__tz_load", "J6__ry_load", "J6__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a"
+_KERNEL_PREFIX = "_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a"
 KERNEL_FUNCTIONS = 26
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,59 +120,59 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape_ptr = external constant [585 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_ptr = external constant [585 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape_src = external constant [1639 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_src = external constant [1639 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_row = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row = external constant [725 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_col = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col = external constant [725 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_zero = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_zero = external constant [725 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_k = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_k = external constant [725 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_i = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_i = external constant [725 x i64]
 
-@_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_j = external constant [725 x i64]
+@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_j = external constant [725 x i64]
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 23257
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -231,7 +231,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -262,7 +262,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -320,83 +320,83 @@ ends:
 }
 
 
-define internal void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 594
   %v2 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2233
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 168192, i1 false)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape(double* %v2, double* %v1, i64 0, i64 584, i64 36, i64* getelementptr inbounds ([585 x i64], [585 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1639 x i64], [1639 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_tape_src, i64 0, i64 0))
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape(double* %v2, double* %v1, i64 0, i64 584, i64 36, i64* getelementptr inbounds ([585 x i64], [585 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1639 x i64], [1639 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 28800, i1 false)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_col, i64 0, i64 0))
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_col, i64 0, i64 0))
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 186536)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 186536)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
@@ -412,7 +412,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 19
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -420,23 +420,23 @@ exit:
   ret void
 }
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -451,33 +451,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -2002,7 +2002,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 282
   %v2 = load double, double* %v1, align 8
@@ -3621,7 +3621,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 384
   %v2 = load double, double* %v1, align 8
@@ -3802,7 +3802,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -6536,7 +6536,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 263
   %v2 = load double, double* %v1, align 8
@@ -9277,7 +9277,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 515
   %v2 = load double, double* %v1, align 8
@@ -10109,7 +10109,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -10874,7 +10874,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 33
   %v2 = load double, double* %v1, align 8
@@ -10914,7 +10914,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_c3ef48e4e52b5b95ae9da37ab5901827_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

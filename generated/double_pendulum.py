@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "fba7051ee1c0210e7d07348c617ac722"
+MODEL_HASH = "0fc1622048737c7c51cf949e5afb64e3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722", sys.modules[__name__])
-__name__ = "_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722"
+    sys.modules.setdefault("_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3", sys.modules[__name__])
+__name__ = "_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3"
 
 STATE_NAMES = ("rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", )
 PARAM_NAMES = ("shoulder__stiffness", "shoulder__damping", "shoulder__rot_stiffness", "shoulder__rot_damping", "shoulder__tx_load", "shoulder__ty_load", "shoulder__tz_load", "shoulder__ry_load", "shoulder__rz_load", "elbow__stiffness", "elbow__damping", "elbow__rot_stiffness", "elbow__rot_damping", "elbow__tx_load", "elbow__ty_load", "elbow__tz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334"
+_KERNEL_PREFIX = "_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_ptr = external constant [162 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_ptr = external constant [162 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_src = external constant [426 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_src = external constant [426 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row = external constant [266 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col = external constant [266 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_zero = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_zero = external constant [266 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_k = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_k = external constant [266 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_i = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_i = external constant [266 x i64]
 
-@_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_j = external constant [266 x i64]
+@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_j = external constant [266 x i64]
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 4451
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 161
   %v2 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 587
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 30912, i1 false)
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_tape_src, i64 0, i64 0))
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 4608, i1 false)
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -1401,7 +1401,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3237,7 +3237,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3534,7 +3534,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 15
   %v2 = load double, double* %v1, align 8
@@ -3553,7 +3553,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_fba7051ee1c0210e7d07348c617ac722_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "flyball_governor"
 MODEL_FILE = "flyball_governor.yaml"
-MODEL_HASH = "0d10540fe472d36f75cbd131ffd78835"
+MODEL_HASH = "fccd1594aae0c03021d52e3b3a4fa05d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835", sys.modules[__name__])
-__name__ = "_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835"
+    sys.modules.setdefault("_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d", sys.modules[__name__])
+__name__ = "_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d"
 
 STATE_NAMES = ("shaft.m.px", "shaft.m.py", "shaft.m.pz", "shaft.J.px", "shaft.J.py", "shaft.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "shaft.x", "shaft.ax", "shaft.y", "shaft.ay", "shaft.z", "shaft.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", "spin.rx", "hinge1.rx", "hinge2.rx", )
 PARAM_NAMES = ("k_s", "c_s", "l0", "phi0", "h0", "spin__stiffness", "spin__damping", "spin__rot_stiffness", "spin__rot_damping", "spin__tx_load", "spin__ty_load", "spin__tz_load", "spin__ry_load", "spin__rz_load", "sleeve__stiffness", "sleeve__damping", "sleeve__rot_stiffness", "sleeve__rot_damping", "sleeve__ty_load", "sleeve__tz_load", "sleeve__rx_load", "sleeve__ry_load", "sleeve__rz_load", "sleeve__tx_k", "sleeve__tx_c", "sleeve__tx_preload", "hinge1__stiffness", "hinge1__damping", "hinge1__rot_stiffness", "hinge1__rot_damping", "hinge1__tx_load", "hinge1__ty_load", "hinge1__tz_load", "hinge1__ry_load", "hinge1__rz_load", "hinge1__rx_k", "hinge1__rx_c", "hinge1__rx_preload", "hinge2__stiffness", "hinge2__damping", "hinge2__rot_stiffness", "hinge2__rot_damping", "hinge2__tx_load", "hinge2__ty_load", "hinge2__tz_load", "hinge2__ry_load", "hinge2__rz_load", "hinge2__rx_k", "hinge2__rx_c", "hinge2__rx_preload", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b"
+_KERNEL_PREFIX = "_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b"
 KERNEL_FUNCTIONS = 25
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -122,58 +122,58 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape_ptr = external constant [507 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_ptr = external constant [507 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape_src = external constant [1724 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_src = external constant [1724 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_row = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row = external constant [856 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_col = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col = external constant [856 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_zero = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_zero = external constant [856 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_k = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_k = external constant [856 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_i = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_i = external constant [856 x i64]
 
-@_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_j = external constant [856 x i64]
+@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_j = external constant [856 x i64]
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 26535
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -232,7 +232,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -263,7 +263,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -321,83 +321,83 @@ ends:
 }
 
 
-define internal void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 523
   %v2 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2247
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 194304, i1 false)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape(double* %v2, double* %v1, i64 0, i64 506, i64 48, i64* getelementptr inbounds ([507 x i64], [507 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1724 x i64], [1724 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_tape_src, i64 0, i64 0))
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape(double* %v2, double* %v1, i64 0, i64 506, i64 48, i64* getelementptr inbounds ([507 x i64], [507 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1724 x i64], [1724 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 20808, i1 false)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 51, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_col, i64 0, i64 0))
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 51, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 0, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_col, i64 0, i64 0))
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 0, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 212688)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 212688)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
@@ -413,7 +413,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -421,21 +421,21 @@ exit:
   ret void
 }
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -452,33 +452,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -2436,7 +2436,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 268
   %v2 = load double, double* %v1, align 8
@@ -3839,7 +3839,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -6356,7 +6356,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 160
   %v2 = load double, double* %v1, align 8
@@ -8901,7 +8901,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 38
   %v2 = load double, double* %v1, align 8
@@ -11597,7 +11597,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -11830,7 +11830,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 39
   %v2 = load double, double* %v1, align 8
@@ -11863,7 +11863,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_0d10540fe472d36f75cbd131ffd78835_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

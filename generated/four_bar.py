@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "3634e1239357da17b0d7f35596e197ee"
+MODEL_HASH = "00b9e0c6a61c30041a958f63f2f7e973"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_four_bar_3634e1239357da17b0d7f35596e197ee", sys.modules[__name__])
-__name__ = "_bgc_four_bar_3634e1239357da17b0d7f35596e197ee"
+    sys.modules.setdefault("_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973", sys.modules[__name__])
+__name__ = "_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "coupler.m.px", "coupler.m.py", "coupler.m.pz", "coupler.J.px", "coupler.J.py", "coupler.J.pz", "rocker.m.px", "rocker.m.py", "rocker.m.pz", "rocker.J.px", "rocker.J.py", "rocker.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "coupler.x", "coupler.ax", "coupler.y", "coupler.ay", "coupler.z", "coupler.az", "rocker.x", "rocker.ax", "rocker.y", "rocker.ay", "rocker.z", "rocker.az", )
 PARAM_NAMES = ("crank_pivot__stiffness", "crank_pivot__damping", "crank_pivot__rot_stiffness", "crank_pivot__rot_damping", "crank_pivot__tx_load", "crank_pivot__ty_load", "crank_pivot__tz_load", "crank_pivot__ry_load", "crank_pivot__rz_load", "ball_A__stiffness", "ball_A__damping", "ball_A__rot_stiffness", "ball_A__rot_damping", "ball_A__tx_load", "ball_A__ty_load", "ball_A__tz_load", "ball_B__stiffness", "ball_B__damping", "ball_B__rot_stiffness", "ball_B__rot_damping", "ball_B__tx_load", "ball_B__ty_load", "ball_B__tz_load", "rocker_pivot__stiffness", "rocker_pivot__damping", "rocker_pivot__rot_stiffness", "rocker_pivot__rot_damping", "rocker_pivot__tx_load", "rocker_pivot__ty_load", "rocker_pivot__tz_load", "rocker_pivot__ry_load", "rocker_pivot__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c"
+_KERNEL_PREFIX = "_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c"
 KERNEL_FUNCTIONS = 24
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,57 +120,57 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape_ptr = external constant [291 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_ptr = external constant [291 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape_src = external constant [815 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_src = external constant [815 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_row = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row = external constant [461 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_col = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col = external constant [461 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_zero = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_zero = external constant [461 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_k = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_k = external constant [461 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_i = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_i = external constant [461 x i64]
 
-@_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_j = external constant [461 x i64]
+@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_j = external constant [461 x i64]
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 11545
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -229,7 +229,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -260,7 +260,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -318,83 +318,83 @@ ends:
 }
 
 
-define internal void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 290
   %v2 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 1105
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 83520, i1 false)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape(double* %v2, double* %v1, i64 0, i64 290, i64 36, i64* getelementptr inbounds ([291 x i64], [291 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([815 x i64], [815 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_tape_src, i64 0, i64 0))
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape(double* %v2, double* %v1, i64 0, i64 290, i64 36, i64* getelementptr inbounds ([291 x i64], [291 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([815 x i64], [815 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 10368, i1 false)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 36, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_col, i64 0, i64 0))
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 36, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 0, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_col, i64 0, i64 0))
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 0, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 92648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 92648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
@@ -410,7 +410,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 11
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -418,19 +418,19 @@ exit:
   ret void
 }
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -445,33 +445,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -2166,7 +2166,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 207
   %v2 = load double, double* %v1, align 8
@@ -2275,7 +2275,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -4852,7 +4852,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 201
   %v2 = load double, double* %v1, align 8
@@ -5796,7 +5796,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -6489,7 +6489,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 27
   %v2 = load double, double* %v1, align 8
@@ -6515,7 +6515,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_3634e1239357da17b0d7f35596e197ee_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

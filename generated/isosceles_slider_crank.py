@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "42c13468d4b09e4667de0cfbaa878404"
+MODEL_HASH = "9d8eafa87f227a25b7e7aa6b4e084fcf"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 0.3, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404", sys.modules[__name__])
-__name__ = "_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404"
+    sys.modules.setdefault("_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf", sys.modules[__name__])
+__name__ = "_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", )
 PARAM_NAMES = ("main__stiffness", "main__damping", "main__rot_stiffness", "main__rot_damping", "main__tx_load", "main__ty_load", "main__tz_load", "main__ry_load", "main__rz_load", "crank_pin__stiffness", "crank_pin__damping", "crank_pin__rot_stiffness", "crank_pin__rot_damping", "crank_pin__tx_load", "crank_pin__ty_load", "crank_pin__tz_load", "crank_pin__ry_load", "crank_pin__rz_load", "wrist_pin__stiffness", "wrist_pin__damping", "wrist_pin__rot_stiffness", "wrist_pin__rot_damping", "wrist_pin__tx_load", "wrist_pin__ty_load", "wrist_pin__tz_load", "wrist_pin__ry_load", "wrist_pin__rz_load", "guide__stiffness", "guide__damping", "guide__rot_stiffness", "guide__rot_damping", "guide__ty_load", "guide__tz_load", "guide__rx_load", "guide__ry_load", "guide__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656"
+_KERNEL_PREFIX = "_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656"
 KERNEL_FUNCTIONS = 24
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,57 +118,57 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape_ptr = external constant [343 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_ptr = external constant [343 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape_src = external constant [1029 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_src = external constant [1029 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_row = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_col = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_zero = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_zero = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_k = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_k = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_i = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_i = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_j = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_j = external constant [388 x i64]
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 13689
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 348
   %v2 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 1377
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 98496, i1 false)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape(double* %v2, double* %v1, i64 0, i64 342, i64 36, i64* getelementptr inbounds ([343 x i64], [343 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1029 x i64], [1029 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_tape_src, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape(double* %v2, double* %v1, i64 0, i64 342, i64 36, i64* getelementptr inbounds ([343 x i64], [343 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1029 x i64], [1029 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 10368, i1 false)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 36, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_col, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 36, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 0, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_col, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 0, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 109800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 109800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,19 +416,19 @@ exit:
   ret void
 }
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -441,33 +441,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -2156,7 +2156,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 299
   %v2 = load double, double* %v1, align 8
@@ -2533,7 +2533,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -5171,7 +5171,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 181
   %v2 = load double, double* %v1, align 8
@@ -6713,7 +6713,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -6778,7 +6778,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 21
   %v2 = load double, double* %v1, align 8
@@ -6804,7 +6804,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_42c13468d4b09e4667de0cfbaa878404_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "n_four_bar"
 MODEL_FILE = "n_four_bar.yaml"
-MODEL_HASH = "e801641d857bd56b5490a8b19505602e"
+MODEL_HASH = "4f35e651b38119815d68af5f2f5f6fcd"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 20.0, "rtol": 1e-06, "atol": 1e-06, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e", sys.modules[__name__])
-__name__ = "_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e"
+    sys.modules.setdefault("_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd", sys.modules[__name__])
+__name__ = "_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd"
 
 STATE_NAMES = ("crank_0.m.px", "crank_0.m.py", "crank_0.m.pz", "crank_0.J.px", "crank_0.J.py", "crank_0.J.pz", "w_1.crank.m.px", "w_1.crank.m.py", "w_1.crank.m.pz", "w_1.crank.J.px", "w_1.crank.J.py", "w_1.crank.J.pz", "w_1.coupler.m.px", "w_1.coupler.m.py", "w_1.coupler.m.pz", "w_1.coupler.J.px", "w_1.coupler.J.py", "w_1.coupler.J.pz", "w_2.crank.m.px", "w_2.crank.m.py", "w_2.crank.m.pz", "w_2.crank.J.px", "w_2.crank.J.py", "w_2.crank.J.pz", "w_2.coupler.m.px", "w_2.coupler.m.py", "w_2.coupler.m.pz", "w_2.coupler.J.px", "w_2.coupler.J.py", "w_2.coupler.J.pz", "crank_0.x", "crank_0.ax", "crank_0.y", "crank_0.ay", "crank_0.z", "crank_0.az", "w_1.crank.x", "w_1.crank.ax", "w_1.crank.y", "w_1.crank.ay", "w_1.crank.z", "w_1.crank.az", "w_1.coupler.x", "w_1.coupler.ax", "w_1.coupler.y", "w_1.coupler.ay", "w_1.coupler.z", "w_1.coupler.az", "w_2.crank.x", "w_2.crank.ax", "w_2.crank.y", "w_2.crank.ay", "w_2.crank.z", "w_2.crank.az", "w_2.coupler.x", "w_2.coupler.ax", "w_2.coupler.y", "w_2.coupler.ay", "w_2.coupler.z", "w_2.coupler.az", )
 PARAM_NAMES = ("v0", "w_1.m", "w_2.m", "pin_0__stiffness", "pin_0__damping", "pin_0__rot_stiffness", "pin_0__rot_damping", "pin_0__tx_load", "pin_0__ty_load", "pin_0__tz_load", "pin_0__ry_load", "pin_0__rz_load", "w_1.pin__stiffness", "w_1.pin__damping", "w_1.pin__rot_stiffness", "w_1.pin__rot_damping", "w_1.pin__tx_load", "w_1.pin__ty_load", "w_1.pin__tz_load", "w_1.pin__ry_load", "w_1.pin__rz_load", "w_1.left_end__stiffness", "w_1.left_end__damping", "w_1.left_end__rot_stiffness", "w_1.left_end__rot_damping", "w_1.left_end__tx_load", "w_1.left_end__ty_load", "w_1.left_end__tz_load", "w_1.left_end__ry_load", "w_1.left_end__rz_load", "w_1.right_end__stiffness", "w_1.right_end__damping", "w_1.right_end__rot_stiffness", "w_1.right_end__rot_damping", "w_1.right_end__tx_load", "w_1.right_end__ty_load", "w_1.right_end__tz_load", "w_1.right_end__ry_load", "w_1.right_end__rz_load", "w_2.pin__stiffness", "w_2.pin__damping", "w_2.pin__rot_stiffness", "w_2.pin__rot_damping", "w_2.pin__tx_load", "w_2.pin__ty_load", "w_2.pin__tz_load", "w_2.pin__ry_load", "w_2.pin__rz_load", "w_2.left_end__stiffness", "w_2.left_end__damping", "w_2.left_end__rot_stiffness", "w_2.left_end__rot_damping", "w_2.left_end__tx_load", "w_2.left_end__ty_load", "w_2.left_end__tz_load", "w_2.left_end__ry_load", "w_2.left_end__rz_load", "w_2.right_end__stiffness", "w_2.right_end__damping", "w_2.right_end__rot_stiffness", "w_2.right_end__rot_damping", "w_2.right_end__tx_load", "w_2.right_end__ty_load", "w_2.right_end__tz_load", "w_2.right_end__ry_load", "w_2.right_end__rz_load", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4"
+_KERNEL_PREFIX = "_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4"
 KERNEL_FUNCTIONS = 26
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -121,59 +121,59 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape_ptr = external constant [630 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_ptr = external constant [630 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape_src = external constant [1733 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_src = external constant [1733 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_row = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row = external constant [725 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_col = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col = external constant [725 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_zero = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_zero = external constant [725 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_k = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_k = external constant [725 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_i = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_i = external constant [725 x i64]
 
-@_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_j = external constant [725 x i64]
+@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_j = external constant [725 x i64]
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 25021
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -232,7 +232,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -263,7 +263,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -321,83 +321,83 @@ ends:
 }
 
 
-define internal void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 644
   %v2 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2377
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 181152, i1 false)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape(double* %v2, double* %v1, i64 0, i64 629, i64 36, i64* getelementptr inbounds ([630 x i64], [630 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1733 x i64], [1733 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_tape_src, i64 0, i64 0))
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape(double* %v2, double* %v1, i64 0, i64 629, i64 36, i64* getelementptr inbounds ([630 x i64], [630 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1733 x i64], [1733 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 28800, i1 false)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_col, i64 0, i64 0))
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_col, i64 0, i64 0))
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
@@ -413,7 +413,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 2
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -421,23 +421,23 @@ exit:
   ret void
 }
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -450,33 +450,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -1991,7 +1991,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 285
   %v2 = load double, double* %v1, align 8
@@ -3670,7 +3670,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 582
   %v2 = load double, double* %v1, align 8
@@ -4082,7 +4082,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -6782,7 +6782,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 182
   %v2 = load double, double* %v1, align 8
@@ -9514,7 +9514,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 240
   %v2 = load double, double* %v1, align 8
@@ -10813,7 +10813,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -10865,7 +10865,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 33
   %v2 = load double, double* %v1, align 8
@@ -10905,7 +10905,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_e801641d857bd56b5490a8b19505602e_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

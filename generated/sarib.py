@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "36fb8ecda46c3a2802853ddeb4508c59"
+MODEL_HASH = "b733328dfe92f6eb4a84ff89ed9a4899"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 28.0, "rtol": 1e-05, "atol": 1e-05, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59", sys.modules[__name__])
-__name__ = "_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59"
+    sys.modules.setdefault("_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899", sys.modules[__name__])
+__name__ = "_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "leg_1.beater.m.px", "leg_1.beater.m.py", "leg_1.beater.m.pz", "leg_1.beater.J.px", "leg_1.beater.J.py", "leg_1.beater.J.pz", "leg_1.bar.m.px", "leg_1.bar.m.py", "leg_1.bar.m.pz", "leg_1.bar.J.px", "leg_1.bar.J.py", "leg_1.bar.J.pz", "leg_2.beater.m.px", "leg_2.beater.m.py", "leg_2.beater.m.pz", "leg_2.beater.J.px", "leg_2.beater.J.py", "leg_2.beater.J.pz", "leg_2.bar.m.px", "leg_2.bar.m.py", "leg_2.bar.m.pz", "leg_2.bar.J.px", "leg_2.bar.J.py", "leg_2.bar.J.pz", "leg_3.beater.m.px", "leg_3.beater.m.py", "leg_3.beater.m.pz", "leg_3.beater.J.px", "leg_3.beater.J.py", "leg_3.beater.J.pz", "leg_3.bar.m.px", "leg_3.bar.m.py", "leg_3.bar.m.pz", "leg_3.bar.J.px", "leg_3.bar.J.py", "leg_3.bar.J.pz", "leg_4.beater.m.px", "leg_4.beater.m.py", "leg_4.beater.m.pz", "leg_4.beater.J.px", "leg_4.beater.J.py", "leg_4.beater.J.pz", "leg_4.bar.m.px", "leg_4.bar.m.py", "leg_4.bar.m.pz", "leg_4.bar.J.px", "leg_4.bar.J.py", "leg_4.bar.J.pz", "attach_pumping.tx.spring.q", "membrane_roll.rx.spring.q", "membrane_pitch.rx.spring.q", "membrane_pumping.tx.spring.q", "leg_1.hinge.rx.spring.q", "leg_2.hinge.rx.spring.q", "leg_3.hinge.rx.spring.q", "leg_4.hinge.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "attach_int_1.x", "attach_int_1.ax", "attach_int_1.y", "attach_int_1.ay", "attach_int_1.z", "attach_int_1.az", "attach_int_2.x", "attach_int_2.ax", "attach_int_2.y", "attach_int_2.ay", "attach_int_2.z", "attach_int_2.az", "membrane_int_1.x", "membrane_int_1.ax", "membrane_int_1.y", "membrane_int_1.ay", "membrane_int_1.z", "membrane_int_1.az", "membrane_int_2.x", "membrane_int_2.ax", "membrane_int_2.y", "membrane_int_2.ay", "membrane_int_2.z", "membrane_int_2.az", "leg_1.beater.x", "leg_1.beater.ax", "leg_1.beater.y", "leg_1.beater.ay", "leg_1.beater.z", "leg_1.beater.az", "leg_1.bar.x", "leg_1.bar.ax", "leg_1.bar.y", "leg_1.bar.ay", "leg_1.bar.z", "leg_1.bar.az", "leg_2.beater.x", "leg_2.beater.ax", "leg_2.beater.y", "leg_2.beater.ay", "leg_2.beater.z", "leg_2.beater.az", "leg_2.bar.x", "leg_2.bar.ax", "leg_2.bar.y", "leg_2.bar.ay", "leg_2.bar.z", "leg_2.bar.az", "leg_3.beater.x", "leg_3.beater.ax", "leg_3.beater.y", "leg_3.beater.ay", "leg_3.beater.z", "leg_3.beater.az", "leg_3.bar.x", "leg_3.bar.ax", "leg_3.bar.y", "leg_3.bar.ay", "leg_3.bar.z", "leg_3.bar.az", "leg_4.beater.x", "leg_4.beater.ax", "leg_4.beater.y", "leg_4.beater.ay", "leg_4.beater.z", "leg_4.beater.az", "leg_4.bar.x", "leg_4.bar.ax", "leg_4.bar.y", "leg_4.bar.ay", "leg_4.bar.z", "leg_4.bar.az", )
 PARAM_NAMES = ("beater_mass", "leg_1.k_hinge", "leg_1.c_hinge", "leg_2.k_hinge", "leg_2.c_hinge", "leg_3.k_hinge", "leg_3.c_hinge", "leg_4.k_hinge", "leg_4.c_hinge", "attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_roll__stiffness", "attach_roll__damping", "attach_roll__rot_stiffness", "attach_roll__rot_damping", "attach_roll__tx_load", "attach_roll__ty_load", "attach_roll__tz_load", "attach_roll__ry_load", "attach_roll__rz_load", "attach_roll__rx_k", "attach_roll__rx_c", "attach_roll__rx_preload", "attach_pitch__stiffness", "attach_pitch__damping", "attach_pitch__rot_stiffness", "attach_pitch__rot_damping", "attach_pitch__tx_load", "attach_pitch__ty_load", "attach_pitch__tz_load", "attach_pitch__ry_load", "attach_pitch__rz_load", "attach_pitch__rx_k", "attach_pitch__rx_c", "attach_pitch__rx_preload", "membrane_roll__stiffness", "membrane_roll__damping", "membrane_roll__rot_stiffness", "membrane_roll__rot_damping", "membrane_roll__tx_load", "membrane_roll__ty_load", "membrane_roll__tz_load", "membrane_roll__ry_load", "membrane_roll__rz_load", "membrane_roll__rx_k", "membrane_roll__rx_c", "membrane_roll__rx_preload", "membrane_pitch__stiffness", "membrane_pitch__damping", "membrane_pitch__rot_stiffness", "membrane_pitch__rot_damping", "membrane_pitch__tx_load", "membrane_pitch__ty_load", "membrane_pitch__tz_load", "membrane_pitch__ry_load", "membrane_pitch__rz_load", "membrane_pitch__rx_k", "membrane_pitch__rx_c", "membrane_pitch__rx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "leg_1.hinge__stiffness", "leg_1.hinge__damping", "leg_1.hinge__rot_stiffness", "leg_1.hinge__rot_damping", "leg_1.hinge__tx_load", "leg_1.hinge__ty_load", "leg_1.hinge__tz_load", "leg_1.hinge__ry_load", "leg_1.hinge__rz_load", "leg_1.bar_bottom__stiffness", "leg_1.bar_bottom__damping", "leg_1.bar_bottom__rot_stiffness", "leg_1.bar_bottom__rot_damping", "leg_1.bar_bottom__tx_load", "leg_1.bar_bottom__ty_load", "leg_1.bar_bottom__tz_load", "leg_1.bar_top__stiffness", "leg_1.bar_top__damping", "leg_1.bar_top__rot_stiffness", "leg_1.bar_top__rot_damping", "leg_1.bar_top__tx_load", "leg_1.bar_top__ty_load", "leg_1.bar_top__tz_load", "leg_2.hinge__stiffness", "leg_2.hinge__damping", "leg_2.hinge__rot_stiffness", "leg_2.hinge__rot_damping", "leg_2.hinge__tx_load", "leg_2.hinge__ty_load", "leg_2.hinge__tz_load", "leg_2.hinge__ry_load", "leg_2.hinge__rz_load", "leg_2.bar_bottom__stiffness", "leg_2.bar_bottom__damping", "leg_2.bar_bottom__rot_stiffness", "leg_2.bar_bottom__rot_damping", "leg_2.bar_bottom__tx_load", "leg_2.bar_bottom__ty_load", "leg_2.bar_bottom__tz_load", "leg_2.bar_top__stiffness", "leg_2.bar_top__damping", "leg_2.bar_top__rot_stiffness", "leg_2.bar_top__rot_damping", "leg_2.bar_top__tx_load", "leg_2.bar_top__ty_load", "leg_2.bar_top__tz_load", "leg_3.hinge__stiffness", "leg_3.hinge__damping", "leg_3.hinge__rot_stiffness", "leg_3.hinge__rot_damping", "leg_3.hinge__tx_load", "leg_3.hinge__ty_load", "leg_3.hinge__tz_load", "leg_3.hinge__ry_load", "leg_3.hinge__rz_load", "leg_3.bar_bottom__stiffness", "leg_3.bar_bottom__damping", "leg_3.bar_bottom__rot_stiffness", "leg_3.bar_bottom__rot_damping", "leg_3.bar_bottom__tx_load", "leg_3.bar_bottom__ty_load", "leg_3.bar_bottom__tz_load", "leg_3.bar_top__stiffness", "leg_3.bar_top__damping", "leg_3.bar_top__rot_stiffness", "leg_3.bar_top__rot_damping", "leg_3.bar_top__tx_load", "leg_3.bar_top__ty_load", "leg_3.bar_top__tz_load", "leg_4.hinge__stiffness", "leg_4.hinge__damping", "leg_4.hinge__rot_stiffness", "leg_4.hinge__rot_damping", "leg_4.hinge__tx_load", "leg_4.hinge__ty_load", "leg_4.hinge__tz_load", "leg_4.hinge__ry_load", "leg_4.hinge__rz_load", "leg_4.bar_bottom__stiffness", "leg_4.bar_bottom__damping", "leg_4.bar_bottom__rot_stiffness", "leg_4.bar_bottom__rot_damping", "leg_4.bar_bottom__tx_load", "leg_4.bar_bottom__ty_load", "leg_4.bar_bottom__tz_load", "leg_4.bar_top__stiffness", "leg_4.bar_top__damping", "leg_4.bar_top__rot_stiffness", "leg_4.bar_top__rot_damping", "leg_4.bar_top__tx_load", "leg_4.bar_top__ty_load", "leg_4.bar_top__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", "excitation__roll", "excitation__pitch", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b"
+_KERNEL_PREFIX = "_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b"
 KERNEL_FUNCTIONS = 61
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -125,27 +125,27 @@ declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr = external constant [1843 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr = external constant [1843 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src = external constant [5394 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src = external constant [5394 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_row = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row = external constant [3218 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_col = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col = external constant [3218 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_zero = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_zero = external constant [3218 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_k = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_k = external constant [3218 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_i = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_i = external constant [3218 x i64]
 
-@_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_j = external constant [3218 x i64]
+@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_j = external constant [3218 x i64]
 
 ; Solve A X = B in place (B: n x m, row-major) by LU with partial pivoting, as the numba
 ; code before it: A is copied to LU; a pivot not above 1e-13 of the largest |A| (or a
 ; NaN in A) is a singular configuration and fills X with NaN, which stops the run where
 ; the simulator reports it.
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU) nounwind {
 entry:
   %k.v = alloca i64
   %i.v = alloca i64
@@ -424,130 +424,130 @@ done:
 }
 
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 18, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 18, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 13, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 13, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_5(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_6(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_7(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_8(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_9(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_10(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_11(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_6(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_7(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_8(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_9(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_10(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_11(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_12(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_13(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_14(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_15(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_16(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_17(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_18(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -606,7 +606,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -637,7 +637,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -695,15 +695,15 @@ ends:
 }
 
 
-define internal void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 3483
   %v2 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 8877
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 1473600, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 0, i64 467, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 0, i64 467, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %w, i64 55577
   %v6 = bitcast double* %v5 to i8*
   %v7 = getelementptr inbounds double, double* %w, i64 53777
@@ -712,8 +712,8 @@ entry:
   %v9 = getelementptr inbounds double, double* %w, i64 55577
   %v10 = getelementptr inbounds double, double* %w, i64 2454
   %v11 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 100, double* %v10, double* %v10, double* %v10, double* %v9, double* %v11, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 485, i64 926, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 100, double* %v10, double* %v10, double* %v10, double* %v9, double* %v11, i1 false)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 485, i64 926, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   %v12 = getelementptr inbounds double, double* %w, i64 101477
   %v13 = bitcast double* %v12 to i8*
   %v14 = getelementptr inbounds double, double* %w, i64 101277
@@ -722,8 +722,8 @@ entry:
   %v16 = getelementptr inbounds double, double* %w, i64 101477
   %v17 = getelementptr inbounds double, double* %w, i64 3104
   %v18 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block1(i64 100, double* %v17, double* %v17, double* %v17, double* %v16, double* %v18, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 928, i64 1036, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 100, double* %v17, double* %v17, double* %v17, double* %v16, double* %v18, i1 false)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 928, i64 1036, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   %v19 = getelementptr inbounds double, double* %w, i64 112477
   %v20 = bitcast double* %v19 to i8*
   %v21 = getelementptr inbounds double, double* %w, i64 112277
@@ -732,8 +732,8 @@ entry:
   %v23 = getelementptr inbounds double, double* %w, i64 112477
   %v24 = getelementptr inbounds double, double* %w, i64 3114
   %v25 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block2(i64 100, double* %v24, double* %v24, double* %v24, double* %v23, double* %v25, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 1038, i64 1110, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 100, double* %v24, double* %v24, double* %v24, double* %v23, double* %v25, i1 false)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1038, i64 1110, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   %v26 = getelementptr inbounds double, double* %w, i64 119877
   %v27 = bitcast double* %v26 to i8*
   %v28 = getelementptr inbounds double, double* %w, i64 119677
@@ -742,8 +742,8 @@ entry:
   %v30 = getelementptr inbounds double, double* %w, i64 119877
   %v31 = getelementptr inbounds double, double* %w, i64 3124
   %v32 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block3(i64 100, double* %v31, double* %v31, double* %v31, double* %v30, double* %v32, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 1112, i64 1292, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 100, double* %v31, double* %v31, double* %v31, double* %v30, double* %v32, i1 false)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1112, i64 1292, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   %v33 = getelementptr inbounds double, double* %w, i64 138077
   %v34 = bitcast double* %v33 to i8*
   %v35 = getelementptr inbounds double, double* %w, i64 136777
@@ -752,76 +752,76 @@ entry:
   %v37 = getelementptr inbounds double, double* %w, i64 138077
   %v38 = getelementptr inbounds double, double* %w, i64 3145
   %v39 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block4(i64 100, double* %v38, double* %v38, double* %v38, double* %v37, double* %v39, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape(double* %v2, double* %v1, i64 1305, i64 1842, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 100, double* %v38, double* %v38, double* %v38, double* %v37, double* %v39, i1 false)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1305, i64 1842, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 184832, i1 false)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 152, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 152, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 0, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 0, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1544616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1544616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
@@ -837,7 +837,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 8
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -845,81 +845,81 @@ exit:
   ret void
 }
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -936,45 +936,45 @@ declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 81
   %v2 = load double, double* %v1, align 8
@@ -2688,7 +2688,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
   %v2 = load double, double* %v1, align 8
@@ -4015,7 +4015,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 210
   %v2 = load double, double* %v1, align 8
@@ -5661,7 +5661,7 @@ entry:
   %v1425 = getelementptr inbounds double, double* %w, i64 2436
   %v1426 = getelementptr inbounds double, double* %w, i64 2454
   %v1427 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
   %v1428 = getelementptr inbounds double, double* %w, i64 309
   %v1429 = bitcast double* %v1428 to i8*
   %v1430 = getelementptr inbounds double, double* %w, i64 2436
@@ -5670,7 +5670,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 315
   %v2 = load double, double* %v1, align 8
@@ -7657,7 +7657,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 228
   %v2 = load double, double* %v1, align 8
@@ -8665,7 +8665,7 @@ entry:
   %v863 = getelementptr inbounds double, double* %w, i64 3102
   %v864 = getelementptr inbounds double, double* %w, i64 3104
   %v865 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block1(i64 1, double* %v864, double* %v864, double* %v864, double* %v863, double* %v865, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 1, double* %v864, double* %v864, double* %v864, double* %v863, double* %v865, i1 true)
   %v866 = getelementptr inbounds double, double* %w, i64 1242
   %v867 = bitcast double* %v866 to i8*
   %v868 = getelementptr inbounds double, double* %w, i64 3102
@@ -8674,7 +8674,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1241
   %v2 = load double, double* %v1, align 8
@@ -9485,7 +9485,7 @@ entry:
   %v699 = getelementptr inbounds double, double* %w, i64 3112
   %v700 = getelementptr inbounds double, double* %w, i64 3114
   %v701 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block2(i64 1, double* %v700, double* %v700, double* %v700, double* %v699, double* %v701, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 1, double* %v700, double* %v700, double* %v700, double* %v699, double* %v701, i1 true)
   %v702 = getelementptr inbounds double, double* %w, i64 1352
   %v703 = bitcast double* %v702 to i8*
   %v704 = getelementptr inbounds double, double* %w, i64 3112
@@ -9494,7 +9494,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1351
   %v2 = load double, double* %v1, align 8
@@ -10214,7 +10214,7 @@ entry:
   %v643 = getelementptr inbounds double, double* %w, i64 3122
   %v644 = getelementptr inbounds double, double* %w, i64 3124
   %v645 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block3(i64 1, double* %v644, double* %v644, double* %v644, double* %v643, double* %v645, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 1, double* %v644, double* %v644, double* %v644, double* %v643, double* %v645, i1 true)
   %v646 = getelementptr inbounds double, double* %w, i64 1427
   %v647 = bitcast double* %v646 to i8*
   %v648 = getelementptr inbounds double, double* %w, i64 3122
@@ -10223,7 +10223,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1426
   %v2 = load double, double* %v1, align 8
@@ -11766,7 +11766,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1521
   %v2 = load double, double* %v1, align 8
@@ -12914,7 +12914,7 @@ entry:
   %v1016 = getelementptr inbounds double, double* %w, i64 3132
   %v1017 = getelementptr inbounds double, double* %w, i64 3145
   %v1018 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block4(i64 1, double* %v1017, double* %v1017, double* %v1017, double* %v1016, double* %v1018, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 1, double* %v1017, double* %v1017, double* %v1017, double* %v1016, double* %v1018, i1 true)
   %v1019 = getelementptr inbounds double, double* %w, i64 1527
   %v1020 = bitcast double* %v1019 to i8*
   %v1021 = getelementptr inbounds double, double* %w, i64 3132
@@ -12923,7 +12923,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1230
   %v2 = load double, double* %v1, align 8
@@ -14849,7 +14849,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1106
   %v2 = load double, double* %v1, align 8
@@ -16581,7 +16581,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2308
   %v2 = load double, double* %v1, align 8
@@ -16958,7 +16958,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 81
   %v2 = load double, double* %v1, align 8
@@ -18672,7 +18672,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
   %v2 = load double, double* %v1, align 8
@@ -19999,7 +19999,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 210
   %v2 = load double, double* %v1, align 8
@@ -21645,7 +21645,7 @@ entry:
   %v1425 = getelementptr inbounds double, double* %w, i64 2436
   %v1426 = getelementptr inbounds double, double* %w, i64 2454
   %v1427 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
   %v1428 = getelementptr inbounds double, double* %w, i64 309
   %v1429 = bitcast double* %v1428 to i8*
   %v1430 = getelementptr inbounds double, double* %w, i64 2436
@@ -21654,7 +21654,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 318
   %v2 = load double, double* %v1, align 8
@@ -23539,7 +23539,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1009
   %v2 = load double, double* %v1, align 8
@@ -25000,7 +25000,7 @@ entry:
   %v1232 = getelementptr inbounds double, double* %w, i64 3102
   %v1233 = getelementptr inbounds double, double* %w, i64 3104
   %v1234 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block1(i64 1, double* %v1233, double* %v1233, double* %v1233, double* %v1232, double* %v1234, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 1, double* %v1233, double* %v1233, double* %v1233, double* %v1232, double* %v1234, i1 true)
   %v1235 = getelementptr inbounds double, double* %w, i64 1242
   %v1236 = bitcast double* %v1235 to i8*
   %v1237 = getelementptr inbounds double, double* %w, i64 3102
@@ -25009,7 +25009,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 10
   %v2 = load double, double* %v1, align 8
@@ -25850,7 +25850,7 @@ entry:
   %v722 = getelementptr inbounds double, double* %w, i64 3112
   %v723 = getelementptr inbounds double, double* %w, i64 3114
   %v724 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block2(i64 1, double* %v723, double* %v723, double* %v723, double* %v722, double* %v724, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 1, double* %v723, double* %v723, double* %v723, double* %v722, double* %v724, i1 true)
   %v725 = getelementptr inbounds double, double* %w, i64 1352
   %v726 = bitcast double* %v725 to i8*
   %v727 = getelementptr inbounds double, double* %w, i64 3112
@@ -25859,7 +25859,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 10
   %v2 = load double, double* %v1, align 8
@@ -26611,7 +26611,7 @@ entry:
   %v668 = getelementptr inbounds double, double* %w, i64 3122
   %v669 = getelementptr inbounds double, double* %w, i64 3124
   %v670 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block3(i64 1, double* %v669, double* %v669, double* %v669, double* %v668, double* %v670, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 1, double* %v669, double* %v669, double* %v669, double* %v668, double* %v670, i1 true)
   %v671 = getelementptr inbounds double, double* %w, i64 1427
   %v672 = bitcast double* %v671 to i8*
   %v673 = getelementptr inbounds double, double* %w, i64 3122
@@ -26620,7 +26620,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 19
   %v2 = load double, double* %v1, align 8
@@ -28175,7 +28175,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1421
   %v2 = load double, double* %v1, align 8
@@ -29346,7 +29346,7 @@ entry:
   %v1032 = getelementptr inbounds double, double* %w, i64 3132
   %v1033 = getelementptr inbounds double, double* %w, i64 3145
   %v1034 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block4(i64 1, double* %v1033, double* %v1033, double* %v1033, double* %v1032, double* %v1034, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 1, double* %v1033, double* %v1033, double* %v1033, double* %v1032, double* %v1034, i1 true)
   %v1035 = getelementptr inbounds double, double* %w, i64 1527
   %v1036 = bitcast double* %v1035 to i8*
   %v1037 = getelementptr inbounds double, double* %w, i64 3132
@@ -29355,7 +29355,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1535
   %v2 = load double, double* %v1, align 8
@@ -31310,7 +31310,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 139
   %v2 = load double, double* %v1, align 8
@@ -33487,7 +33487,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 40
   %v2 = load double, double* %v1, align 8
@@ -36168,7 +36168,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 323
   %v2 = load double, double* %v1, align 8
@@ -38957,7 +38957,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 54
   %v2 = load double, double* %v1, align 8
@@ -41636,7 +41636,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1115
   %v2 = load double, double* %v1, align 8
@@ -44311,7 +44311,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 70
   %v2 = load double, double* %v1, align 8
@@ -46881,7 +46881,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 22
   %v2 = load double, double* %v1, align 8
@@ -49660,7 +49660,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1989
   %v2 = load double, double* %v1, align 8
@@ -52336,7 +52336,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %out, i64 4944
   store double 0x3FF0000000000000, double* %v1, align 8
@@ -54300,7 +54300,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 69
   %v2 = load double, double* %v1, align 8
@@ -56061,7 +56061,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 170
   %v2 = load double, double* %v1, align 8
@@ -57324,7 +57324,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 289
   %v2 = load double, double* %v1, align 8
@@ -58910,7 +58910,7 @@ entry:
   %v1401 = getelementptr inbounds double, double* %w, i64 2436
   %v1402 = getelementptr inbounds double, double* %w, i64 2454
   %v1403 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_block0(i64 1, double* %v1402, double* %v1402, double* %v1402, double* %v1401, double* %v1403, i1 true)
+  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1402, double* %v1402, double* %v1402, double* %v1401, double* %v1403, i1 true)
   %v1404 = getelementptr inbounds double, double* %w, i64 309
   %v1405 = bitcast double* %v1404 to i8*
   %v1406 = getelementptr inbounds double, double* %w, i64 2436
@@ -58919,7 +58919,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 172
   %v2 = load double, double* %v1, align 8
@@ -60861,7 +60861,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 188
   %v2 = load double, double* %v1, align 8
@@ -61588,7 +61588,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 83
   %v2 = load double, double* %v1, align 8
@@ -61691,7 +61691,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_36fb8ecda46c3a2802853ddeb4508c59_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

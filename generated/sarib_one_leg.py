@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "44d867ea2908fe3c3431c89e1bd17039"
+MODEL_HASH = "0719ea7d1ca2720ab01e6a3301edd78e"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 28.0, "rtol": 1e-05, "atol": 1e-05, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039", sys.modules[__name__])
-__name__ = "_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039"
+    sys.modules.setdefault("_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e", sys.modules[__name__])
+__name__ = "_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "beater_1.m.px", "beater_1.m.py", "beater_1.m.pz", "beater_1.J.px", "beater_1.J.py", "beater_1.J.pz", "bar_1.m.px", "bar_1.m.py", "bar_1.m.pz", "bar_1.J.px", "bar_1.J.py", "bar_1.J.pz", "attach_pumping.tx.spring.q", "membrane_pumping.tx.spring.q", "hinge_1.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "beater_1.x", "beater_1.ax", "beater_1.y", "beater_1.ay", "beater_1.z", "beater_1.az", "bar_1.x", "bar_1.ax", "bar_1.y", "bar_1.ay", "bar_1.z", "bar_1.az", )
 PARAM_NAMES = ("attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_pumping__tx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "hinge_1__stiffness", "hinge_1__damping", "hinge_1__rot_stiffness", "hinge_1__rot_damping", "hinge_1__tx_load", "hinge_1__ty_load", "hinge_1__tz_load", "hinge_1__ry_load", "hinge_1__rz_load", "hinge_1__rx_k", "hinge_1__rx_c", "hinge_1__rx_preload", "bar_bottom_1__stiffness", "bar_bottom_1__damping", "bar_bottom_1__rot_stiffness", "bar_bottom_1__rot_damping", "bar_bottom_1__tx_load", "bar_bottom_1__ty_load", "bar_bottom_1__tz_load", "bar_top_1__stiffness", "bar_top_1__damping", "bar_top_1__rot_stiffness", "bar_top_1__rot_damping", "bar_top_1__tx_load", "bar_top_1__ty_load", "bar_top_1__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771"
+_KERNEL_PREFIX = "_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771"
 KERNEL_FUNCTIONS = 25
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -121,58 +121,58 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape_ptr = external constant [548 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_ptr = external constant [548 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape_src = external constant [1678 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_src = external constant [1678 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_row = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_col = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_zero = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_zero = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_k = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_k = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_i = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_i = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_j = external constant [842 x i64]
+@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_j = external constant [842 x i64]
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 29582
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -231,7 +231,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -262,7 +262,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -320,83 +320,83 @@ ends:
 }
 
 
-define internal void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 554
   %v2 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2232
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 218800, i1 false)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape(double* %v2, double* %v1, i64 0, i64 547, i64 50, i64* getelementptr inbounds ([548 x i64], [548 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1678 x i64], [1678 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape(double* %v2, double* %v1, i64 0, i64 547, i64 50, i64* getelementptr inbounds ([548 x i64], [548 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1678 x i64], [1678 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 20808, i1 false)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 51, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 51, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 0, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 0, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 237064)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 237064)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
@@ -412,7 +412,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -420,21 +420,21 @@ exit:
   ret void
 }
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -447,33 +447,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 46
   %v2 = load double, double* %v1, align 8
@@ -2175,7 +2175,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 298
   %v2 = load double, double* %v1, align 8
@@ -3756,7 +3756,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 46
   %v2 = load double, double* %v1, align 8
@@ -6468,7 +6468,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 29
   %v2 = load double, double* %v1, align 8
@@ -9181,7 +9181,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 433
   %v2 = load double, double* %v1, align 8
@@ -10337,7 +10337,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 40
   %v2 = load double, double* %v1, align 8
@@ -11920,7 +11920,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 48
   %v2 = load double, double* %v1, align 8
@@ -11953,7 +11953,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_44d867ea2908fe3c3431c89e1bd17039_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }

@@ -41,7 +41,9 @@ The stage in parts, each a module:
   ctypes, no numba wrapper to compile).
 
 The IR is plain text, target-independent (no triple, no CPU), with every number written
-exactly (hexadecimal doubles): the same model gives the same bytes on every machine.
+exactly (hexadecimal doubles): the same model gives the same bytes on every machine. A
+generated module keeps the integer tables apart (``lower(data=True)``): external in the
+IR, their values numpy arrays of the module's own, given to LLVM by address.
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import signal
@@ -124,10 +125,8 @@ class _FmuObject:
     def hurry(self):
         """Back to the tests' priority (the child's group: its compiler too), where this
         user may raise it again; else it goes on at the lowest, in the cores' idle time."""
-        try:
+        with contextlib.suppress(OSError):      # not this user's to raise: it stays low
             os.setpriority(os.PRIO_PGRP, self.proc.pid, os.getpriority(os.PRIO_PROCESS, 0))
-        except OSError:
-            pass
 
     def wait(self) -> bool:
         return self.proc.wait() == 0

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "andrews"
 MODEL_FILE = "andrews.yaml"
-MODEL_HASH = "276fe5b0b047b32b24779eede564783b"
+MODEL_HASH = "cdd8d178abe4db755c2dcb04436351d3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 0.03, "rtol": 1e-10, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_andrews_276fe5b0b047b32b24779eede564783b", sys.modules[__name__])
-__name__ = "_bgc_andrews_276fe5b0b047b32b24779eede564783b"
+    sys.modules.setdefault("_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3", sys.modules[__name__])
+__name__ = "_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3"
 
 STATE_NAMES = ("body1.m.px", "body1.m.py", "body1.m.pz", "body1.J.px", "body1.J.py", "body1.J.pz", "body2.m.px", "body2.m.py", "body2.m.pz", "body2.J.px", "body2.J.py", "body2.J.pz", "body3.m.px", "body3.m.py", "body3.m.pz", "body3.J.px", "body3.J.py", "body3.J.pz", "body4.m.px", "body4.m.py", "body4.m.pz", "body4.J.px", "body4.J.py", "body4.J.pz", "body5.m.px", "body5.m.py", "body5.m.pz", "body5.J.px", "body5.J.py", "body5.J.pz", "body6.m.px", "body6.m.py", "body6.m.pz", "body6.J.px", "body6.J.py", "body6.J.pz", "body7.m.px", "body7.m.py", "body7.m.pz", "body7.J.px", "body7.J.py", "body7.J.pz", "body1.x", "body1.ax", "body1.y", "body1.ay", "body1.z", "body1.az", "body2.x", "body2.ax", "body2.y", "body2.ay", "body2.z", "body2.az", "body3.x", "body3.ax", "body3.y", "body3.ay", "body3.z", "body3.az", "body4.x", "body4.ax", "body4.y", "body4.ay", "body4.z", "body4.az", "body5.x", "body5.ax", "body5.y", "body5.ay", "body5.z", "body5.az", "body6.x", "body6.ax", "body6.y", "body6.ay", "body6.z", "body6.az", "body7.x", "body7.ax", "body7.y", "body7.ay", "body7.z", "body7.az", )
 PARAM_NAMES = ("mom", "beta0", "Theta0", "gamma0", "Phi0", "delta0", "Omega0", "epsilon0", "c0", "l0", "xb", "yb", "xc", "yc", "sc", "sd", "pivot_O__stiffness", "pivot_O__damping", "pivot_O__rot_stiffness", "pivot_O__rot_damping", "pivot_O__tx_load", "pivot_O__ty_load", "pivot_O__tz_load", "pivot_O__ry_load", "pivot_O__rz_load", "pivot_O__rx_k", "pivot_O__rx_c", "pivot_O__rx_preload", "pin_F__stiffness", "pin_F__damping", "pin_F__rot_stiffness", "pin_F__rot_damping", "pin_F__ty_load", "pin_F__tz_load", "pin_E3__stiffness", "pin_E3__damping", "pin_E3__rot_stiffness", "pin_E3__rot_damping", "pin_E3__ty_load", "pin_E3__tz_load", "pin_E4__stiffness", "pin_E4__damping", "pin_E4__rot_stiffness", "pin_E4__rot_damping", "pin_E4__ty_load", "pin_E4__tz_load", "pin_E6__stiffness", "pin_E6__damping", "pin_E6__rot_stiffness", "pin_E6__rot_damping", "pin_E6__ty_load", "pin_E6__tz_load", "pivot_B__stiffness", "pivot_B__damping", "pivot_B__rot_stiffness", "pivot_B__rot_damping", "pivot_B__tx_load", "pivot_B__ty_load", "pivot_B__tz_load", "pivot_B__ry_load", "pivot_B__rz_load", "pivot_B__rx_k", "pivot_B__rx_c", "pivot_B__rx_preload", "pivot_A5__stiffness", "pivot_A5__damping", "pivot_A5__rot_stiffness", "pivot_A5__rot_damping", "pivot_A5__tx_load", "pivot_A5__ty_load", "pivot_A5__tz_load", "pivot_A5__ry_load", "pivot_A5__rz_load", "pin_H__stiffness", "pin_H__damping", "pin_H__rot_stiffness", "pin_H__rot_damping", "pin_H__ty_load", "pin_H__tz_load", "pivot_A7__stiffness", "pivot_A7__damping", "pivot_A7__rot_stiffness", "pivot_A7__rot_damping", "pivot_A7__tx_load", "pivot_A7__ty_load", "pivot_A7__tz_load", "pivot_A7__ry_load", "pivot_A7__rz_load", "pin_G__stiffness", "pin_G__damping", "pin_G__rot_stiffness", "pin_G__rot_damping", "pin_G__ty_load", "pin_G__tz_load", "plane_2__stiffness", "plane_2__damping", "plane_2__rot_stiffness", "plane_2__rot_damping", "plane_2__tx_load", "plane_2__ry_load", "plane_2__rz_load", "plane_4__stiffness", "plane_4__damping", "plane_4__rot_stiffness", "plane_4__rot_damping", "plane_4__tx_load", "plane_4__ry_load", "plane_4__rz_load", "plane_6__stiffness", "plane_6__damping", "plane_6__rot_stiffness", "plane_6__rot_damping", "plane_6__tx_load", "plane_6__ry_load", "plane_6__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d"
+_KERNEL_PREFIX = "_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb"
 KERNEL_FUNCTIONS = 30
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -122,63 +122,63 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_ptr = external constant [1074 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape_ptr = external constant [1074 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_src = external constant [3490 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape_src = external constant [3490 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_row = external constant [1473 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_col = external constant [1473 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_zero = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_zero = external constant [1473 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_k = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_k = external constant [1473 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_i = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_i = external constant [1473 x i64]
 
-@_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_j = external constant [1473 x i64]
+@_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_j = external constant [1473 x i64]
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 68955
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -237,7 +237,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -268,7 +268,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -326,83 +326,83 @@ ends:
 }
 
 
-define internal void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1085
   %v2 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 4575
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 515040, i1 false)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape(double* %v2, double* %v1, i64 0, i64 1073, i64 60, i64* getelementptr inbounds ([1074 x i64], [1074 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([3490 x i64], [3490 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_tape_src, i64 0, i64 0))
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape(double* %v2, double* %v1, i64 0, i64 1073, i64 60, i64* getelementptr inbounds ([1074 x i64], [1074 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([3490 x i64], [3490 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 56448, i1 false)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 84, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col, i64 0, i64 0))
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_scatter(double* %J, double* %v1, i64 1473, i64 84, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 4575
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_scatter(double* %J, double* %v1, i64 1473, i64 0, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_col, i64 0, i64 0))
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_scatter(double* %J, double* %v1, i64 1473, i64 0, i64 60, i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1473 x i64], [1473 x i64]* @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 552312)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 552312)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
@@ -418,7 +418,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 7
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -426,31 +426,31 @@ exit:
   ret void
 }
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -467,33 +467,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 43
   %v2 = load double, double* %v1, align 8
@@ -2203,7 +2203,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 77
   %v2 = load double, double* %v1, align 8
@@ -4079,7 +4079,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 598
   %v2 = load double, double* %v1, align 8
@@ -5767,7 +5767,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 897
   %v2 = load double, double* %v1, align 8
@@ -7033,7 +7033,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 43
   %v2 = load double, double* %v1, align 8
@@ -9710,7 +9710,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 17
   %v2 = load double, double* %v1, align 8
@@ -12343,7 +12343,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 37
   %v2 = load double, double* %v1, align 8
@@ -15052,7 +15052,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 537
   %v2 = load double, double* %v1, align 8
@@ -17785,7 +17785,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 18
   %v2 = load double, double* %v1, align 8
@@ -20511,7 +20511,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %out, i64 3395
   store double 0x3FF0000000000000, double* %v1, align 8
@@ -20956,7 +20956,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 1
   %v2 = load double, double* %v1, align 8
@@ -21016,7 +21016,7 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 45
   %v2 = load double, double* %v1, align 8
@@ -21070,14 +21070,14 @@ entry:
   ret void
 }
 
-define void @_bgc_andrews_276fe5b0b047b32b24779eede564783b_00c5b919f23d_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_andrews_cdd8d178abe4db755c2dcb04436351d3_35c4390d40eb_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 51 57 63 69 74 79 85 91 97 103 108 113 131 132 133 134 135 136 138 141 147 149 152 158 160 162 168 170 172 174 176 182 183 184 185 186 187 189 192 198 199 201 204 210 211 213 215 221 222 224 226 228 230 236 242 248 254 266 278 290 296 299 300 302 304 322 324 326 328 334 336 338 340 346 358 370 382 388 391 392 394 396 398 401 402 403 405 411 413 414 416 418 420 422 424 427 433 435 436 438 440 442 444 446 449 455 457 458 460 462 464 466 467 471 472 474 476 479 481 483 484 488 489 491 493 496 498 500 502 504 508 514 520 521 527 528 531 537 538 539 542 548 554 560 562 568 574 576 579 580 581 582 583 584 585 591 597 603 609 614 619 637 638 639 640 641 642 644 647 653 654 656 659 665 666 668 670 676 677 679 681 683 685 691 692 693 695 701 703 709 711 717 719 721 723 725 731 737 743 749 761 773 785 791 794 795 797 799 817 819 821 823 829 831 833 835 841 853 865 877 883 886 887 889 891 893 899 905 911 917 922 927 945 946 947 948 949 950 952 955 961 962 964 967 973 974 976 978 984 985 987 989 991 993 999 1000 1001 1003 1009 1011 1017 1019 1025 1027 1029 1031 1033 1039 1045 1051 1057 1069 1081 1093 1099 1102 1103 1105 1107 1125 1127 1129 1131 1137 1139 1141 1143 1149 1161 1173 1185 1191 1194 1195 1197 1199 1201 1207 1213 1219 1225 1230 1235 1253 1254 1255 1256 1257 1258 1260 1263 1269 1270 1272 1275 1281 1282 1284 1286 1292 1293 1295 1297 1299 1301 1307 1308 1309 1311 1317 1319 1325 1327 1333 1335 1337 1339 1341 1347 1353 1359 1365 1377 1389 1401 1407 1410 1411 1413 1415 1433 1435 1437 1439 1445 1447 1449 1451 1457 1469 1481 1493 1499 1502 1503 1505 1507 1509 1511 1513 1515 1519 1521 1523 1525 1527 1529 1531 1533 1535 1537 1539 1541 1543 1547 1549 1551 1553 1555 1557 1559 1561 1563 1565 1567 1569 1571 1574 1575 1576 1578 1584 1586 1587 1589 1594 1595 1601 1607 1611 1612 1614 1616 1617 1623 1627 1628 1630 1632 1634 1636 1638 1644 1650 1651 1657 1658 1664 1665 1671 1672 1674 1675 1681 1687 1688 1689 1690 1691 1692 1698 1704 1710 1716 1718 1724 1730 1732 1738 1744 1746 1752 1758 1760 1762 1764 1766 1772 1773 1774 1775 1776 1777 1778 1780 1782 1784 1787 1788 1789 1791 1797 1799 1800 1802 1804 1806 1808 1810 1813 1819 1821 1822 1824 1826 1828 1830 1832 1835 1841 1843 1844 1846 1848 1850 1852 1853 1857 1858 1860 1862 1865 1867 1869 1870 1874 1875 1877 1879 1882 1884 1886 1887 1889 1891 1896 1902 1908 1909 1915 1916 1919 1925 1926 1927 1930 1936 1942 1948 1950 1956 1962 1964 1967 1968 1969 1970 1971 1972 1973 1975 1977 1979 1985 1991 1997 2003 2008 2013 2031 2032 2033 2034 2035 2036 2038 2041 2047 2048 2050 2053 2059 2060 2062 2064 2070 2071 2073 2075 2077 2079 2085 2086 2087 2089 2095 2097 2103 2105 2111 2113 2115 2117 2119 2125 2131 2137 2143 2155 2167 2179 2185 2188 2189 2191 2193 2211 2213 2215 2217 2223 2225 2227 2229 2235 2247 2259 2271 2277 2280 2281 2283 2285 2287 2289 2291 2293 2295 2297 2299 2301 2303 2305 2307 2309 2311 2313 2315 2318 2319 2320 2322 2328 2330 2331 2333 2336 2338 2340 2341 2345 2346 2348 2350 2353 2355 2357 2358 2362 2363 2365 2367 2370 2372 2374 2376 2378 2382 2388 2394 2395 2401 2402 2404 2405 2409 2415 2416 2417 2418 2422 2428 2434 2440 2442 2448 2454 2456 2458 2460 2462 2466 2467 2468 2469 2470 2471 2472 2474 2476 2478 2481 2482 2483 2485 2491 2493 2494 2496 2498 2500 2502 2504 2507 2513 2515 2516 2518 2520 2522 2524 2526 2529 2535 2537 2538 2540 2542 2544 2546 2547 2551 2552 2554 2556 2559 2561 2563 2564 2568 2569 2571 2573 2576 2578 2580 2582 2584 2588 2594 2600 2601 2607 2608 2611 2617 2618 2619 2622 2628 2634 2640 2642 2648 2654 2656 2659 2660 2661 2662 2663 2664 2665 2667 2669 2671 2677 2683 2689 2695 2700 2705 2723 2724 2725 2726 2727 2728 2730 2733 2739 2740 2742 2745 2751 2752 2754 2756 2762 2763 2765 2767 2769 2771 2777 2778 2779 2781 2787 2789 2795 2797 2803 2805 2807 2809 2811 2817 2823 2829 2835 2847 2859 2871 2877 2880 2881 2883 2885 2903 2905 2907 2909 2915 2917 2919 2921 2927 2939 2951 2963 2969 2972 2973 2975 2977 2979 2981 2983 2985 2987 2989 2991 2993 2995 2997 2999 3001 3003 3005 3007 3010 3011 3012 3014 3020 3022 3023 3025 3028 3030 3032 3033 3037 3038 3040 3042 3045 3047 3049 3050 3054 3055 3057 3059 3062 3064 3066 3068 3070 3074 3080 3086 3087 3093 3094 3096 3097 3101 3107 3108 3109 3110 3114 3120 3126 3132 3134 3140 3146 3148 3150 3152 3154 3158 3159 3160 3161 3162 3163 3164 3166 3168 3170 3173 3174 3175 3177 3183 3185 3186 3188 3190 3192 3194 3196 3199 3205 3207 3208 3210 3212 3214 3216 3218 3221 3227 3229 3230 3232 3234 3236 3238 3239 3243 3244 3246 3248 3251 3253 3255 3256 3260 3261 3263 3265 3268 3270 3272 3274 3276 3280 3286 3292 3293 3299 3300 3303 3309 3310 3311 3314 3320 3326 3332 3334 3340 3346 3348 3351 3352 3353 3354 3355 3356 3357 3358 3363 3364 3368 3369 3376 3377 3382 3383 3387 3388 3395 3396 3401 3402 3406 3407 3414 3415 3420 3421 3425 3426 3433 3434 3439 3440 3444 3445 3452 3453 3458 3459 3463 3464 3471 3472 3477 3478 3482 3483 3490", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-54 -43 -41 -10 -4 -3 -58 -44 -42 -30 -19 -17 -34 -20 -18 -34 -20 -18 -30 -19 -17 -54 -43 -41 -10 -4 -3 -58 -44 -42 -30 -19 -17 -34 -20 -18 -34 -20 -18 -30 -19 -17 -45 -46 -47 21 22 23 0 1 2 21 22 23 0 1 2 21 22 23 0 1 2 21 22 23 0 1 2 21 23 0 1 2 21 23 0 1 2 24 25 26 3 4 5 24 25 26 3 4 5 24 25 26 3 4 5 24 25 26 3 4 5 24 26 3 4 5 24 26 3 4 5 45 46 47 48 49 50 51 52 53 54 55 56 -53 -55 -56 -9 -11 -12 -48 58 58 -37 -38 61 62 22 0 1 59 60 63 45 46 64 65 42 22 0 1 59 60 63 47 48 67 68 43 21 22 59 60 63 49 50 70 71 44 45 46 47 48 49 50 66 69 72 73 74 75 -8 77 77 -1 -2 80 81 25 3 4 78 79 82 51 52 83 -5 84 85 25 3 4 78 79 82 53 54 87 -6 88 89 24 25 78 79 82 55 56 91 -7 92 93 45 46 47 48 49 50 86 90 94 95 96 97 61 62 58 45 46 64 61 62 58 47 48 67 61 62 58 49 50 70 47 48 49 50 53 54 55 56 -55 -56 -11 -12 45 46 49 50 51 52 55 56 -53 -56 -9 -12 45 46 47 48 51 52 53 54 -53 -55 -9 -11 99 100 101 102 103 104 76 98 105 106 57 107 108 73 45 46 47 48 49 50 51 52 53 54 55 56 -53 -55 -56 -9 -11 -12 45 46 47 48 49 50 66 69 72 111 112 113 45 46 47 48 49 50 86 90 94 115 116 117 47 48 49 50 53 54 55 56 -55 -56 -11 -12 45 46 49 50 51 52 55 56 -53 -56 -9 -12 45 46 47 48 51 52 53 54 -53 -55 -9 -11 99 100 101 119 120 121 114 118 122 123 110 124 125 111 109 126 45 46 -53 58 58 61 62 129 130 131 45 46 64 132 42 133 128 134 127 135 108 74 125 112 137 138 47 48 -55 129 130 131 47 48 67 141 43 142 140 143 139 144 108 75 125 113 146 147 49 50 -56 129 130 131 49 50 70 150 44 151 149 152 148 153 108 102 125 119 67 99 101 64 70 158 157 159 160 70 155 156 161 108 103 125 120 64 100 101 67 70 166 165 167 168 70 163 164 169 108 104 125 121 160 64 168 67 171 172 173 174 162 170 175 45 47 49 127 139 148 64 67 70 177 135 144 153 64 67 70 179 176 178 180 162 170 175 46 48 50 177 179 182 183 184 162 170 175 64 67 70 127 139 148 45 47 49 127 139 148 46 48 50 187 188 135 144 153 45 47 49 135 144 153 46 48 50 190 191 186 189 192 136 145 154 181 185 193 27 28 29 6 7 8 27 28 29 6 7 8 27 28 29 6 7 8 27 28 29 6 7 8 27 29 6 7 8 27 29 6 7 8 51 52 53 54 55 56 200 201 202 203 204 205 -9 -11 -12 -57 -59 -60 -52 207 207 -39 -40 210 211 28 6 7 208 209 212 200 201 213 -49 214 215 28 6 7 208 209 212 202 203 217 -50 218 219 27 28 208 209 212 204 205 221 -51 222 223 200 201 202 203 204 205 216 220 224 225 226 227 77 77 80 81 229 230 231 51 52 83 232 85 229 230 231 53 54 87 234 89 229 230 231 55 56 91 236 93 200 201 202 203 204 205 233 235 237 238 239 240 210 211 207 200 201 213 210 211 207 202 203 217 210 211 207 204 205 221 53 54 55 56 202 203 204 205 -11 -12 -59 -60 51 52 55 56 200 201 204 205 -9 -12 -57 -60 51 52 53 54 200 201 202 203 -9 -11 -57 -59 242 243 244 245 246 247 228 241 248 249 206 250 251 238 51 52 53 54 55 56 200 201 202 203 204 205 -9 -11 -12 -57 -59 -60 200 201 202 203 204 205 216 220 224 254 255 256 200 201 202 203 204 205 233 235 237 258 259 260 53 54 55 56 202 203 204 205 -11 -12 -59 -60 51 52 55 56 200 201 204 205 -9 -12 -57 -60 51 52 53 54 200 201 202 203 -9 -11 -57 -59 242 243 244 262 263 264 257 261 265 266 253 267 268 258 252 269 30 31 32 9 10 11 30 31 32 9 10 11 30 31 32 9 10 11 30 31 32 9 10 11 30 32 9 10 11 30 32 9 10 11 51 52 53 54 55 56 271 272 273 274 275 276 -9 -11 -12 -29 -31 -32 -24 278 278 -13 -14 281 282 31 9 10 279 280 283 271 272 284 -21 285 286 31 9 10 279 280 283 273 274 288 -22 289 290 30 31 279 280 283 275 276 292 -23 293 294 271 272 273 274 275 276 287 291 295 296 297 298 77 77 80 81 300 301 302 51 52 83 303 85 300 301 302 53 54 87 305 89 300 301 302 55 56 91 307 93 271 272 273 274 275 276 304 306 308 309 310 311 281 282 278 271 272 284 281 282 278 273 274 288 281 282 278 275 276 292 53 54 55 56 273 274 275 276 -11 -12 -31 -32 51 52 55 56 271 272 275 276 -9 -12 -29 -32 51 52 53 54 271 272 273 274 -9 -11 -29 -31 313 314 315 316 317 318 299 312 319 320 277 321 322 309 51 52 53 54 55 56 271 272 273 274 275 276 -9 -11 -12 -29 -31 -32 271 272 273 274 275 276 287 291 295 325 326 327 271 272 273 274 275 276 304 306 308 329 330 331 53 54 55 56 273 274 275 276 -11 -12 -31 -32 51 52 55 56 271 272 275 276 -9 -12 -29 -32 51 52 53 54 271 272 273 274 -9 -11 -29 -31 313 314 315 333 334 335 328 332 336 337 324 338 339 329 323 340 36 37 38 15 16 17 36 37 38 15 16 17 36 37 38 15 16 17 36 37 38 15 16 17 36 38 15 16 17 36 38 15 16 17 51 52 53 54 55 56 342 343 344 345 346 347 -9 -11 -12 -33 -35 -36 -28 349 349 -15 -16 352 353 37 15 16 350 351 354 342 343 355 -25 356 357 37 15 16 350 351 354 344 345 359 -26 360 361 36 37 350 351 354 346 347 363 -27 364 365 342 343 344 345 346 347 358 362 366 367 368 369 77 77 80 81 371 372 373 51 52 83 374 85 371 372 373 53 54 87 376 89 371 372 373 55 56 91 378 93 342 343 344 345 346 347 375 377 379 380 381 382 352 353 349 342 343 355 352 353 349 344 345 359 352 353 349 346 347 363 53 54 55 56 344 345 346 347 -11 -12 -35 -36 51 52 55 56 342 343 346 347 -9 -12 -33 -36 51 52 53 54 342 343 344 345 -9 -11 -33 -35 384 385 386 387 388 389 370 383 390 391 348 392 393 380 51 52 53 54 55 56 342 343 344 345 346 347 -9 -11 -12 -33 -35 -36 342 343 344 345 346 347 358 362 366 396 397 398 342 343 344 345 346 347 375 377 379 400 401 402 53 54 55 56 344 345 346 347 -11 -12 -35 -36 51 52 55 56 342 343 346 347 -9 -12 -33 -36 51 52 53 54 342 343 344 345 -9 -11 -33 -35 384 385 386 404 405 406 399 403 407 408 395 409 410 400 394 411 108 95 125 115 413 414 270 341 412 415 251 239 268 259 417 418 322 310 339 330 420 421 393 381 410 401 423 424 108 96 125 116 426 427 419 422 425 428 251 240 268 260 430 431 322 311 339 331 433 434 393 382 410 402 436 437 108 97 125 117 439 440 55 56 -12 77 77 80 81 443 444 445 55 56 91 446 93 447 442 448 432 435 438 441 449 87 80 81 77 51 52 83 80 81 77 55 56 91 452 453 83 91 454 451 455 456 91 83 80 81 77 53 54 87 459 453 87 91 460 458 461 462 91 456 83 462 87 464 465 466 457 463 51 53 55 270 419 432 83 87 91 468 341 422 435 83 87 91 470 412 425 438 83 87 91 472 415 428 441 83 87 91 474 449 91 476 467 469 471 473 475 477 466 457 463 52 54 56 468 470 472 474 476 479 480 481 482 483 484 466 457 463 83 87 91 270 419 432 51 53 55 270 419 432 52 54 56 487 488 341 422 435 51 53 55 341 422 435 52 54 56 490 491 412 425 438 51 53 55 412 425 438 52 54 56 493 494 415 428 441 51 53 55 415 428 441 52 54 56 496 497 449 55 449 56 499 500 486 489 492 495 498 501 416 429 450 478 485 502 251 225 268 254 509 510 200 201 -57 207 207 210 211 513 514 515 200 201 213 516 215 517 512 518 511 519 251 226 268 255 521 522 202 203 -59 513 514 515 202 203 217 525 219 526 524 527 523 528 251 227 268 256 530 531 204 205 -60 513 514 515 204 205 221 534 223 535 533 536 532 537 251 245 268 262 217 242 244 213 221 542 541 543 544 221 539 540 545 251 246 268 263 213 243 244 217 221 550 549 551 552 221 547 548 553 251 247 268 264 -42 544 213 552 217 555 556 558 559 557 546 554 560 200 202 204 511 523 532 213 217 221 562 519 528 537 213 217 221 564 561 563 565 546 554 560 201 203 205 562 564 567 568 569 546 554 560 213 217 221 511 523 532 200 202 204 511 523 532 201 203 205 572 573 519 528 537 200 202 204 519 528 537 201 203 205 575 576 571 574 577 520 529 538 566 570 578 322 296 339 325 585 586 33 34 35 12 13 14 33 34 35 12 13 14 33 34 35 12 13 14 33 34 35 12 13 14 33 35 12 13 14 33 35 12 13 14 271 272 273 274 275 276 588 589 590 591 592 593 -29 -31 -32 -33 -35 -36 -28 595 595 -15 -16 598 599 34 12 13 596 597 600 588 589 601 -25 602 603 34 12 13 596 597 600 590 591 605 -26 606 607 33 34 596 597 600 592 593 609 -27 610 611 588 589 590 591 592 593 604 608 612 613 614 615 278 278 281 282 617 618 619 271 272 284 620 286 617 618 619 273 274 288 622 290 617 618 619 275 276 292 624 294 588 589 590 591 592 593 621 623 625 626 627 628 598 599 595 588 589 601 598 599 595 590 591 605 598 599 595 592 593 609 273 274 275 276 590 591 592 593 -31 -32 -35 -36 271 272 275 276 588 589 592 593 -29 -32 -33 -36 271 272 273 274 588 589 590 591 -29 -31 -33 -35 630 631 632 633 634 635 616 629 636 637 594 638 639 626 271 272 273 274 275 276 588 589 590 591 592 593 -29 -31 -32 -33 -35 -36 588 589 590 591 592 593 604 608 612 642 643 644 588 589 590 591 592 593 621 623 625 646 647 648 273 274 275 276 590 591 592 593 -31 -32 -35 -36 271 272 275 276 588 589 592 593 -29 -32 -33 -36 271 272 273 274 588 589 590 591 -29 -31 -33 -35 630 631 632 650 651 652 645 649 653 654 641 655 656 646 640 657 587 658 322 297 339 326 660 661 639 627 656 647 663 664 662 665 322 298 339 327 667 668 639 628 656 648 670 671 275 276 -32 278 278 281 282 674 675 676 275 276 292 677 294 678 673 679 669 672 680 322 316 339 333 288 313 315 284 292 685 684 686 687 292 682 683 688 322 317 339 334 284 314 315 288 292 693 692 694 695 292 690 691 696 322 318 339 335 687 284 695 288 698 699 700 701 689 697 702 271 273 275 587 662 669 284 288 292 704 658 665 672 284 288 292 706 680 292 708 703 705 707 709 689 697 702 272 274 276 704 706 708 711 712 713 714 689 697 702 284 288 292 587 662 669 271 273 275 587 662 669 272 274 276 717 718 658 665 672 271 273 275 658 665 672 272 274 276 720 721 680 275 680 276 723 724 716 719 722 725 659 666 681 710 715 726 639 613 656 642 733 734 588 589 -33 595 595 598 599 737 738 739 588 589 601 740 603 741 736 742 735 743 639 614 656 643 745 746 590 591 -35 737 738 739 590 591 605 749 607 750 748 751 747 752 639 615 656 644 754 755 592 593 -36 737 738 739 592 593 609 758 611 759 757 760 756 761 639 633 656 650 605 630 632 601 609 766 765 767 768 609 763 764 769 639 634 656 651 601 631 632 605 609 774 773 775 776 609 771 772 777 639 635 656 652 768 601 776 605 779 780 781 782 770 778 783 588 590 592 735 747 756 601 605 609 785 743 752 761 601 605 609 787 784 786 788 770 778 783 589 591 593 785 787 790 791 792 770 778 783 601 605 609 735 747 756 588 590 592 735 747 756 589 591 593 795 796 743 752 761 588 590 592 743 752 761 589 591 593 798 799 794 797 800 744 753 762 789 793 801 393 367 410 396 808 809 39 40 41 18 19 20 39 40 41 18 19 20 39 40 41 18 19 20 39 40 41 18 19 20 39 41 18 19 20 39 41 18 19 20 342 343 344 345 346 347 811 812 813 814 815 816 -33 -35 -36 -29 -31 -32 -24 818 818 -13 -14 821 822 40 18 19 819 820 823 811 812 824 -21 825 826 40 18 19 819 820 823 813 814 828 -22 829 830 39 40 819 820 823 815 816 832 -23 833 834 811 812 813 814 815 816 827 831 835 836 837 838 349 349 352 353 840 841 842 342 343 355 843 357 840 841 842 344 345 359 845 361 840 841 842 346 347 363 847 365 811 812 813 814 815 816 844 846 848 849 850 851 821 822 818 811 812 824 821 822 818 813 814 828 821 822 818 815 816 832 344 345 346 347 813 814 815 816 -35 -36 -31 -32 342 343 346 347 811 812 815 816 -33 -36 -29 -32 342 343 344 345 811 812 813 814 -33 -35 -29 -31 853 854 855 856 857 858 839 852 859 860 817 861 862 849 342 343 344 345 346 347 811 812 813 814 815 816 -33 -35 -36 -29 -31 -32 811 812 813 814 815 816 827 831 835 865 866 867 811 812 813 814 815 816 844 846 848 869 870 871 344 345 346 347 813 814 815 816 -35 -36 -31 -32 342 343 346 347 811 812 815 816 -33 -36 -29 -32 342 343 344 345 811 812 813 814 -33 -35 -29 -31 853 854 855 873 874 875 868 872 876 877 864 878 879 869 863 880 810 881 393 368 410 397 883 884 862 850 879 870 886 887 885 888 393 369 410 398 890 891 862 851 879 871 893 894 346 347 -36 349 349 352 353 897 898 899 346 347 363 900 365 901 896 902 892 895 903 393 387 410 404 359 384 386 355 363 908 907 909 910 363 905 906 911 393 388 410 405 355 385 386 359 363 916 915 917 918 363 913 914 919 393 389 410 406 910 355 918 359 921 922 923 924 912 920 925 342 344 346 810 885 892 355 359 363 927 881 888 895 355 359 363 929 903 363 931 926 928 930 932 912 920 925 343 345 347 927 929 931 934 935 936 937 912 920 925 355 359 363 810 885 892 342 344 346 810 885 892 343 345 347 940 941 881 888 895 342 344 346 881 888 895 343 345 347 943 944 903 346 903 347 946 947 939 942 945 948 882 889 904 933 938 949 862 836 879 865 956 957 811 812 -29 818 818 821 822 960 961 962 811 812 824 963 826 964 959 965 958 966 862 837 879 866 968 969 813 814 -31 960 961 962 813 814 828 972 830 973 971 974 970 975 862 838 879 867 977 978 815 816 -32 960 961 962 815 816 832 981 834 982 980 983 979 984 862 856 879 873 828 853 855 824 832 989 988 990 991 832 986 987 992 862 857 879 874 824 854 855 828 832 997 996 998 999 832 994 995 1000 862 858 879 875 991 824 999 828 1002 1003 1004 1005 993 1001 1006 811 813 815 958 970 979 824 828 832 1008 966 975 984 824 828 832 1010 1007 1009 1011 993 1001 1006 812 814 816 1008 1010 1013 1014 1015 993 1001 1006 824 828 832 958 970 979 811 813 815 958 970 979 812 814 816 1018 1019 966 975 984 811 813 815 966 975 984 812 814 816 1021 1022 1017 1020 1023 967 976 985 1012 1016 1024 42 22 23 61 62 2 43 23 61 62 2 44 22 23 61 62 58 1 2 85 25 26 80 81 5 89 26 80 81 5 93 25 26 80 81 77 4 5 215 28 29 210 211 8 219 29 210 211 8 223 28 29 210 211 207 7 8 286 31 32 281 282 11 290 32 281 282 11 294 31 32 281 282 278 10 11 603 34 35 598 599 14 607 35 598 599 14 611 34 35 598 599 595 13 14 357 37 38 352 353 17 361 38 352 353 17 365 37 38 352 353 349 16 17 826 40 41 821 822 20 830 41 821 822 20 834 40 41 821 822 818 19 20", dtype=np.int64, sep=" "),
@@ -21096,8 +21096,6 @@ _N, _NP, _NG = 84, 115, 7
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 84
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 39 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 42 43 43 43 43 44 45 45 45 46 47 47 47 47 47 48 49 49 49 49 50 51 51 51 52 53 53 53 53 53 54 55 55 55 55 56 57 57 57 58 59 59 59 59 59 60 61 61 61 61 62 63 63 63 64 65 65 65 65 65 66 67 67 67 67 68 69 69 69 70 71 71 71 71 71 72 73 73 73 73 74 75 75 75 76 77 77 77 77 77 78 79 79 79 79 80 81 81 81 82 83 83 83 83 83", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 42 43 44 45 46 47 48 49 50 51 52 53 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 72 73 74 75 76 77 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 18 19 20 21 22 23 24 25 26 27 28 29 60 61 62 63 64 65 66 67 68 69 70 71 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 48 49 50 51 52 53 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 30 31 32 33 34 35 36 37 38 39 40 41 72 73 74 75 76 77 78 79 80 81 82 83 0 3 4 45 47 1 3 4 47 2 3 4 5 45 47 6 9 10 51 53 7 9 10 53 8 9 10 11 51 53 12 15 16 57 59 13 15 16 59 14 15 16 17 57 59 18 21 22 63 65 19 21 22 65 20 21 22 23 63 65 24 27 28 69 71 25 27 28 71 26 27 28 29 69 71 30 33 34 75 77 31 33 34 77 32 33 34 35 75 77 36 39 40 81 83 37 39 40 83 38 39 40 41 81 83", dtype=np.int64, sep=" ")
 

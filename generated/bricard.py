@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "bricard"
 MODEL_FILE = "bricard.yaml"
-MODEL_HASH = "f445e7c95d36bdac95f599eb57883eba"
+MODEL_HASH = "37c0cc54579c7cacb683d7ba5ee7faca"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_bricard_f445e7c95d36bdac95f599eb57883eba", sys.modules[__name__])
-__name__ = "_bgc_bricard_f445e7c95d36bdac95f599eb57883eba"
+    sys.modules.setdefault("_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca", sys.modules[__name__])
+__name__ = "_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca"
 
 STATE_NAMES = ("bar1.m.px", "bar1.m.py", "bar1.m.pz", "bar1.J.px", "bar1.J.py", "bar1.J.pz", "bar2.m.px", "bar2.m.py", "bar2.m.pz", "bar2.J.px", "bar2.J.py", "bar2.J.pz", "bar3.m.px", "bar3.m.py", "bar3.m.pz", "bar3.J.px", "bar3.J.py", "bar3.J.pz", "bar4.m.px", "bar4.m.py", "bar4.m.pz", "bar4.J.px", "bar4.J.py", "bar4.J.pz", "bar5.m.px", "bar5.m.py", "bar5.m.pz", "bar5.J.px", "bar5.J.py", "bar5.J.pz", "bar1.x", "bar1.ax", "bar1.y", "bar1.ay", "bar1.z", "bar1.az", "bar2.x", "bar2.ax", "bar2.y", "bar2.ay", "bar2.z", "bar2.az", "bar3.x", "bar3.ax", "bar3.y", "bar3.ay", "bar3.z", "bar3.az", "bar4.x", "bar4.ax", "bar4.y", "bar4.ay", "bar4.z", "bar4.az", "bar5.x", "bar5.ax", "bar5.y", "bar5.ay", "bar5.z", "bar5.az", )
 PARAM_NAMES = ("J1__stiffness", "J1__damping", "J1__rot_stiffness", "J1__rot_damping", "J1__tx_load", "J1__ty_load", "J1__tz_load", "J1__ry_load", "J1__rz_load", "J2__stiffness", "J2__damping", "J2__rot_stiffness", "J2__rot_damping", "J2__tx_load", "J2__ty_load", "J2__tz_load", "J2__ry_load", "J2__rz_load", "J3__stiffness", "J3__damping", "J3__rot_stiffness", "J3__rot_damping", "J3__tx_load", "J3__ty_load", "J3__tz_load", "J3__ry_load", "J3__rz_load", "J4__stiffness", "J4__damping", "J4__rot_stiffness", "J4__rot_damping", "J4__tx_load", "J4__ty_load", "J4__tz_load", "J4__ry_load", "J4__rz_load", "J5__stiffness", "J5__damping", "J5__rot_stiffness", "J5__rot_damping", "J5__tx_load", "J5__ty_load", "J5__tz_load", "J5__ry_load", "J5__rz_load", "J6__stiffness", "J6__damping", "J6__rot_stiffness", "J6__rot_damping", "J6__tx_load", "J6__ty_load", "J6__tz_load", "J6__ry_load", "J6__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a"
+_KERNEL_PREFIX = "_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9"
 KERNEL_FUNCTIONS = 26
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,59 +120,59 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_ptr = external constant [585 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape_ptr = external constant [585 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_src = external constant [1639 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape_src = external constant [1639 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_row = external constant [725 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_col = external constant [725 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_zero = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_zero = external constant [725 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_k = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_k = external constant [725 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_i = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_i = external constant [725 x i64]
 
-@_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_j = external constant [725 x i64]
+@_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_j = external constant [725 x i64]
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 23257
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -231,7 +231,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -262,7 +262,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -320,83 +320,83 @@ ends:
 }
 
 
-define internal void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 594
   %v2 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2233
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 168192, i1 false)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape(double* %v2, double* %v1, i64 0, i64 584, i64 36, i64* getelementptr inbounds ([585 x i64], [585 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1639 x i64], [1639 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_tape_src, i64 0, i64 0))
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape(double* %v2, double* %v1, i64 0, i64 584, i64 36, i64* getelementptr inbounds ([585 x i64], [585 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1639 x i64], [1639 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 28800, i1 false)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col, i64 0, i64 0))
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2233
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_col, i64 0, i64 0))
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 186536)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 186536)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4752)
   %w = bitcast i8* %raw to double*
@@ -412,7 +412,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 19
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -420,23 +420,23 @@ exit:
   ret void
 }
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -451,33 +451,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -2002,7 +2002,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 282
   %v2 = load double, double* %v1, align 8
@@ -3621,7 +3621,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 384
   %v2 = load double, double* %v1, align 8
@@ -3802,7 +3802,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -6536,7 +6536,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 263
   %v2 = load double, double* %v1, align 8
@@ -9277,7 +9277,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 515
   %v2 = load double, double* %v1, align 8
@@ -10109,7 +10109,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -10874,7 +10874,7 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 33
   %v2 = load double, double* %v1, align 8
@@ -10914,14 +10914,14 @@ entry:
   ret void
 }
 
-define void @_bgc_bricard_f445e7c95d36bdac95f599eb57883eba_6d503d27ea6a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_bricard_37c0cc54579c7cacb683d7ba5ee7faca_aa792e0b27f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 32 34 35 36 37 38 40 41 45 47 48 50 55 59 60 61 65 67 68 69 70 71 76 78 82 84 86 87 89 91 96 98 103 105 109 111 112 114 116 120 124 126 128 129 133 135 137 138 140 142 147 149 154 156 160 162 163 165 170 174 178 180 185 187 191 193 195 196 198 200 201 202 208 214 218 219 221 223 229 235 239 243 247 253 254 260 266 272 276 280 284 290 292 293 295 297 303 307 311 315 321 325 329 333 339 341 342 344 346 349 351 352 356 357 359 361 363 365 369 371 373 375 378 384 386 392 393 399 400 406 410 412 418 419 425 426 432 436 437 438 439 440 441 442 447 451 452 453 457 459 460 461 462 463 468 470 474 476 478 479 481 483 488 492 496 498 503 505 509 511 513 514 516 518 520 524 528 530 532 533 537 539 541 542 544 546 548 550 556 560 564 568 574 575 581 587 593 597 601 605 611 613 614 616 618 624 628 632 636 642 646 650 654 660 662 663 665 667 671 673 675 677 679 683 685 687 689 691 695 701 703 709 710 716 717 723 727 729 735 736 742 743 749 753 754 755 756 757 758 759 761 765 766 767 771 773 774 775 776 777 779 780 784 786 788 789 791 793 798 802 806 808 813 815 819 821 823 824 826 828 833 837 841 843 848 850 854 856 858 859 861 863 865 867 873 877 881 885 891 892 898 904 910 914 918 922 928 930 931 933 935 941 945 949 953 959 963 967 971 977 979 980 982 984 988 990 992 994 996 1000 1002 1004 1006 1008 1012 1018 1020 1026 1027 1033 1034 1040 1044 1046 1052 1053 1059 1060 1066 1070 1071 1072 1073 1074 1075 1076 1081 1085 1086 1087 1091 1093 1094 1095 1096 1097 1102 1104 1108 1110 1112 1113 1115 1117 1119 1123 1127 1129 1131 1132 1136 1138 1140 1141 1143 1145 1150 1154 1158 1160 1165 1167 1171 1173 1175 1176 1178 1180 1182 1184 1190 1194 1198 1202 1208 1209 1215 1221 1227 1231 1235 1239 1245 1247 1248 1250 1252 1258 1262 1266 1270 1276 1280 1284 1288 1294 1296 1297 1299 1301 1305 1307 1309 1311 1313 1317 1319 1321 1323 1325 1329 1335 1337 1343 1344 1350 1351 1357 1361 1363 1369 1370 1376 1377 1383 1387 1388 1389 1390 1391 1392 1393 1395 1396 1397 1401 1403 1404 1406 1408 1410 1414 1416 1417 1419 1421 1423 1427 1429 1430 1432 1434 1436 1438 1439 1443 1444 1446 1448 1449 1453 1454 1456 1458 1462 1464 1466 1468 1471 1473 1475 1477 1480 1486 1488 1494 1495 1501 1502 1508 1512 1514 1520 1521 1527 1528 1534 1538 1539 1540 1541 1542 1543 1544 1545 1550 1551 1555 1556 1563 1564 1569 1570 1574 1575 1582 1583 1588 1589 1593 1594 1601 1602 1607 1608 1612 1613 1620 1621 1626 1627 1631 1632 1639", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-15 -9 -6 -13 -7 -4 -14 -8 -5 -15 -9 -6 -13 -7 -4 -15 -9 -6 -13 -7 -4 -14 -8 -5 -15 -9 -6 -13 -7 -4 16 17 30 -34 -12 32 -3 34 16 2 1 33 35 36 37 38 -25 39 31 40 18 20 3 4 5 30 42 -34 -28 32 34 44 45 36 37 46 -25 -10 48 -1 50 18 20 3 4 5 19 3 49 51 52 53 54 -19 47 55 56 43 57 41 58 15 17 0 1 2 60 -35 15 17 0 1 2 15 16 33 35 62 63 64 -26 65 61 66 19 20 60 68 -35 -29 44 45 62 63 70 -26 19 5 4 49 51 72 73 74 -20 71 75 76 69 77 67 78 15 17 0 1 2 80 -36 15 17 0 1 2 16 0 33 35 82 83 84 -27 85 81 86 18 20 3 4 5 80 88 -36 -30 44 45 82 83 90 -27 18 20 3 4 5 18 19 49 51 92 93 94 -21 91 95 96 89 97 87 98 -18 83 100 34 32 30 36 37 100 34 32 60 62 63 102 103 37 63 104 101 105 106 63 37 63 83 53 73 93 100 34 32 80 82 83 63 83 73 93 37 83 53 93 37 63 53 73 102 103 109 110 111 112 -16 114 50 48 42 52 53 114 50 48 68 72 73 114 50 48 88 92 93 63 83 73 93 37 83 53 93 37 63 53 73 115 116 117 118 119 120 113 121 122 108 123 124 110 30 60 80 53 73 93 60 80 73 93 30 80 53 93 30 60 53 73 102 103 109 127 128 129 60 80 73 93 30 80 53 93 30 60 53 73 115 116 117 131 132 133 130 134 135 126 136 137 127 107 125 138 106 37 37 103 109 63 83 142 141 143 144 83 124 111 137 128 140 145 146 147 144 63 124 112 137 129 149 150 151 139 148 152 30 60 80 100 32 41 67 87 37 63 83 155 58 78 98 37 63 83 157 139 148 152 36 62 82 154 156 158 159 100 34 41 67 87 36 62 82 162 58 78 98 36 62 82 164 139 148 152 37 63 83 161 163 165 166 59 79 99 153 160 167 21 23 6 7 8 42 174 -28 -31 48 50 176 177 52 53 178 -19 -11 180 -2 182 21 23 6 7 8 22 6 181 183 184 185 186 -22 179 187 188 175 189 58 190 21 23 6 7 8 68 192 -29 -32 176 177 72 73 194 -20 21 23 6 7 8 21 22 181 183 196 197 198 -23 195 199 200 193 201 78 202 22 23 88 204 -30 -33 176 177 92 93 206 -21 22 8 7 181 183 208 209 210 -24 207 211 212 205 213 98 214 124 118 137 131 53 73 93 184 196 208 73 93 196 208 53 93 184 208 53 73 184 196 115 116 117 219 220 221 -17 223 182 180 174 184 185 223 182 180 192 196 197 223 182 180 204 208 209 73 93 196 208 53 93 184 208 53 73 184 196 224 225 226 227 228 229 222 230 231 218 232 233 219 42 68 88 184 196 208 68 88 196 208 42 88 184 208 42 68 184 196 115 116 117 236 237 238 68 88 196 208 42 88 184 208 42 68 184 196 224 225 226 240 241 242 239 243 244 235 245 246 236 216 217 234 247 124 119 137 132 233 220 246 237 249 250 251 252 124 120 137 133 233 221 246 238 254 255 256 257 248 253 258 42 68 88 114 48 58 78 98 53 73 93 261 190 202 214 53 73 93 263 248 253 258 52 72 92 260 262 264 265 114 50 58 78 98 52 72 92 268 190 202 214 52 72 92 270 248 253 258 53 73 93 267 269 271 272 191 203 215 259 266 273 25 26 174 280 -31 -34 180 182 282 283 184 185 284 -22 -12 286 -3 288 25 11 10 287 289 290 291 292 -25 285 293 294 281 295 190 296 24 26 9 10 11 192 298 -32 -35 282 283 196 197 300 -23 24 26 9 10 11 25 9 287 289 302 303 304 -26 301 305 306 299 307 202 308 24 26 9 10 11 204 310 -33 -36 282 283 208 209 312 -24 24 26 9 10 11 24 25 287 289 314 315 316 -27 313 317 318 311 319 214 320 233 227 246 240 174 192 204 290 302 314 192 204 302 314 174 204 290 314 174 192 290 302 224 225 226 325 326 327 -18 329 288 286 280 290 291 329 288 286 298 302 303 329 288 286 310 314 315 192 204 302 314 174 204 290 314 174 192 290 302 330 331 332 333 334 335 328 336 337 324 338 339 325 184 196 208 290 302 314 196 208 302 314 184 208 290 314 184 196 290 302 224 225 226 342 343 344 196 208 302 314 184 208 290 314 184 196 290 302 330 331 332 346 347 348 345 349 350 341 351 352 342 322 323 340 353 233 228 246 241 339 326 352 343 355 356 357 358 233 229 246 242 339 327 352 344 360 361 362 363 354 359 364 174 192 204 223 180 190 202 214 185 197 209 367 296 308 320 185 197 209 369 354 359 364 184 196 208 366 368 370 371 223 182 190 202 214 184 196 208 374 296 308 320 184 196 208 376 354 359 364 185 197 209 373 375 377 378 297 309 321 365 372 379 27 29 12 13 14 280 386 -34 -28 286 288 388 389 290 291 390 -25 -10 392 -1 394 27 29 12 13 14 27 28 393 395 396 397 398 -19 391 399 400 387 401 296 402 28 29 298 404 -35 -29 388 389 302 303 406 -26 28 14 13 393 395 408 409 410 -20 407 411 412 405 413 308 414 27 29 12 13 14 310 416 -36 -30 388 389 314 315 418 -27 27 29 12 13 14 28 12 393 395 420 421 422 -21 419 423 424 417 425 320 426 339 333 352 346 290 302 314 396 408 420 302 314 408 420 290 314 396 420 290 302 396 408 330 331 332 431 432 433 -16 435 394 392 386 396 397 435 394 392 404 408 409 435 394 392 416 420 421 302 314 408 420 290 314 396 420 290 302 396 408 436 437 438 439 440 441 434 442 443 430 444 445 431 280 298 310 396 408 420 298 310 408 420 280 310 396 420 280 298 396 408 330 331 332 448 449 450 298 310 408 420 280 310 396 420 280 298 396 408 436 437 438 452 453 454 451 455 456 447 457 458 448 428 429 446 459 339 334 352 347 445 432 458 449 461 462 463 464 339 335 352 348 445 433 458 450 466 467 468 469 460 465 470 280 298 310 329 286 296 308 320 291 303 315 473 402 414 426 291 303 315 475 460 465 470 290 302 314 472 474 476 477 329 288 296 308 320 290 302 314 480 402 414 426 290 302 314 482 460 465 470 291 303 315 479 481 483 484 403 415 427 471 478 485 386 -28 392 394 493 494 396 397 495 -19 496 492 497 402 498 404 -29 493 494 408 409 501 -20 502 500 503 414 504 416 -30 493 494 420 421 507 -21 508 506 509 426 510 445 439 458 452 421 436 437 397 409 515 514 516 517 409 409 436 438 397 421 520 519 521 522 421 512 513 518 523 445 440 458 453 517 397 525 526 527 445 441 458 454 522 397 529 530 531 524 528 532 386 404 416 435 392 402 414 426 397 409 421 535 498 504 510 397 409 421 537 524 528 532 396 408 420 534 536 538 539 435 394 402 414 426 396 408 420 542 498 504 510 396 408 420 544 524 528 532 397 409 421 541 543 545 546 499 505 511 533 540 547 -25 16 17 100 34 2 -26 17 100 34 2 -27 16 17 100 34 32 1 2 -19 19 20 114 50 5 -20 20 114 50 5 -21 19 20 114 50 48 4 5 -22 22 23 223 182 8 -23 23 223 182 8 -24 22 23 223 182 180 7 8 -25 25 26 329 288 11 -26 26 329 288 11 -27 25 26 329 288 286 10 11 -19 28 29 435 394 14 -20 29 435 394 14 -21 28 29 435 394 392 13 14", dtype=np.int64, sep=" "),
@@ -10940,8 +10940,6 @@ _N, _NP, _NG = 60, 54, 5
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 60
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 24 24 24 24 24 24 24 24 24 24 24 24 25 25 25 25 25 25 25 25 25 25 25 25 25 26 26 26 26 26 26 26 26 26 26 26 26 26 26 27 27 27 27 27 27 27 27 27 27 27 27 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 30 31 31 31 31 32 33 33 33 34 35 35 35 35 35 36 37 37 37 37 38 39 39 39 40 41 41 41 41 41 42 43 43 43 43 44 45 45 45 46 47 47 47 47 47 48 49 49 49 49 50 51 51 51 52 53 53 53 53 53 54 55 55 55 55 56 57 57 57 58 59 59 59 59 59", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 4 5 6 10 11 30 33 35 36 37 39 41 1 4 5 7 10 11 31 32 33 35 38 39 41 2 4 5 8 10 11 31 33 34 35 37 39 40 41 3 4 5 9 10 11 31 33 35 37 39 41 0 1 2 3 4 5 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 0 1 2 3 4 5 6 7 8 9 10 11 30 31 32 33 34 35 36 37 38 39 40 41 0 4 5 6 10 11 12 16 17 30 33 35 36 37 39 41 42 43 45 47 1 4 5 7 10 11 13 16 17 31 32 33 35 38 39 41 43 44 45 47 2 4 5 8 10 11 14 16 17 31 33 34 35 37 39 40 41 45 46 47 3 4 5 9 10 11 15 16 17 31 33 35 37 39 41 43 45 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 6 10 11 12 16 17 18 22 23 36 37 39 41 42 43 45 47 48 51 53 7 10 11 13 16 17 19 22 23 38 39 41 43 44 45 47 49 50 51 53 8 10 11 14 16 17 20 22 23 37 39 40 41 45 46 47 49 51 52 53 9 10 11 15 16 17 21 22 23 37 39 41 43 45 47 49 51 53 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 12 16 17 18 22 23 24 28 29 42 43 45 47 48 51 53 54 55 57 59 13 16 17 19 22 23 25 28 29 43 44 45 47 49 50 51 53 56 57 59 14 16 17 20 22 23 26 28 29 45 46 47 49 51 52 53 55 57 58 59 15 16 17 21 22 23 27 28 29 43 45 47 49 51 53 55 57 59 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 18 22 23 24 28 29 48 51 53 54 55 57 59 19 22 23 25 28 29 49 50 51 53 56 57 59 20 22 23 26 28 29 49 51 52 53 55 57 58 59 21 22 23 27 28 29 49 51 53 55 57 59 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 54 55 56 57 58 59 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 54 55 56 57 58 59 0 3 4 33 35 1 3 4 35 2 3 4 5 33 35 6 9 10 39 41 7 9 10 41 8 9 10 11 39 41 12 15 16 45 47 13 15 16 47 14 15 16 17 45 47 18 21 22 51 53 19 21 22 53 20 21 22 23 51 53 24 27 28 57 59 25 27 28 59 26 27 28 29 57 59", dtype=np.int64, sep=" ")
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "double_pendulum"
 MODEL_FILE = "double_pendulum.yaml"
-MODEL_HASH = "0fc1622048737c7c51cf949e5afb64e3"
+MODEL_HASH = "412e2241854c975fbf029f20b8cb5118"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3", sys.modules[__name__])
-__name__ = "_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3"
+    sys.modules.setdefault("_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118", sys.modules[__name__])
+__name__ = "_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118"
 
 STATE_NAMES = ("rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", )
 PARAM_NAMES = ("shoulder__stiffness", "shoulder__damping", "shoulder__rot_stiffness", "shoulder__rot_damping", "shoulder__tx_load", "shoulder__ty_load", "shoulder__tz_load", "shoulder__ry_load", "shoulder__rz_load", "elbow__stiffness", "elbow__damping", "elbow__rot_stiffness", "elbow__rot_damping", "elbow__tx_load", "elbow__ty_load", "elbow__tz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334"
+_KERNEL_PREFIX = "_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_ptr = external constant [162 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape_ptr = external constant [162 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_src = external constant [426 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape_src = external constant [426 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_row = external constant [266 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_col = external constant [266 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_zero = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_zero = external constant [266 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_k = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_k = external constant [266 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_i = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_i = external constant [266 x i64]
 
-@_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_j = external constant [266 x i64]
+@_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_j = external constant [266 x i64]
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 4451
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 161
   %v2 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 587
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 30912, i1 false)
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_tape_src, i64 0, i64 0))
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape(double* %v2, double* %v1, i64 0, i64 161, i64 24, i64* getelementptr inbounds ([162 x i64], [162 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([426 x i64], [426 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 4608, i1 false)
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_scatter(double* %J, double* %v1, i64 266, i64 24, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 587
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_col, i64 0, i64 0))
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_scatter(double* %J, double* %v1, i64 266, i64 0, i64 24, i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([266 x i64], [266 x i64]* @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 35800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1288)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -1401,7 +1401,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3237,7 +3237,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 13
   %v2 = load double, double* %v1, align 8
@@ -3534,7 +3534,7 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 15
   %v2 = load double, double* %v1, align 8
@@ -3553,14 +3553,14 @@ entry:
   ret void
 }
 
-define void @_bgc_double_pendulum_0fc1622048737c7c51cf949e5afb64e3_f51c24084334_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_double_pendulum_412e2241854c975fbf029f20b8cb5118_2d351d5fb232_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 17 20 22 23 29 30 31 33 34 35 36 41 47 49 50 51 53 54 55 56 58 64 65 67 69 70 72 75 77 78 79 85 87 88 90 92 94 95 100 103 109 111 117 119 124 130 131 133 135 136 138 141 147 149 150 152 154 159 162 167 170 176 181 187 189 194 200 201 203 205 206 208 211 217 219 220 222 224 226 227 233 239 243 244 246 248 250 251 257 261 262 264 266 268 270 276 282 288 290 296 302 304 308 310 316 322 323 329 330 334 340 341 342 345 346 347 348 349 350 351 352 354 360 366 368 370 372 378 379 381 382 383 384 385 386 387 388 389 394 395 399 400 407 408 413 414 418 419 426", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-11 -7 -5 -12 -8 -6 -11 -7 -5 -12 -8 -6 6 8 0 1 2 6 7 0 10 5 4 12 13 14 15 -19 -22 -2 -9 17 18 -1 20 20 6 8 0 1 2 19 21 22 23 12 13 24 -13 -4 -10 26 27 -3 29 29 10 11 28 30 31 32 14 15 -16 33 34 25 35 36 16 37 12 13 -19 17 18 20 20 40 41 42 23 12 13 43 -13 44 39 45 38 46 7 2 1 9 11 3 4 5 9 10 3 48 49 50 51 -20 -23 7 8 19 21 22 53 48 49 54 -14 9 11 3 4 5 28 30 31 56 50 51 -17 57 58 55 59 60 52 61 48 49 -20 40 41 42 53 48 49 64 -14 65 63 66 62 67 6 8 0 1 2 6 7 0 9 11 3 4 5 9 10 3 69 70 71 72 -21 -24 6 8 0 1 2 19 21 22 74 69 70 75 -15 9 11 3 4 5 28 30 31 77 71 72 -18 78 79 76 80 81 73 82 69 70 -21 40 41 42 74 69 70 85 -15 86 84 87 83 88 17 18 74 20 17 18 23 12 13 20 17 18 53 48 49 92 93 23 53 94 91 95 96 53 96 23 23 20 17 18 74 69 70 93 100 53 74 101 99 102 103 74 98 104 103 53 105 97 106 23 53 74 38 62 83 12 48 69 38 62 83 13 49 70 108 109 46 67 88 12 48 69 46 67 88 13 49 70 111 112 90 107 110 113 20 18 105 97 106 12 48 69 38 62 83 23 53 74 117 46 67 88 23 53 74 119 115 116 118 120 105 97 106 13 49 70 117 119 122 123 124 47 68 89 114 121 125 83 26 27 38 62 83 14 50 71 38 62 83 15 51 72 134 135 133 136 29 27 38 62 83 32 56 77 139 138 140 139 38 62 132 137 141 142 -13 7 8 20 17 2 -14 8 20 17 2 -15 7 8 20 17 18 1 2 34 10 11 29 26 5 58 11 29 26 5 79 10 11 29 26 27 4 5", dtype=np.int64, sep=" "),
@@ -3579,8 +3579,6 @@ _N, _NP, _NG = 24, 16, 2
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 24
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 13 13 13 13 14 15 15 15 16 17 17 17 17 17 18 19 19 19 19 20 21 21 21 22 23 23 23 23 23", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 4 5 6 9 10 11 12 13 15 17 18 21 23 1 3 4 5 7 9 10 11 14 15 17 19 20 21 23 2 3 4 5 8 9 10 11 13 15 16 17 19 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 3 4 5 6 9 10 11 12 13 15 17 18 21 23 1 3 4 5 7 9 10 11 14 15 17 19 20 21 23 2 3 4 5 8 9 10 11 13 15 16 17 19 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 0 3 4 15 17 1 3 4 17 2 3 4 5 15 17 6 9 10 21 23 7 9 10 23 8 9 10 11 21 23", dtype=np.int64, sep=" ")
 

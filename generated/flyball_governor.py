@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "flyball_governor"
 MODEL_FILE = "flyball_governor.yaml"
-MODEL_HASH = "fccd1594aae0c03021d52e3b3a4fa05d"
+MODEL_HASH = "d4467b7777500ed9f31e6c807c00910f"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d", sys.modules[__name__])
-__name__ = "_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d"
+    sys.modules.setdefault("_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f", sys.modules[__name__])
+__name__ = "_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f"
 
 STATE_NAMES = ("shaft.m.px", "shaft.m.py", "shaft.m.pz", "shaft.J.px", "shaft.J.py", "shaft.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "rod1.m.px", "rod1.m.py", "rod1.m.pz", "rod1.J.px", "rod1.J.py", "rod1.J.pz", "rod2.m.px", "rod2.m.py", "rod2.m.pz", "rod2.J.px", "rod2.J.py", "rod2.J.pz", "shaft.x", "shaft.ax", "shaft.y", "shaft.ay", "shaft.z", "shaft.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", "rod1.x", "rod1.ax", "rod1.y", "rod1.ay", "rod1.z", "rod1.az", "rod2.x", "rod2.ax", "rod2.y", "rod2.ay", "rod2.z", "rod2.az", "spin.rx", "hinge1.rx", "hinge2.rx", )
 PARAM_NAMES = ("k_s", "c_s", "l0", "phi0", "h0", "spin__stiffness", "spin__damping", "spin__rot_stiffness", "spin__rot_damping", "spin__tx_load", "spin__ty_load", "spin__tz_load", "spin__ry_load", "spin__rz_load", "sleeve__stiffness", "sleeve__damping", "sleeve__rot_stiffness", "sleeve__rot_damping", "sleeve__ty_load", "sleeve__tz_load", "sleeve__rx_load", "sleeve__ry_load", "sleeve__rz_load", "sleeve__tx_k", "sleeve__tx_c", "sleeve__tx_preload", "hinge1__stiffness", "hinge1__damping", "hinge1__rot_stiffness", "hinge1__rot_damping", "hinge1__tx_load", "hinge1__ty_load", "hinge1__tz_load", "hinge1__ry_load", "hinge1__rz_load", "hinge1__rx_k", "hinge1__rx_c", "hinge1__rx_preload", "hinge2__stiffness", "hinge2__damping", "hinge2__rot_stiffness", "hinge2__rot_damping", "hinge2__tx_load", "hinge2__ty_load", "hinge2__tz_load", "hinge2__ry_load", "hinge2__rz_load", "hinge2__rx_k", "hinge2__rx_c", "hinge2__rx_preload", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b"
+_KERNEL_PREFIX = "_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284"
 KERNEL_FUNCTIONS = 25
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -122,58 +122,58 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_ptr = external constant [507 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape_ptr = external constant [507 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_src = external constant [1724 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape_src = external constant [1724 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_row = external constant [856 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_col = external constant [856 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_zero = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_zero = external constant [856 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_k = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_k = external constant [856 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_i = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_i = external constant [856 x i64]
 
-@_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_j = external constant [856 x i64]
+@_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_j = external constant [856 x i64]
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 26535
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -232,7 +232,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -263,7 +263,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -321,83 +321,83 @@ ends:
 }
 
 
-define internal void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 523
   %v2 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2247
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 194304, i1 false)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape(double* %v2, double* %v1, i64 0, i64 506, i64 48, i64* getelementptr inbounds ([507 x i64], [507 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1724 x i64], [1724 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_tape_src, i64 0, i64 0))
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape(double* %v2, double* %v1, i64 0, i64 506, i64 48, i64* getelementptr inbounds ([507 x i64], [507 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1724 x i64], [1724 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 20808, i1 false)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 51, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col, i64 0, i64 0))
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_scatter(double* %J, double* %v1, i64 856, i64 51, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2247
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_scatter(double* %J, double* %v1, i64 856, i64 0, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_col, i64 0, i64 0))
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_scatter(double* %J, double* %v1, i64 856, i64 0, i64 48, i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([856 x i64], [856 x i64]* @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 212688)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 212688)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4184)
   %w = bitcast i8* %raw to double*
@@ -413,7 +413,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -421,21 +421,21 @@ exit:
   ret void
 }
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -452,33 +452,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -2436,7 +2436,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 268
   %v2 = load double, double* %v1, align 8
@@ -3839,7 +3839,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -6356,7 +6356,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 160
   %v2 = load double, double* %v1, align 8
@@ -8901,7 +8901,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 38
   %v2 = load double, double* %v1, align 8
@@ -11597,7 +11597,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 37
   %v2 = load double, double* %v1, align 8
@@ -11830,7 +11830,7 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 39
   %v2 = load double, double* %v1, align 8
@@ -11863,14 +11863,14 @@ entry:
   ret void
 }
 
-define void @_bgc_flyball_governor_fccd1594aae0c03021d52e3b3a4fa05d_78f22645e75b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_flyball_governor_d4467b7777500ed9f31e6c807c00910f_e9624a219284_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 33 36 38 39 45 46 47 48 49 51 52 54 60 62 63 64 65 66 68 69 75 81 82 84 86 87 89 95 98 104 105 107 108 114 116 117 118 119 120 122 123 129 135 136 138 140 141 143 144 145 146 147 148 149 150 151 152 157 162 164 170 176 179 184 189 191 197 203 206 208 210 211 216 221 223 228 233 235 288 290 295 300 309 314 316 321 323 329 335 341 347 353 359 365 371 377 380 381 383 385 394 400 406 412 418 424 430 433 434 436 438 441 443 444 445 449 451 452 454 458 464 470 472 478 480 482 483 485 491 497 499 505 507 509 510 512 514 516 518 521 523 527 529 530 532 536 542 548 550 556 558 560 561 563 569 575 577 583 585 587 588 590 592 594 596 599 601 605 607 608 610 614 616 662 664 670 674 678 682 688 694 700 706 710 714 718 724 726 727 729 731 737 741 745 749 755 759 763 767 773 775 776 778 780 826 828 834 838 842 846 852 858 864 870 874 878 882 888 890 891 893 895 901 905 909 913 919 923 927 931 937 939 940 942 944 950 954 958 962 968 969 975 981 987 991 995 999 1005 1007 1008 1010 1012 1018 1022 1026 1030 1036 1040 1044 1048 1054 1056 1057 1059 1061 1067 1071 1075 1079 1085 1089 1093 1097 1103 1105 1106 1108 1110 1116 1118 1120 1122 1123 1127 1128 1130 1132 1145 1147 1149 1151 1153 1155 1157 1159 1161 1163 1169 1171 1173 1175 1176 1180 1181 1183 1185 1198 1200 1202 1204 1206 1208 1210 1212 1214 1216 1222 1224 1226 1228 1230 1232 1246 1252 1258 1259 1265 1266 1272 1273 1278 1280 1286 1292 1298 1300 1306 1312 1314 1320 1321 1326 1332 1333 1334 1337 1338 1339 1340 1341 1342 1343 1345 1347 1349 1352 1354 1356 1358 1361 1363 1365 1367 1370 1371 1373 1375 1377 1380 1382 1384 1386 1389 1391 1393 1395 1398 1404 1410 1416 1417 1418 1419 1420 1421 1422 1423 1425 1427 1429 1431 1434 1436 1438 1440 1443 1445 1447 1449 1452 1458 1464 1465 1468 1470 1476 1482 1488 1490 1493 1499 1500 1502 1503 1504 1505 1506 1507 1508 1509 1511 1513 1515 1517 1520 1522 1524 1526 1529 1531 1533 1535 1538 1544 1550 1551 1554 1556 1562 1568 1574 1576 1579 1585 1586 1588 1589 1590 1591 1592 1593 1594 1595 1600 1601 1605 1606 1613 1614 1619 1620 1624 1625 1632 1633 1638 1639 1643 1644 1651 1652 1657 1658 1662 1663 1670 1676 1700 1724", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-31 -21 -15 -32 -22 -16 -6 -4 -3 -20 -9 -8 -31 -21 -15 -32 -22 -16 -6 -4 -3 -20 -9 -8 -17 -18 -19 12 13 14 0 1 2 12 13 1 19 20 7 27 28 29 30 -42 -25 -2 32 -1 -5 34 35 32 19 8 33 36 37 29 38 30 39 24 -12 41 -11 -23 43 44 41 12 13 14 0 1 2 42 45 46 27 47 28 -36 48 49 50 40 51 31 52 15 16 17 3 4 5 15 16 4 54 55 29 30 -45 -25 32 34 35 32 57 58 59 29 38 30 60 24 -14 62 -13 -24 64 65 62 15 16 17 3 4 5 63 66 67 54 68 55 -39 69 70 71 61 72 56 73 -37 -38 -40 -41 -28 -29 -30 -7 -10 12 14 0 1 2 12 14 0 1 2 13 0 12 13 14 0 1 2 12 13 14 0 1 2 12 13 1 15 17 3 4 5 15 17 3 4 5 16 3 15 16 17 3 4 5 15 16 17 3 4 5 15 16 4 22 23 22 11 10 21 23 9 10 11 21 23 9 10 11 22 9 21 23 9 10 11 21 23 9 10 11 21 22 49 75 76 43 41 44 70 77 78 64 62 65 79 80 81 82 83 27 47 28 84 85 86 87 88 89 54 68 55 90 91 92 93 94 95 96 97 98 99 100 101 102 103 104 -42 -43 -44 -45 -46 -47 -33 -34 -35 105 30 18 20 6 7 8 18 20 6 7 8 29 107 108 -25 -26 -27 -33 -34 -35 18 20 6 7 8 19 6 18 20 6 7 8 18 19 24 25 26 29 107 108 79 80 81 29 107 108 34 32 35 29 38 30 34 32 35 107 110 111 34 32 35 108 112 113 107 108 -26 -27 -34 -35 29 108 -25 -27 -33 -35 29 107 -25 -26 -33 -34 116 117 118 119 120 121 114 115 122 123 109 124 125 29 38 110 112 -25 -26 -27 -33 -34 -35 24 25 26 38 110 112 79 80 81 38 110 112 110 112 -26 -27 -34 -35 38 112 -25 -27 -33 -35 38 110 -25 -26 -33 -34 116 117 118 130 131 132 128 129 133 134 127 135 136 38 106 126 137 30 -25 32 34 140 141 29 38 142 24 143 139 144 53 74 138 145 84 86 107 111 -43 -26 33 36 37 107 110 111 148 25 42 45 46 84 85 86 150 75 151 149 152 147 153 90 92 107 111 -46 -26 57 58 59 107 110 111 156 25 63 66 67 90 91 92 158 77 159 157 160 155 161 105 111 125 107 136 110 163 164 165 111 -26 140 141 107 110 168 25 169 167 170 154 162 166 171 87 89 108 113 -44 -27 33 36 37 108 112 113 174 26 42 45 46 87 88 89 176 76 177 175 178 173 179 93 95 108 113 -47 -27 57 58 59 108 112 113 182 26 63 66 67 93 94 95 184 78 185 183 186 181 187 105 113 125 108 136 112 189 190 191 113 -27 140 141 108 112 194 26 195 193 196 180 188 192 197 32 35 20 49 75 76 43 41 44 79 80 81 82 83 27 47 28 84 85 86 87 88 89 29 30 107 111 108 113 96 97 98 99 100 101 102 103 104 8 -42 -43 -44 -25 -26 -27 -33 -34 -35 200 38 47 85 88 30 111 113 85 88 111 113 47 88 30 113 47 85 30 111 116 117 118 203 204 205 43 41 44 27 47 28 43 41 44 84 85 86 43 41 44 87 88 89 85 88 111 113 47 88 30 113 47 85 30 111 207 208 209 210 211 212 206 213 214 202 215 216 203 47 85 88 29 107 108 85 88 107 108 47 88 29 108 47 85 29 107 116 117 118 219 220 221 85 88 107 108 47 88 29 108 47 85 29 107 207 208 209 223 224 225 222 226 227 218 228 229 219 20 70 77 78 64 62 65 79 80 81 82 83 54 68 55 90 91 92 93 94 95 29 30 107 111 108 113 96 97 98 99 100 101 102 103 104 8 -45 -46 -47 -25 -26 -27 -33 -34 -35 231 38 68 91 94 30 111 113 91 94 111 113 68 94 30 113 68 91 30 111 116 117 118 234 235 236 64 62 65 54 68 55 64 62 65 90 91 92 64 62 65 93 94 95 91 94 111 113 68 94 30 113 68 91 30 111 238 239 240 241 242 243 237 244 245 233 246 247 234 68 91 94 29 107 108 91 94 107 108 68 94 29 108 68 91 29 107 116 117 118 250 251 252 91 94 107 108 68 94 29 108 68 91 29 107 238 239 240 254 255 256 253 257 258 249 259 260 250 38 110 112 96 99 102 110 112 99 102 38 112 96 102 38 110 96 99 116 117 118 263 264 265 -48 267 82 83 96 97 98 267 82 83 99 100 101 267 82 83 102 103 104 110 112 99 102 38 112 96 102 38 110 96 99 268 269 270 271 272 273 266 274 275 262 276 277 263 38 110 112 98 101 104 110 112 101 104 38 112 98 104 38 110 98 101 116 117 118 280 281 282 110 112 101 104 38 112 98 104 38 110 98 101 268 269 270 284 285 286 283 287 288 279 289 290 280 29 107 108 98 101 104 107 108 101 104 29 108 98 104 29 107 98 101 116 117 118 293 294 295 107 108 101 104 29 108 98 104 29 107 98 101 268 269 270 297 298 299 296 300 301 292 302 303 293 111 113 -26 -27 -34 -35 105 305 125 119 136 130 111 116 118 30 113 310 309 311 312 113 201 217 230 232 248 261 278 291 304 306 307 308 313 200 110 216 204 229 220 231 110 247 235 260 251 277 264 290 281 303 294 30 113 -25 -27 -33 -35 105 324 125 120 136 131 30 117 118 111 113 329 328 330 331 113 315 316 317 318 319 320 321 322 323 325 326 327 332 200 112 216 205 229 221 231 112 247 236 260 252 277 265 290 282 303 295 30 111 -25 -26 -33 -34 105 343 125 121 136 132 312 30 331 111 334 335 336 337 338 339 340 341 342 344 345 346 347 348 314 333 349 29 107 108 53 154 180 38 110 112 351 74 162 188 38 110 112 353 145 171 197 38 110 112 355 199 350 352 354 356 34 35 314 333 349 38 110 112 53 154 180 29 107 108 53 154 180 30 111 113 360 361 74 162 188 29 107 108 74 162 188 30 111 113 363 364 145 171 197 29 107 108 366 358 359 362 365 367 314 333 349 30 111 113 351 353 369 370 371 146 172 198 357 368 372 105 30 125 29 136 38 379 380 381 105 111 125 107 136 110 383 384 385 105 113 125 108 136 112 387 388 389 390 277 271 290 284 303 297 392 393 394 277 272 290 285 303 298 396 397 398 277 273 290 286 303 299 400 401 402 395 399 403 96 99 102 395 399 403 97 100 103 395 399 403 98 101 104 382 386 391 404 405 406 180 41 44 200 38 216 210 229 223 415 416 417 200 110 216 211 229 224 419 420 421 200 112 216 212 229 225 423 424 425 418 422 426 27 84 87 53 154 180 47 85 88 428 414 427 429 43 44 418 422 426 47 85 88 53 154 180 27 84 87 53 154 180 28 86 89 433 434 431 432 435 418 422 426 28 86 89 428 437 438 53 154 413 430 436 439 188 62 65 231 38 247 241 260 254 448 449 450 231 110 247 242 260 255 452 453 454 231 112 247 243 260 256 456 457 458 451 455 459 54 90 93 74 162 188 68 91 94 461 447 460 462 64 65 451 455 459 68 91 94 74 162 188 54 90 93 74 162 188 55 92 95 466 467 464 465 468 451 455 459 55 92 95 461 470 471 74 162 446 463 469 472 24 19 20 34 32 8 25 20 34 32 8 26 19 20 34 32 35 7 8 79 22 23 267 82 11 80 23 267 82 11 81 22 23 267 82 83 10 11 49 13 14 43 41 2 75 14 43 41 2 76 13 14 43 41 44 1 2 70 16 17 64 62 5 77 17 64 62 5 78 16 17 64 62 65 4 5 34 32 35 108 112 113 43 41 44 34 32 35 27 47 28 84 85 86 87 88 89 29 38 30 107 110 111 108 112 113 64 62 65 34 32 35 54 68 55 90 91 92 93 94 95 29 38 30 107 110 111 108 112 113", dtype=np.int64, sep=" "),
@@ -11889,8 +11889,6 @@ _N, _NP, _NG = 51, 50, 4
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 51
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 25 25 25 25 26 27 27 27 28 29 29 29 29 29 30 31 31 31 31 32 33 33 33 34 35 35 35 35 35 36 37 37 37 37 38 39 39 39 40 41 41 41 41 41 42 43 43 43 43 44 45 45 45 46 47 47 47 47 47 48 48 48 48 48 48 49 49 49 49 49 49 49 49 49 49 49 49 50 50 50 50 50 50 50 50 50 50 50 50", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 3 4 5 9 10 11 25 27 29 31 33 35 3 4 5 9 10 11 25 27 29 31 33 35 3 4 5 9 10 11 25 27 29 31 33 35 0 3 4 5 12 15 16 17 24 27 29 36 37 39 41 1 3 4 5 13 15 16 17 25 26 27 29 37 38 39 41 2 3 4 5 14 15 16 17 25 27 28 29 37 39 40 41 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 0 1 2 3 4 5 6 7 8 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 0 3 4 5 18 21 22 23 24 27 29 42 43 45 47 1 3 4 5 19 21 22 23 25 26 27 29 43 44 45 47 2 3 4 5 20 21 22 23 25 27 28 29 43 45 46 47 0 1 2 3 4 5 6 7 8 10 11 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 10 11 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 42 43 44 45 46 47 0 3 4 27 29 1 3 4 29 2 3 4 5 27 29 6 9 10 33 35 7 9 10 35 8 9 10 11 33 35 12 15 16 39 41 13 15 16 41 14 15 16 17 39 41 18 21 22 45 47 19 21 22 47 20 21 22 23 45 47 3 4 5 25 27 29 3 4 5 15 16 17 25 27 29 37 39 41 3 4 5 21 22 23 25 27 29 43 45 47", dtype=np.int64, sep=" ")
 

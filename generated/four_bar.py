@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "four_bar"
 MODEL_FILE = "four_bar.yaml"
-MODEL_HASH = "00b9e0c6a61c30041a958f63f2f7e973"
+MODEL_HASH = "83ce323f40b3c77ce6b33fd37892e8f2"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973", sys.modules[__name__])
-__name__ = "_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973"
+    sys.modules.setdefault("_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2", sys.modules[__name__])
+__name__ = "_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "coupler.m.px", "coupler.m.py", "coupler.m.pz", "coupler.J.px", "coupler.J.py", "coupler.J.pz", "rocker.m.px", "rocker.m.py", "rocker.m.pz", "rocker.J.px", "rocker.J.py", "rocker.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "coupler.x", "coupler.ax", "coupler.y", "coupler.ay", "coupler.z", "coupler.az", "rocker.x", "rocker.ax", "rocker.y", "rocker.ay", "rocker.z", "rocker.az", )
 PARAM_NAMES = ("crank_pivot__stiffness", "crank_pivot__damping", "crank_pivot__rot_stiffness", "crank_pivot__rot_damping", "crank_pivot__tx_load", "crank_pivot__ty_load", "crank_pivot__tz_load", "crank_pivot__ry_load", "crank_pivot__rz_load", "ball_A__stiffness", "ball_A__damping", "ball_A__rot_stiffness", "ball_A__rot_damping", "ball_A__tx_load", "ball_A__ty_load", "ball_A__tz_load", "ball_B__stiffness", "ball_B__damping", "ball_B__rot_stiffness", "ball_B__rot_damping", "ball_B__tx_load", "ball_B__ty_load", "ball_B__tz_load", "rocker_pivot__stiffness", "rocker_pivot__damping", "rocker_pivot__rot_stiffness", "rocker_pivot__rot_damping", "rocker_pivot__tx_load", "rocker_pivot__ty_load", "rocker_pivot__tz_load", "rocker_pivot__ry_load", "rocker_pivot__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c"
+_KERNEL_PREFIX = "_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a"
 KERNEL_FUNCTIONS = 24
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,57 +120,57 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_ptr = external constant [291 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape_ptr = external constant [291 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_src = external constant [815 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape_src = external constant [815 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_row = external constant [461 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_col = external constant [461 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_zero = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_zero = external constant [461 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_k = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_k = external constant [461 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_i = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_i = external constant [461 x i64]
 
-@_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_j = external constant [461 x i64]
+@_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_j = external constant [461 x i64]
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 11545
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -229,7 +229,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -260,7 +260,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -318,83 +318,83 @@ ends:
 }
 
 
-define internal void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 290
   %v2 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 1105
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 83520, i1 false)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape(double* %v2, double* %v1, i64 0, i64 290, i64 36, i64* getelementptr inbounds ([291 x i64], [291 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([815 x i64], [815 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_tape_src, i64 0, i64 0))
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape(double* %v2, double* %v1, i64 0, i64 290, i64 36, i64* getelementptr inbounds ([291 x i64], [291 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([815 x i64], [815 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 10368, i1 false)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 36, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col, i64 0, i64 0))
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_scatter(double* %J, double* %v1, i64 461, i64 36, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1105
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_scatter(double* %J, double* %v1, i64 461, i64 0, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_col, i64 0, i64 0))
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_scatter(double* %J, double* %v1, i64 461, i64 0, i64 36, i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([461 x i64], [461 x i64]* @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 92648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 92648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2320)
   %w = bitcast i8* %raw to double*
@@ -410,7 +410,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 11
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -418,19 +418,19 @@ exit:
   ret void
 }
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -445,33 +445,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -2166,7 +2166,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 207
   %v2 = load double, double* %v1, align 8
@@ -2275,7 +2275,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -4852,7 +4852,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 201
   %v2 = load double, double* %v1, align 8
@@ -5796,7 +5796,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 25
   %v2 = load double, double* %v1, align 8
@@ -6489,7 +6489,7 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 27
   %v2 = load double, double* %v1, align 8
@@ -6515,14 +6515,14 @@ entry:
   ret void
 }
 
-define void @_bgc_four_bar_00b9e0c6a61c30041a958f63f2f7e973_b2976052857c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_four_bar_83ce323f40b3c77ce6b33fd37892e8f2_9e4f4954905a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 27 33 37 39 40 47 48 49 51 52 53 54 56 62 64 65 66 68 69 71 73 79 81 83 84 86 89 91 92 93 99 101 102 104 106 112 118 122 127 130 137 142 148 150 156 158 160 161 163 166 172 174 175 177 179 184 189 192 197 200 207 212 218 220 226 228 230 231 233 236 242 244 245 247 249 251 252 258 264 268 269 271 273 274 280 284 285 287 289 291 293 295 301 307 313 315 321 327 329 333 335 341 347 348 354 355 359 365 366 367 370 371 372 373 374 375 376 381 384 391 393 395 397 403 405 406 407 409 410 411 412 417 423 424 426 428 429 431 433 438 441 448 454 456 461 467 468 470 472 473 475 477 479 480 487 493 495 497 503 504 506 508 509 511 513 515 521 527 529 535 541 543 546 548 554 556 562 564 567 569 571 573 574 575 576 577 578 579 582 584 585 586 592 594 595 597 599 602 608 610 611 613 615 618 624 626 627 629 631 633 634 640 646 650 651 653 655 656 662 666 667 669 671 673 675 677 683 689 695 697 703 709 711 715 717 723 729 730 736 737 741 747 748 749 752 753 754 755 756 757 758 759 764 765 769 770 777 778 783 784 788 789 796 797 802 803 807 808 815", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-6 -4 -3 -23 -13 -11 -24 -14 -12 -6 -4 -3 -23 -13 -11 -24 -14 -12 -25 -26 -27 9 10 11 0 1 2 9 10 11 0 1 2 9 10 0 1 13 5 4 21 22 23 24 25 -20 -31 -8 -15 27 28 -7 30 30 13 14 29 31 32 33 24 25 34 18 -2 -5 36 37 -1 39 37 39 36 38 40 41 21 22 23 42 -16 43 35 44 26 45 24 25 -31 27 28 30 30 48 49 50 33 24 25 51 18 52 47 53 46 54 9 10 11 0 1 2 9 10 11 0 1 2 9 10 0 1 12 14 3 4 5 12 13 3 56 57 58 59 60 -21 -32 12 14 3 4 5 29 31 32 62 59 60 63 19 38 40 41 56 57 58 65 -17 66 64 67 61 68 59 60 -32 48 49 50 62 59 60 71 19 72 70 73 69 74 9 11 0 1 2 9 11 0 1 2 9 10 0 12 14 3 4 5 12 13 3 76 77 78 79 80 -22 -33 12 14 3 4 5 29 31 32 82 79 80 83 20 38 40 41 76 77 78 85 -18 86 84 87 81 88 79 80 -33 48 49 50 82 79 80 91 20 92 90 93 89 94 27 28 82 30 27 28 33 24 25 30 27 28 62 59 60 98 99 33 62 100 97 101 102 62 62 30 27 28 82 79 80 98 105 33 82 106 104 107 108 82 103 109 102 33 108 33 110 111 112 33 62 82 46 69 89 24 59 79 46 69 89 25 60 80 114 115 54 74 94 24 59 79 54 74 94 25 60 80 117 118 96 113 116 119 30 28 110 111 112 24 59 79 46 69 89 33 62 82 123 54 74 94 33 62 82 125 121 122 124 126 110 111 112 25 60 80 123 125 128 129 130 55 75 95 120 127 131 15 17 6 7 8 15 16 6 21 22 23 138 139 -20 -34 36 37 39 37 39 36 141 142 143 21 22 23 144 -16 -10 -19 146 147 -9 149 149 15 17 6 7 8 148 150 151 152 138 139 -28 153 154 145 155 156 140 157 46 158 15 17 6 7 8 15 16 6 56 57 58 160 161 -21 -35 141 142 143 56 57 58 163 -17 15 17 6 7 8 148 150 151 165 160 161 -29 166 167 164 168 169 162 170 69 171 16 8 7 76 77 78 173 174 -22 -36 141 142 143 76 77 78 176 -18 16 17 148 150 151 178 173 174 -30 179 180 177 181 182 175 183 89 184 36 37 46 69 89 22 57 77 46 69 89 23 58 78 187 188 158 171 184 22 57 77 158 171 184 23 58 78 190 191 186 189 192 39 37 46 69 89 21 56 76 195 188 158 171 184 21 56 76 197 191 194 196 198 195 187 197 190 200 201 159 172 185 193 199 202 138 139 -34 146 147 149 149 210 211 212 152 138 139 213 154 214 209 215 158 216 160 161 -35 210 211 212 165 160 161 219 167 220 218 221 171 222 173 174 -36 210 211 212 178 173 174 225 180 226 224 227 184 228 146 147 165 149 146 147 152 138 139 149 146 147 178 173 174 232 233 152 178 234 231 235 236 178 152 149 146 147 165 160 161 239 233 165 178 240 238 241 242 178 236 152 242 165 244 245 246 237 243 152 165 178 158 171 184 138 160 173 158 171 184 139 161 174 248 249 216 222 228 138 160 173 216 222 228 139 161 174 251 252 230 247 250 253 149 147 246 237 243 138 160 173 158 171 184 152 165 178 257 216 222 228 152 165 178 259 255 256 258 260 246 237 243 139 161 174 257 259 262 263 264 217 223 229 254 261 265 18 13 14 30 27 5 19 14 30 27 5 20 13 14 30 27 28 4 5 -16 10 11 39 36 2 -17 11 39 36 2 -18 10 11 39 36 37 1 2 154 16 17 149 146 8 167 17 149 146 8 180 16 17 149 146 147 7 8", dtype=np.int64, sep=" "),
@@ -6541,8 +6541,6 @@ _N, _NP, _NG = 36, 32, 3
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 36
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 19 19 19 19 20 21 21 21 22 23 23 23 23 23 24 25 25 25 25 26 27 27 27 28 29 29 29 29 29 30 31 31 31 31 32 33 33 33 34 35 35 35 35 35", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 4 5 6 9 10 11 18 21 23 24 25 27 29 1 3 4 5 7 9 10 11 19 20 21 23 25 26 27 29 2 3 4 5 8 9 10 11 19 21 22 23 25 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 3 4 5 6 9 10 11 12 15 16 17 18 21 23 24 25 27 29 30 31 33 35 1 3 4 5 7 9 10 11 13 15 16 17 19 20 21 23 25 26 27 29 31 32 33 35 2 3 4 5 8 9 10 11 14 15 16 17 19 21 22 23 25 27 28 29 33 34 35 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 6 9 10 11 12 15 16 17 24 25 27 29 30 31 33 35 7 9 10 11 13 15 16 17 25 26 27 29 31 32 33 35 8 9 10 11 14 15 16 17 25 27 28 29 33 34 35 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 30 31 32 33 34 35 0 3 4 21 23 1 3 4 23 2 3 4 5 21 23 6 9 10 27 29 7 9 10 29 8 9 10 11 27 29 12 15 16 33 35 13 15 16 35 14 15 16 17 33 35", dtype=np.int64, sep=" ")
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "geared_inertias"
 MODEL_FILE = "geared_inertias.yaml"
-MODEL_HASH = "8913f3f1818438b52ea04193a9eb6480"
+MODEL_HASH = "88a9cb548a7e5af3e43d5ff6cc29116c"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 2.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480", sys.modules[__name__])
-__name__ = "_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480"
+    sys.modules.setdefault("_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c", sys.modules[__name__])
+__name__ = "_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c"
 
 STATE_NAMES = ("J_r.p", "shaft.q", )
 PARAM_NAMES = ("T0", "J_rotor", "J_load", "n", "k", "b", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e"
+_KERNEL_PREFIX = "_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -114,55 +114,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape_ptr = external constant [8 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape_ptr = external constant [8 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape_src = external constant [8 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape_src = external constant [8 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_row = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_row = external constant [3 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_col = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_col = external constant [3 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_zero = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_zero = external constant [3 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_k = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_k = external constant [3 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_i = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_i = external constant [3 x i64]
 
-@_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_j = external constant [3 x i64]
+@_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_j = external constant [3 x i64]
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 34
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -221,7 +221,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -252,7 +252,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -310,83 +310,83 @@ ends:
 }
 
 
-define internal void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 12
   %v2 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 20
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 112, i1 false)
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_tape_src, i64 0, i64 0))
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape(double* %v2, double* %v1, i64 0, i64 7, i64 2, i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([8 x i64], [8 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 20
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_col, i64 0, i64 0))
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 96)
   %w = bitcast i8* %raw to double*
@@ -402,7 +402,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 4
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -410,15 +410,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -427,33 +427,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 0
   %v2 = load double, double* %v1, align 8
@@ -511,7 +511,7 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -577,7 +577,7 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -609,19 +609,19 @@ entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_geared_inertias_8913f3f1818438b52ea04193a9eb6480_cf497fe9928e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_geared_inertias_88a9cb548a7e5af3e43d5ff6cc29116c_dc120f936af6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 6 7 8", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-1 -2 0 2 1 3 4 2", dtype=np.int64, sep=" "),
@@ -640,8 +640,6 @@ _N, _NP, _NG = 2, 6, 0
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 2
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 1", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 0", dtype=np.int64, sep=" ")
 

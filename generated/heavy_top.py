@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "heavy_top"
 MODEL_FILE = "heavy_top.yaml"
-MODEL_HASH = "2fff20ed7634167bcf59ab8964ffbcf7"
+MODEL_HASH = "74a894916ea0f7065c0234fca475430d"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 3.0, "rtol": 1e-09, "atol": 1e-11, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7", sys.modules[__name__])
-__name__ = "_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7"
+    sys.modules.setdefault("_bgc_heavy_top_74a894916ea0f7065c0234fca475430d", sys.modules[__name__])
+__name__ = "_bgc_heavy_top_74a894916ea0f7065c0234fca475430d"
 
 STATE_NAMES = ("top.m.px", "top.m.py", "top.m.pz", "top.J.px", "top.J.py", "top.J.pz", "top.x", "top.ax", "top.y", "top.ay", "top.z", "top.az", )
 PARAM_NAMES = ("pivot__stiffness", "pivot__damping", "pivot__rot_stiffness", "pivot__rot_damping", "pivot__tx_load", "pivot__ty_load", "pivot__tz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9"
+_KERNEL_PREFIX = "_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape_ptr = external constant [60 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape_ptr = external constant [60 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape_src = external constant [153 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape_src = external constant [153 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_row = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_row = external constant [75 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_col = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_col = external constant [75 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_zero = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_zero = external constant [75 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_k = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_k = external constant [75 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_i = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_i = external constant [75 x i64]
 
-@_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_j = external constant [75 x i64]
+@_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_j = external constant [75 x i64]
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 920
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 59
   %v2 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 212
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 5664, i1 false)
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_tape_src, i64 0, i64 0))
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape(double* %v2, double* %v1, i64 0, i64 59, i64 12, i64* getelementptr inbounds ([60 x i64], [60 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([153 x i64], [153 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_scatter(double* %J, double* %v1, i64 75, i64 12, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_col, i64 0, i64 0))
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_scatter(double* %J, double* %v1, i64 75, i64 0, i64 12, i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([75 x i64], [75 x i64]* @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 7456)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 472)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 4
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -807,7 +807,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1455,7 +1455,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1560,7 +1560,7 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1572,14 +1572,14 @@ entry:
   ret void
 }
 
-define void @_bgc_heavy_top_2fff20ed7634167bcf59ab8964ffbcf7_9d1f08a414c9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_heavy_top_74a894916ea0f7065c0234fca475430d_2d43d69ed686_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 12 15 18 19 20 21 22 24 25 31 37 39 40 42 47 49 52 57 63 65 66 68 74 77 80 86 92 94 95 97 98 100 106 107 109 111 117 123 125 127 128 129 130 131 132 133 134 135 140 141 145 146 153", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-6 -4 -3 -6 -4 -3 3 4 5 0 1 2 3 4 1 6 7 -10 -2 9 -1 -5 11 12 9 3 4 5 0 1 2 10 13 14 6 15 7 16 -7 17 8 18 3 5 0 1 2 4 0 20 21 -11 3 5 0 1 2 10 13 14 20 23 21 24 -8 25 22 26 3 4 5 0 1 2 3 4 1 28 29 -12 3 4 5 0 1 2 10 13 14 28 31 29 32 -9 33 30 34 35 9 12 19 27 35 15 23 31 38 37 39 11 12 19 27 35 6 20 28 19 27 35 7 21 29 42 43 41 44 38 19 27 36 40 45 46 -7 4 5 11 9 2 -8 5 11 9 2 -9 4 5 11 9 12 1 2", dtype=np.int64, sep=" "),
@@ -1598,8 +1598,6 @@ _N, _NP, _NG = 12, 7, 1
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 12
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 4 5 6 7 9 11 1 3 4 5 7 8 9 11 2 3 4 5 7 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" ")
 

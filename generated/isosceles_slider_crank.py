@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "isosceles_slider_crank"
 MODEL_FILE = "isosceles_slider_crank.yaml"
-MODEL_HASH = "9d8eafa87f227a25b7e7aa6b4e084fcf"
+MODEL_HASH = "d898438280d169d112384cebbe90c555"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 0.3, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf", sys.modules[__name__])
-__name__ = "_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf"
+    sys.modules.setdefault("_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555", sys.modules[__name__])
+__name__ = "_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555"
 
 STATE_NAMES = ("crank.m.px", "crank.m.py", "crank.m.pz", "crank.J.px", "crank.J.py", "crank.J.pz", "rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "slider.m.px", "slider.m.py", "slider.m.pz", "slider.J.px", "slider.J.py", "slider.J.pz", "crank.x", "crank.ax", "crank.y", "crank.ay", "crank.z", "crank.az", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", "slider.x", "slider.ax", "slider.y", "slider.ay", "slider.z", "slider.az", )
 PARAM_NAMES = ("main__stiffness", "main__damping", "main__rot_stiffness", "main__rot_damping", "main__tx_load", "main__ty_load", "main__tz_load", "main__ry_load", "main__rz_load", "crank_pin__stiffness", "crank_pin__damping", "crank_pin__rot_stiffness", "crank_pin__rot_damping", "crank_pin__tx_load", "crank_pin__ty_load", "crank_pin__tz_load", "crank_pin__ry_load", "crank_pin__rz_load", "wrist_pin__stiffness", "wrist_pin__damping", "wrist_pin__rot_stiffness", "wrist_pin__rot_damping", "wrist_pin__tx_load", "wrist_pin__ty_load", "wrist_pin__tz_load", "wrist_pin__ry_load", "wrist_pin__rz_load", "guide__stiffness", "guide__damping", "guide__rot_stiffness", "guide__rot_damping", "guide__ty_load", "guide__tz_load", "guide__rx_load", "guide__ry_load", "guide__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656"
+_KERNEL_PREFIX = "_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4"
 KERNEL_FUNCTIONS = 24
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,57 +118,57 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_ptr = external constant [343 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape_ptr = external constant [343 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_src = external constant [1029 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape_src = external constant [1029 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_row = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_col = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_zero = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_zero = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_k = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_k = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_i = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_i = external constant [388 x i64]
 
-@_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_j = external constant [388 x i64]
+@_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_j = external constant [388 x i64]
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 13689
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 348
   %v2 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 1377
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 98496, i1 false)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape(double* %v2, double* %v1, i64 0, i64 342, i64 36, i64* getelementptr inbounds ([343 x i64], [343 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1029 x i64], [1029 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_tape_src, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape(double* %v2, double* %v1, i64 0, i64 342, i64 36, i64* getelementptr inbounds ([343 x i64], [343 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1029 x i64], [1029 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 10368, i1 false)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 36, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_scatter(double* %J, double* %v1, i64 388, i64 36, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1377
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_scatter(double* %J, double* %v1, i64 388, i64 0, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_col, i64 0, i64 0))
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_scatter(double* %J, double* %v1, i64 388, i64 0, i64 36, i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([388 x i64], [388 x i64]* @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 109800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 109800)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 2784)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,19 +416,19 @@ exit:
   ret void
 }
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -441,33 +441,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -2156,7 +2156,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 299
   %v2 = load double, double* %v1, align 8
@@ -2533,7 +2533,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -5171,7 +5171,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 181
   %v2 = load double, double* %v1, align 8
@@ -6713,7 +6713,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 19
   %v2 = load double, double* %v1, align 8
@@ -6778,7 +6778,7 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 21
   %v2 = load double, double* %v1, align 8
@@ -6804,14 +6804,14 @@ entry:
   ret void
 }
 
-define void @_bgc_isosceles_slider_crank_9d8eafa87f227a25b7e7aa6b4e084fcf_dd26b5b91656_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_isosceles_slider_crank_d898438280d169d112384cebbe90c555_bcc8454a60f4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 26 29 34 37 43 44 45 47 48 49 50 55 61 63 64 65 67 68 69 70 75 81 83 85 86 88 91 93 94 95 101 103 104 106 108 110 111 113 114 120 122 128 130 132 138 140 142 143 145 148 154 156 157 159 161 166 169 174 177 183 188 194 196 201 207 209 211 212 214 217 223 225 226 228 230 232 241 247 253 259 265 271 277 283 289 295 301 307 313 319 325 327 328 330 332 341 347 353 359 365 371 377 383 389 391 392 394 396 397 401 402 404 406 409 411 413 415 416 420 421 423 425 429 431 433 435 438 444 450 456 458 464 470 472 476 478 484 490 491 497 498 502 508 509 510 513 514 515 516 517 518 519 523 525 526 527 533 535 536 538 540 541 543 544 546 548 552 558 560 561 566 571 573 575 576 578 580 584 590 592 593 598 603 605 607 608 610 612 614 616 618 627 633 639 645 651 652 653 654 660 666 672 678 684 690 696 698 699 701 703 712 718 724 730 736 742 748 754 760 762 763 765 767 771 773 775 777 779 783 785 787 789 791 795 801 807 813 815 821 827 829 833 835 841 847 848 854 855 859 865 866 867 870 871 872 873 874 875 876 877 878 880 882 883 884 886 888 889 893 894 896 898 899 903 904 906 908 909 913 914 916 918 920 922 927 929 931 933 935 939 941 943 945 948 954 960 966 967 968 969 970 971 972 973 978 979 983 984 991 992 997 998 1002 1003 1010 1011 1016 1017 1021 1022 1029", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-15 -10 -8 -9 -4 -3 -33 -28 -24 -15 -10 -8 -9 -4 -3 -33 -28 -24 -16 -17 -18 9 11 0 1 2 9 10 0 12 14 3 4 5 12 13 3 21 22 23 24 -25 -21 -7 -11 26 27 -6 29 29 9 11 0 1 2 28 30 31 32 21 22 33 18 -2 -5 35 36 -1 38 38 12 14 3 4 5 37 39 40 41 23 24 42 -12 34 43 44 25 45 21 22 -25 26 27 29 29 48 49 50 32 21 22 51 18 52 47 53 46 54 10 2 1 13 5 4 56 57 58 59 -26 -22 10 11 28 30 31 61 56 57 62 19 13 14 37 39 40 64 58 59 65 -13 63 66 67 60 68 56 57 -26 48 49 50 61 56 57 71 19 72 70 73 69 74 9 11 0 1 2 9 10 0 12 14 3 4 5 12 13 3 76 77 78 79 -27 -23 9 11 0 1 2 28 30 31 81 76 77 82 20 12 14 3 4 5 37 39 40 84 78 79 85 -14 83 86 87 80 88 76 77 -27 48 49 50 81 76 77 91 20 92 90 93 89 94 26 27 21 22 56 57 76 77 41 64 84 29 26 27 32 21 22 29 26 27 61 56 57 29 26 27 81 76 77 56 57 76 77 64 84 21 22 76 77 41 84 21 22 56 57 41 64 98 99 100 101 102 103 38 35 36 41 23 24 38 35 36 64 58 59 38 35 36 84 78 79 56 57 76 77 64 84 21 22 76 77 41 84 21 22 56 57 41 64 105 106 107 108 109 110 104 111 112 97 113 114 101 21 22 56 57 76 77 41 64 84 56 57 76 77 64 84 21 22 76 77 41 84 21 22 56 57 41 64 98 99 100 117 118 119 56 57 76 77 64 84 21 22 76 77 41 84 21 22 56 57 41 64 105 106 107 121 122 123 120 124 125 116 126 127 117 81 98 99 32 61 130 129 131 132 61 115 128 133 114 102 127 118 132 32 32 99 100 61 81 139 138 140 141 81 135 136 137 142 114 103 127 119 141 61 144 145 146 134 143 147 32 61 81 46 69 89 21 56 76 46 69 89 22 57 77 149 150 54 74 94 21 56 76 54 74 94 22 57 77 152 153 96 148 151 154 29 27 134 143 147 21 56 76 46 69 89 32 61 81 158 54 74 94 32 61 81 160 156 157 159 161 134 143 147 22 57 77 158 160 163 164 165 55 75 95 155 162 166 23 24 -21 -34 35 36 38 38 174 175 176 41 23 24 177 -12 -30 16 17 16 8 7 178 179 183 173 184 46 185 58 59 -22 -35 174 175 176 64 58 59 188 -13 -31 15 17 6 7 8 15 17 6 7 8 16 6 189 190 194 187 195 69 196 78 79 -23 -36 174 175 176 84 78 79 199 -14 -32 15 17 6 7 8 15 17 6 7 8 15 16 200 201 205 198 206 89 207 35 36 114 108 127 121 23 24 58 59 78 79 181 192 203 58 59 78 79 192 203 23 24 78 79 181 203 23 24 58 59 181 192 105 106 107 213 214 215 -19 -20 -29 217 218 219 180 181 182 217 218 219 191 192 193 217 218 219 202 203 204 58 59 78 79 192 203 23 24 78 79 181 203 23 24 58 59 181 192 220 221 222 223 224 225 216 226 227 212 228 229 213 23 24 58 59 78 79 181 192 203 58 59 78 79 192 203 23 24 78 79 181 203 23 24 58 59 181 192 105 106 107 232 233 234 58 59 78 79 192 203 23 24 78 79 181 203 23 24 58 59 181 192 220 221 222 236 237 238 235 239 240 231 241 242 232 210 211 230 243 114 109 127 122 229 214 242 233 245 246 247 248 114 110 127 123 229 215 242 234 250 251 252 253 244 249 254 41 64 84 46 69 89 23 58 78 46 69 89 24 59 79 256 257 185 196 207 23 58 78 185 196 207 24 59 79 259 260 209 255 258 261 38 36 244 249 254 23 58 78 46 69 89 41 64 84 265 185 196 207 41 64 84 267 263 264 266 268 244 249 254 24 59 79 265 267 270 271 272 186 197 208 262 269 273 -35 190 280 281 282 196 -36 201 284 285 286 207 203 220 221 181 192 289 288 290 291 192 202 220 221 180 191 294 293 295 296 191 191 220 222 180 202 299 298 300 301 202 229 223 242 236 292 297 302 303 304 291 181 296 180 229 224 242 237 306 307 308 309 301 180 229 225 242 238 311 312 313 305 310 314 180 191 202 305 310 314 181 192 203 305 310 314 182 193 204 185 283 287 315 316 317 18 10 11 29 26 2 19 11 29 26 2 20 10 11 29 26 27 1 2 -12 13 14 38 35 5 -13 14 38 35 5 -14 13 14 38 35 36 4 5 179 16 17 217 218 8 190 17 217 218 8 201 16 17 217 218 219 7 8", dtype=np.int64, sep=" "),
@@ -6830,8 +6830,6 @@ _N, _NP, _NG = 36, 36, 3
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 36
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 18 19 19 19 19 20 21 21 21 22 23 23 23 23 23 24 25 25 25 25 26 27 27 27 28 29 29 29 29 29 30 31 31 31 31 32 33 33 33 34 35 35 35 35 35", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 4 5 6 9 10 11 18 19 21 23 24 25 27 29 1 3 4 5 7 9 10 11 20 21 23 26 27 29 2 3 4 5 8 9 10 11 19 21 22 23 25 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 0 3 4 5 6 9 10 11 12 18 19 21 23 24 25 27 29 30 1 3 4 5 7 9 10 11 13 20 21 23 26 27 29 32 2 3 4 5 8 9 10 11 14 19 21 22 23 25 27 28 29 34 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 6 9 10 11 12 24 25 27 29 30 7 9 10 11 13 26 27 29 32 8 9 10 11 14 25 27 28 29 34 9 10 11 15 16 17 25 27 29 31 33 35 9 10 11 15 16 17 25 27 29 31 33 35 9 10 11 15 16 17 25 27 29 31 33 35 0 3 4 21 23 1 3 4 23 2 3 4 5 21 23 6 9 10 27 29 7 9 10 29 8 9 10 11 27 29 12 15 16 33 35 13 15 16 35 14 15 16 17 33 35", dtype=np.int64, sep=" ")
 

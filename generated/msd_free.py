@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "msd_free"
 MODEL_FILE = "msd_free.yaml"
-MODEL_HASH = "3985d2601923ce292297fd52066e4042"
+MODEL_HASH = "1c55e698241d25960c584123d6a02cbb"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 1.0, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_msd_free_3985d2601923ce292297fd52066e4042", sys.modules[__name__])
-__name__ = "_bgc_msd_free_3985d2601923ce292297fd52066e4042"
+    sys.modules.setdefault("_bgc_msd_free_1c55e698241d25960c584123d6a02cbb", sys.modules[__name__])
+__name__ = "_bgc_msd_free_1c55e698241d25960c584123d6a02cbb"
 
 STATE_NAMES = ("mass.p", "spring.q", )
 PARAM_NAMES = ("m", "k", "c", "x0", )
@@ -106,7 +106,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6"
+_KERNEL_PREFIX = "_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -115,55 +115,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape_ptr = external constant [7 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape_ptr = external constant [7 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape_src = external constant [7 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape_src = external constant [7 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_row = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_row = external constant [3 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_col = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_col = external constant [3 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_zero = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_zero = external constant [3 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_k = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_k = external constant [3 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_i = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_i = external constant [3 x i64]
 
-@_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_j = external constant [3 x i64]
+@_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_j = external constant [3 x i64]
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 25
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -222,7 +222,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -253,7 +253,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -311,83 +311,83 @@ ends:
 }
 
 
-define internal void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 6
   %v2 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 13
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 96, i1 false)
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_tape_src, i64 0, i64 0))
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape(double* %v2, double* %v1, i64 0, i64 6, i64 2, i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([7 x i64], [7 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 32, i1 false)
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_scatter(double* %J, double* %v1, i64 3, i64 2, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 13
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_col, i64 0, i64 0))
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_scatter(double* %J, double* %v1, i64 3, i64 0, i64 2, i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3 x i64], [3 x i64]* @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 216)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 216)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 48)
   %w = bitcast i8* %raw to double*
@@ -403,7 +403,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -411,15 +411,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -428,33 +428,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -491,7 +491,7 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -532,7 +532,7 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -557,19 +557,19 @@ entry:
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_msd_free_3985d2601923ce292297fd52066e4042_6de8b80743d6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_msd_free_1c55e698241d25960c584123d6a02cbb_a65ad6318f15_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 5 6 7", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-1 -2 0 1 2 3 0", dtype=np.int64, sep=" "),
@@ -588,8 +588,6 @@ _N, _NP, _NG = 2, 4, 0
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 2
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 1", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 0", dtype=np.int64, sep=" ")
 

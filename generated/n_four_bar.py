@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "n_four_bar"
 MODEL_FILE = "n_four_bar.yaml"
-MODEL_HASH = "4f35e651b38119815d68af5f2f5f6fcd"
+MODEL_HASH = "b3e1b2be9e7676adfceb496cff031204"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 20.0, "rtol": 1e-06, "atol": 1e-06, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd", sys.modules[__name__])
-__name__ = "_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd"
+    sys.modules.setdefault("_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204", sys.modules[__name__])
+__name__ = "_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204"
 
 STATE_NAMES = ("crank_0.m.px", "crank_0.m.py", "crank_0.m.pz", "crank_0.J.px", "crank_0.J.py", "crank_0.J.pz", "w_1.crank.m.px", "w_1.crank.m.py", "w_1.crank.m.pz", "w_1.crank.J.px", "w_1.crank.J.py", "w_1.crank.J.pz", "w_1.coupler.m.px", "w_1.coupler.m.py", "w_1.coupler.m.pz", "w_1.coupler.J.px", "w_1.coupler.J.py", "w_1.coupler.J.pz", "w_2.crank.m.px", "w_2.crank.m.py", "w_2.crank.m.pz", "w_2.crank.J.px", "w_2.crank.J.py", "w_2.crank.J.pz", "w_2.coupler.m.px", "w_2.coupler.m.py", "w_2.coupler.m.pz", "w_2.coupler.J.px", "w_2.coupler.J.py", "w_2.coupler.J.pz", "crank_0.x", "crank_0.ax", "crank_0.y", "crank_0.ay", "crank_0.z", "crank_0.az", "w_1.crank.x", "w_1.crank.ax", "w_1.crank.y", "w_1.crank.ay", "w_1.crank.z", "w_1.crank.az", "w_1.coupler.x", "w_1.coupler.ax", "w_1.coupler.y", "w_1.coupler.ay", "w_1.coupler.z", "w_1.coupler.az", "w_2.crank.x", "w_2.crank.ax", "w_2.crank.y", "w_2.crank.ay", "w_2.crank.z", "w_2.crank.az", "w_2.coupler.x", "w_2.coupler.ax", "w_2.coupler.y", "w_2.coupler.ay", "w_2.coupler.z", "w_2.coupler.az", )
 PARAM_NAMES = ("v0", "w_1.m", "w_2.m", "pin_0__stiffness", "pin_0__damping", "pin_0__rot_stiffness", "pin_0__rot_damping", "pin_0__tx_load", "pin_0__ty_load", "pin_0__tz_load", "pin_0__ry_load", "pin_0__rz_load", "w_1.pin__stiffness", "w_1.pin__damping", "w_1.pin__rot_stiffness", "w_1.pin__rot_damping", "w_1.pin__tx_load", "w_1.pin__ty_load", "w_1.pin__tz_load", "w_1.pin__ry_load", "w_1.pin__rz_load", "w_1.left_end__stiffness", "w_1.left_end__damping", "w_1.left_end__rot_stiffness", "w_1.left_end__rot_damping", "w_1.left_end__tx_load", "w_1.left_end__ty_load", "w_1.left_end__tz_load", "w_1.left_end__ry_load", "w_1.left_end__rz_load", "w_1.right_end__stiffness", "w_1.right_end__damping", "w_1.right_end__rot_stiffness", "w_1.right_end__rot_damping", "w_1.right_end__tx_load", "w_1.right_end__ty_load", "w_1.right_end__tz_load", "w_1.right_end__ry_load", "w_1.right_end__rz_load", "w_2.pin__stiffness", "w_2.pin__damping", "w_2.pin__rot_stiffness", "w_2.pin__rot_damping", "w_2.pin__tx_load", "w_2.pin__ty_load", "w_2.pin__tz_load", "w_2.pin__ry_load", "w_2.pin__rz_load", "w_2.left_end__stiffness", "w_2.left_end__damping", "w_2.left_end__rot_stiffness", "w_2.left_end__rot_damping", "w_2.left_end__tx_load", "w_2.left_end__ty_load", "w_2.left_end__tz_load", "w_2.left_end__ry_load", "w_2.left_end__rz_load", "w_2.right_end__stiffness", "w_2.right_end__damping", "w_2.right_end__rot_stiffness", "w_2.right_end__rot_damping", "w_2.right_end__tx_load", "w_2.right_end__ty_load", "w_2.right_end__tz_load", "w_2.right_end__ry_load", "w_2.right_end__rz_load", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4"
+_KERNEL_PREFIX = "_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4"
 KERNEL_FUNCTIONS = 26
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -121,59 +121,59 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_ptr = external constant [630 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape_ptr = external constant [630 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_src = external constant [1733 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape_src = external constant [1733 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_row = external constant [725 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_col = external constant [725 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_zero = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_zero = external constant [725 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_k = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_k = external constant [725 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_i = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_i = external constant [725 x i64]
 
-@_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_j = external constant [725 x i64]
+@_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_j = external constant [725 x i64]
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 25021
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -232,7 +232,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -263,7 +263,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -321,83 +321,83 @@ ends:
 }
 
 
-define internal void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 644
   %v2 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2377
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 181152, i1 false)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape(double* %v2, double* %v1, i64 0, i64 629, i64 36, i64* getelementptr inbounds ([630 x i64], [630 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1733 x i64], [1733 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_tape_src, i64 0, i64 0))
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape(double* %v2, double* %v1, i64 0, i64 629, i64 36, i64* getelementptr inbounds ([630 x i64], [630 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1733 x i64], [1733 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 28800, i1 false)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col, i64 0, i64 0))
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_scatter(double* %J, double* %v1, i64 725, i64 60, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2377
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_col, i64 0, i64 0))
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_scatter(double* %J, double* %v1, i64 725, i64 0, i64 36, i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([725 x i64], [725 x i64]* @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 200648)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 5152)
   %w = bitcast i8* %raw to double*
@@ -413,7 +413,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 2
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -421,23 +421,23 @@ exit:
   ret void
 }
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -450,33 +450,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -1991,7 +1991,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 285
   %v2 = load double, double* %v1, align 8
@@ -3670,7 +3670,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 582
   %v2 = load double, double* %v1, align 8
@@ -4082,7 +4082,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -6782,7 +6782,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 182
   %v2 = load double, double* %v1, align 8
@@ -9514,7 +9514,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 240
   %v2 = load double, double* %v1, align 8
@@ -10813,7 +10813,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 31
   %v2 = load double, double* %v1, align 8
@@ -10865,7 +10865,7 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 33
   %v2 = load double, double* %v1, align 8
@@ -10905,14 +10905,14 @@ entry:
   ret void
 }
 
-define void @_bgc_n_four_bar_4f35e651b38119815d68af5f2f5f6fcd_afa5727c0ea4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_n_four_bar_b3e1b2be9e7676adfceb496cff031204_a769cd3cefa4_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 32 34 35 36 37 38 40 41 45 47 48 50 52 56 57 58 62 64 65 66 67 68 69 71 72 76 78 80 81 83 85 90 92 97 99 103 105 106 108 113 117 121 123 124 129 131 135 137 139 140 142 144 149 151 156 158 162 164 165 167 172 176 180 182 183 188 190 194 196 198 199 201 203 204 206 207 213 219 223 224 226 228 234 240 244 248 252 258 259 265 271 277 281 285 289 295 297 298 300 302 308 312 316 320 326 330 334 338 344 346 347 349 351 354 355 359 360 362 364 366 368 371 373 375 377 379 383 389 395 396 402 403 407 413 415 421 427 428 434 435 439 440 441 442 443 444 445 446 447 448 450 452 453 454 455 456 458 459 463 465 466 468 472 473 474 478 480 481 482 486 488 490 491 493 495 499 500 501 505 507 508 509 510 511 512 514 515 519 521 523 524 526 529 534 536 541 543 547 549 550 552 556 560 562 566 568 570 571 573 578 582 586 588 589 594 596 600 602 604 605 607 610 615 617 622 624 628 630 631 633 637 641 643 647 649 651 652 654 659 663 667 669 670 675 677 681 683 685 686 688 691 692 694 695 701 707 711 712 714 716 722 726 730 734 740 746 750 754 758 764 766 767 769 771 777 781 785 789 795 799 803 807 813 815 816 818 820 826 830 834 838 844 845 851 857 863 867 871 875 881 883 884 886 888 894 898 902 906 912 916 920 924 930 932 933 935 937 942 943 947 948 950 952 954 956 958 960 965 967 969 971 973 975 977 983 989 995 996 1002 1003 1009 1010 1015 1021 1023 1029 1035 1036 1042 1043 1049 1050 1055 1056 1057 1058 1059 1060 1061 1063 1065 1067 1069 1071 1073 1075 1079 1081 1083 1085 1087 1091 1093 1095 1097 1099 1103 1109 1111 1117 1123 1124 1130 1131 1135 1137 1143 1149 1150 1156 1157 1161 1162 1163 1164 1165 1166 1167 1168 1169 1170 1172 1174 1175 1176 1177 1178 1180 1181 1185 1187 1188 1190 1194 1195 1196 1200 1202 1203 1204 1208 1210 1212 1213 1215 1217 1222 1224 1229 1231 1235 1237 1238 1240 1244 1248 1250 1254 1256 1258 1259 1261 1263 1268 1270 1275 1277 1281 1283 1284 1286 1290 1294 1296 1300 1302 1304 1305 1307 1309 1310 1312 1313 1319 1325 1329 1330 1332 1334 1340 1344 1348 1352 1358 1364 1368 1372 1376 1382 1384 1385 1387 1389 1395 1399 1403 1407 1413 1417 1421 1425 1431 1433 1434 1436 1438 1441 1442 1446 1447 1449 1451 1453 1455 1458 1460 1462 1464 1466 1470 1476 1482 1483 1489 1490 1494 1500 1502 1508 1514 1515 1521 1522 1526 1527 1528 1529 1530 1531 1532 1534 1536 1538 1540 1542 1544 1546 1550 1552 1554 1556 1558 1562 1564 1566 1568 1570 1574 1580 1582 1588 1594 1595 1601 1602 1606 1608 1614 1620 1621 1627 1628 1632 1633 1634 1635 1636 1637 1638 1639 1644 1645 1649 1650 1657 1658 1663 1664 1668 1669 1676 1677 1682 1683 1687 1688 1695 1696 1701 1702 1706 1707 1714 1715 1720 1721 1725 1726 1733", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-15 -9 -6 -14 -8 -5 -13 -7 -4 -15 -9 -6 -14 -8 -5 -15 -9 -6 -14 -8 -5 -13 -7 -4 -15 -9 -6 -14 -8 -5 16 2 30 -34 -12 32 -3 34 16 17 1 33 35 36 37 38 -25 39 31 40 19 20 30 42 -34 -31 32 34 44 45 36 37 46 -25 -22 -11 49 -2 51 19 5 4 50 52 53 54 48 55 47 56 57 43 58 41 59 15 17 0 1 2 61 -35 15 17 0 1 2 16 0 33 35 63 64 65 -26 66 62 67 18 20 3 4 5 61 69 -35 -32 44 45 63 64 71 -26 -23 18 20 3 4 5 19 3 50 52 74 75 73 76 72 77 78 70 79 68 80 15 17 0 1 2 82 -36 15 17 0 1 2 15 16 33 35 84 85 86 -27 87 83 88 18 20 3 4 5 82 90 -36 -33 44 45 84 85 92 -27 -24 18 20 3 4 5 18 19 50 52 95 96 94 97 93 98 99 91 100 89 101 -18 103 32 64 34 103 32 36 30 37 34 103 32 84 82 85 106 107 37 85 108 105 109 110 85 30 61 82 54 75 96 34 103 32 63 61 64 61 82 75 96 30 82 54 96 30 61 54 75 106 113 107 114 115 116 -17 118 51 49 42 53 54 118 51 49 69 74 75 118 51 49 90 95 96 61 82 75 96 30 82 54 96 30 61 54 75 119 120 121 122 123 124 117 125 126 112 127 128 114 36 63 84 54 75 96 63 84 75 96 36 84 54 96 36 63 54 75 106 113 107 131 132 133 63 84 75 96 36 84 54 96 36 63 54 75 119 120 121 135 136 137 134 138 139 130 140 141 131 111 129 142 37 113 107 64 85 145 144 146 147 85 128 115 141 132 148 149 150 110 37 147 64 128 116 141 133 152 153 154 155 143 151 156 36 63 84 41 68 89 37 64 85 158 59 80 101 37 64 85 160 104 157 159 161 143 151 156 30 61 82 34 103 143 151 156 37 64 85 41 68 89 36 63 84 166 59 80 101 36 63 84 168 164 165 167 169 60 81 102 162 163 170 -19 -20 -21 22 8 180 -28 -10 182 -1 184 22 23 7 183 185 186 187 177 188 189 181 190 42 180 -31 -28 49 51 193 194 53 54 48 195 182 184 197 198 186 187 177 199 196 200 201 192 202 25 26 180 204 -28 -34 182 184 206 207 186 187 177 208 -25 -12 211 -3 213 25 11 10 212 214 215 216 210 217 209 218 219 205 220 191 203 221 21 23 6 7 8 223 -29 21 23 6 7 8 22 6 183 185 225 226 178 227 228 224 229 69 223 -32 -29 193 194 74 75 73 232 197 198 225 226 178 234 233 235 236 231 237 24 26 9 10 11 223 239 -29 -35 206 207 225 226 178 241 -26 24 26 9 10 11 25 9 212 214 244 245 243 246 242 247 248 240 249 230 238 250 21 23 6 7 8 252 -30 21 23 6 7 8 21 22 183 185 254 255 179 256 257 253 258 90 252 -33 -30 193 194 95 96 94 261 197 198 254 255 179 263 262 264 265 260 266 24 26 9 10 11 252 268 -30 -36 206 207 254 255 179 270 -27 24 26 9 10 11 24 25 212 214 273 274 272 275 271 276 277 269 278 259 267 279 -16 281 182 226 184 281 182 186 180 187 184 281 182 254 252 255 284 285 187 255 286 283 287 288 255 53 74 95 187 226 255 74 95 226 255 53 95 187 255 53 74 187 226 119 120 121 291 292 293 184 281 182 225 223 226 74 95 226 255 53 95 187 255 53 74 187 226 284 295 285 296 297 298 294 299 300 290 301 302 296 42 69 90 187 226 255 69 90 226 255 42 90 187 255 42 69 187 226 119 120 121 305 306 307 69 90 226 255 42 90 187 255 42 69 187 226 284 295 285 309 310 311 308 312 313 304 314 315 309 180 223 252 216 245 274 223 252 245 274 180 252 216 274 180 223 216 245 284 295 285 318 319 320 -18 322 213 211 204 215 216 322 213 211 239 244 245 322 213 211 268 273 274 223 252 245 274 180 252 216 274 180 223 216 245 323 324 325 326 327 328 321 329 330 317 331 332 318 186 225 254 216 245 274 225 254 245 274 186 254 216 274 186 225 216 245 284 295 285 335 336 337 225 254 245 274 186 254 216 274 186 225 216 245 323 324 325 339 340 341 338 342 343 334 344 345 335 289 303 316 333 346 187 295 285 226 255 349 348 350 351 255 302 297 315 310 332 319 345 336 352 353 354 355 356 288 187 351 226 302 298 315 311 332 320 345 337 358 359 360 361 362 363 347 357 364 186 225 254 191 230 259 187 226 255 366 203 238 267 187 226 255 368 221 250 279 187 226 255 370 282 365 367 369 371 347 357 364 180 223 252 184 281 347 357 364 187 226 255 191 230 259 186 225 254 376 203 238 267 186 225 254 378 221 250 279 186 225 254 380 374 375 377 379 381 222 251 280 372 373 382 59 203 80 238 101 267 128 122 141 135 302 291 315 305 392 393 394 395 128 123 141 136 302 292 315 306 397 398 399 400 128 124 141 137 302 293 315 307 402 403 404 405 396 401 406 42 69 90 118 49 396 401 406 53 74 95 59 80 101 54 75 96 410 203 238 267 54 75 96 412 408 409 411 413 118 51 396 401 406 54 75 96 59 80 101 53 74 95 417 203 238 267 53 74 95 419 415 416 418 420 389 390 391 407 414 421 -22 -23 -24 28 14 431 -31 -11 433 -2 435 28 29 13 434 436 437 438 428 439 440 432 441 204 431 -34 -31 211 213 444 445 215 216 210 446 433 435 448 449 437 438 428 450 447 451 452 443 453 442 454 27 29 12 13 14 456 -32 27 29 12 13 14 28 12 434 436 458 459 429 460 461 457 462 239 456 -35 -32 444 445 244 245 243 465 448 449 458 459 429 467 466 468 469 464 470 463 471 27 29 12 13 14 473 -33 27 29 12 13 14 27 28 434 436 475 476 430 477 478 474 479 268 473 -36 -33 444 445 273 274 272 482 448 449 475 476 430 484 483 485 486 481 487 480 488 -17 490 433 459 435 490 433 437 431 438 435 490 433 475 473 476 493 494 438 476 495 492 496 497 476 215 244 273 438 459 476 244 273 459 476 215 273 438 476 215 244 438 459 323 324 325 500 501 502 435 490 433 458 456 459 244 273 459 476 215 273 438 476 215 244 438 459 493 504 494 505 506 507 503 508 509 499 510 511 505 204 239 268 438 459 476 239 268 459 476 204 268 438 476 204 239 438 459 323 324 325 514 515 516 239 268 459 476 204 268 438 476 204 239 438 459 493 504 494 518 519 520 517 521 522 513 523 524 518 498 512 525 438 504 494 459 476 528 527 529 530 476 511 506 524 519 531 532 533 497 438 530 459 511 507 524 520 535 536 537 538 526 534 539 437 458 475 442 463 480 438 459 476 541 454 471 488 438 459 476 543 491 540 542 544 526 534 539 431 456 473 435 490 526 534 539 438 459 476 442 463 480 437 458 475 549 454 471 488 437 458 475 551 547 548 550 552 455 472 489 545 546 553 221 454 250 471 279 488 332 326 345 339 511 500 524 514 563 564 565 566 332 327 345 340 511 501 524 515 568 569 570 571 332 328 345 341 511 502 524 516 573 574 575 576 567 572 577 204 239 268 322 211 567 572 577 215 244 273 221 250 279 216 245 274 581 454 471 488 216 245 274 583 579 580 582 584 322 213 567 572 577 216 245 274 221 250 279 215 244 273 588 454 471 488 215 244 273 590 586 587 589 591 560 561 562 578 585 592 -25 16 17 34 103 2 -26 17 34 103 2 -27 16 17 34 103 32 1 2 177 22 23 184 281 8 178 23 184 281 8 179 22 23 184 281 182 7 8 48 19 20 118 51 5 73 20 118 51 5 94 19 20 118 51 49 4 5 428 28 29 435 490 14 429 29 435 490 14 430 28 29 435 490 433 13 14 210 25 26 322 213 11 243 26 322 213 11 272 25 26 322 213 211 10 11", dtype=np.int64, sep=" "),
@@ -10931,8 +10931,6 @@ _N, _NP, _NG = 60, 66, 5
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 60
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 27 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 30 31 31 31 31 32 33 33 33 34 35 35 35 35 35 36 37 37 37 37 38 39 39 39 40 41 41 41 41 41 42 43 43 43 43 44 45 45 45 46 47 47 47 47 47 48 49 49 49 49 50 51 51 51 52 53 53 53 53 53 54 55 55 55 55 56 57 57 57 58 59 59 59 59 59", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 5 12 16 17 30 33 35 42 45 47 1 3 5 13 16 17 31 32 33 35 43 44 45 47 2 3 5 14 16 17 31 33 34 35 43 45 46 47 0 1 2 3 4 5 12 13 14 15 16 17 30 31 32 33 34 35 42 43 44 45 46 47 3 4 5 15 16 17 31 33 35 43 45 47 0 1 2 3 4 5 12 13 14 15 16 17 30 31 32 33 34 35 42 43 44 45 46 47 6 9 11 12 16 17 24 28 29 36 39 41 42 45 47 54 57 59 7 9 11 13 16 17 25 28 29 37 38 39 41 43 44 45 47 55 56 57 59 8 9 11 14 16 17 26 28 29 37 39 40 41 43 45 46 47 55 57 58 59 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 36 37 38 39 40 41 42 43 44 45 46 47 54 55 56 57 58 59 9 10 11 15 16 17 27 28 29 37 39 41 43 45 47 55 57 59 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 36 37 38 39 40 41 42 43 44 45 46 47 54 55 56 57 58 59 0 3 5 6 9 11 12 16 17 30 33 35 36 39 41 42 45 47 1 3 5 7 9 11 13 16 17 31 32 33 35 37 38 39 41 43 44 45 47 2 3 5 8 9 11 14 16 17 31 33 34 35 37 39 40 41 43 45 46 47 3 4 5 9 10 11 15 16 17 31 33 35 37 39 41 43 45 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 18 21 23 24 28 29 48 51 53 54 57 59 19 21 23 25 28 29 49 50 51 53 55 56 57 59 20 21 23 26 28 29 49 51 52 53 55 57 58 59 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 54 55 56 57 58 59 21 22 23 27 28 29 49 51 53 55 57 59 18 19 20 21 22 23 24 25 26 27 28 29 48 49 50 51 52 53 54 55 56 57 58 59 6 9 11 18 21 23 24 28 29 36 39 41 48 51 53 54 57 59 7 9 11 19 21 23 25 28 29 37 38 39 41 49 50 51 53 55 56 57 59 8 9 11 20 21 23 26 28 29 37 39 40 41 49 51 52 53 55 57 58 59 9 10 11 21 22 23 27 28 29 37 39 41 49 51 53 55 57 59 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 36 37 38 39 40 41 48 49 50 51 52 53 54 55 56 57 58 59 6 7 8 9 10 11 18 19 20 21 22 23 24 25 26 27 28 29 36 37 38 39 40 41 48 49 50 51 52 53 54 55 56 57 58 59 0 3 4 33 35 1 3 4 35 2 3 4 5 33 35 6 9 10 39 41 7 9 10 41 8 9 10 11 39 41 12 15 16 45 47 13 15 16 47 14 15 16 17 45 47 18 21 22 51 53 19 21 22 53 20 21 22 23 51 53 24 27 28 57 59 25 27 28 59 26 27 28 29 57 59", dtype=np.int64, sep=" ")
 

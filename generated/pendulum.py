@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "pendulum"
 MODEL_FILE = "pendulum.yaml"
-MODEL_HASH = "f4f4094db3b1e99b00ec0ab7e2160f13"
+MODEL_HASH = "4f455f02934c92fb575f8e5cfca0f3e3"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 4.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13", sys.modules[__name__])
-__name__ = "_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13"
+    sys.modules.setdefault("_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3", sys.modules[__name__])
+__name__ = "_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3"
 
 STATE_NAMES = ("rod.m.px", "rod.m.py", "rod.m.pz", "rod.J.px", "rod.J.py", "rod.J.pz", "rod.x", "rod.ax", "rod.y", "rod.ay", "rod.z", "rod.az", )
 PARAM_NAMES = ("hinge__stiffness", "hinge__damping", "hinge__rot_stiffness", "hinge__rot_damping", "hinge__tx_load", "hinge__ty_load", "hinge__tz_load", "hinge__ry_load", "hinge__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9"
+_KERNEL_PREFIX = "_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -120,55 +120,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape_ptr = external constant [83 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape_ptr = external constant [83 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape_src = external constant [209 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape_src = external constant [209 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_row = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_row = external constant [74 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_col = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_col = external constant [74 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_zero = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_zero = external constant [74 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_k = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_k = external constant [74 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_i = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_i = external constant [74 x i64]
 
-@_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_j = external constant [74 x i64]
+@_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_j = external constant [74 x i64]
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 1275
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -227,7 +227,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -258,7 +258,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -316,83 +316,83 @@ ends:
 }
 
 
-define internal void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 82
   %v2 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 291
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 7872, i1 false)
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_tape_src, i64 0, i64 0))
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape(double* %v2, double* %v1, i64 0, i64 82, i64 12, i64* getelementptr inbounds ([83 x i64], [83 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([209 x i64], [209 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_scatter(double* %J, double* %v1, i64 74, i64 12, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 291
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_col, i64 0, i64 0))
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_scatter(double* %J, double* %v1, i64 74, i64 0, i64 12, i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([74 x i64], [74 x i64]* @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 10296)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 656)
   %w = bitcast i8* %raw to double*
@@ -408,7 +408,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 6
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -416,15 +416,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -439,33 +439,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -894,7 +894,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1705,7 +1705,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -2153,7 +2153,7 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -2165,14 +2165,14 @@ entry:
   ret void
 }
 
-define void @_bgc_pendulum_f4f4094db3b1e99b00ec0ab7e2160f13_df0721dda9f9_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_pendulum_4f455f02934c92fb575f8e5cfca0f3e3_ada463cb208e_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 14 16 19 20 21 23 24 25 26 31 37 39 40 42 44 45 48 50 56 58 59 61 66 68 71 76 82 84 85 87 88 90 91 97 103 107 108 110 112 114 115 121 125 126 128 130 132 134 140 146 152 154 157 159 165 171 172 175 181 182 184 185 186 187 188 189 190 191 196 197 201 202 209", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-9 -4 -3 -9 -4 -3 -6 -7 -8 3 5 0 1 2 3 4 9 10 -10 -2 -5 12 13 -1 15 15 3 5 0 1 2 14 16 17 18 9 10 19 6 20 11 21 4 2 1 23 24 -11 4 5 14 16 17 26 23 24 27 7 28 25 29 3 5 0 1 2 4 0 31 32 -12 3 5 0 1 2 14 16 17 34 31 32 35 8 36 33 37 38 12 13 34 15 12 13 18 9 10 15 12 13 26 23 24 42 43 18 26 44 41 45 46 26 46 18 18 15 12 13 34 31 32 43 50 26 34 51 49 52 53 34 48 54 53 26 55 47 56 18 26 34 22 30 38 9 23 31 22 30 38 10 24 32 58 59 40 57 60 15 13 55 47 56 9 23 31 22 30 38 18 26 34 64 62 63 65 55 47 56 10 24 32 64 67 68 22 30 39 61 66 69 6 4 5 15 12 2 7 5 15 12 2 8 4 5 15 12 13 1 2", dtype=np.int64, sep=" "),
@@ -2191,8 +2191,6 @@ _N, _NP, _NG = 12, 9, 1
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 12
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 4 5 6 7 9 11 1 3 4 5 8 9 11 2 3 4 5 7 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" ")
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "rc_table"
 MODEL_FILE = "rc_table.yaml"
-MODEL_HASH = "3dc6ac781eb88f3c3cd07f3a905373c5"
+MODEL_HASH = "9bbafef844f9bdfee79f64ab7ed6f9c9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 0.03, "rtol": 1e-06, "atol": 1e-08, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5", sys.modules[__name__])
-__name__ = "_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5"
+    sys.modules.setdefault("_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9", sys.modules[__name__])
+__name__ = "_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9"
 
 STATE_NAMES = ("cap.q", )
 PARAM_NAMES = ("R", "C", )
@@ -107,7 +107,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef"
+_KERNEL_PREFIX = "_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0"
 KERNEL_FUNCTIONS = 23
 _KERNEL_IR = """\
 declare i8* @malloc(i64)
@@ -116,74 +116,74 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_t0 = internal constant [3 x double] [double 0x0000000000000000, double 0x3F847AE147AE147B, double 0x3F9EB851EB851EB8]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_y0 = internal constant [3 x double] [double 0x0000000000000000, double 0x4014000000000000, double 0x4014000000000000]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape_ptr = external constant [5 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape_ptr = external constant [5 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape_src = external constant [4 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape_src = external constant [4 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_row = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_row = external constant [1 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_col = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_col = external constant [1 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_zero = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_zero = external constant [1 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_k = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_k = external constant [1 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_i = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_i = external constant [1 x i64]
 
-@_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_j = external constant [1 x i64]
+@_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_j = external constant [1 x i64]
 
-define internal void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tables(double %t, double* %w) nounwind {
+define internal void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tables(double %t, double* %w) nounwind {
 entry:
-  %v5 = call double @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_y0, i64 0, i64 0), i64 3, i1 false)
+  %v5 = call double @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_y0, i64 0, i64 0), i64 3, i1 false)
   %p5 = getelementptr inbounds double, double* %w, i64 5
   store double %v5, double* %p5, align 8
-  %v6 = call double @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_table_y0, i64 0, i64 0), i64 3, i1 true)
+  %v6 = call double @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_interp(double %t, double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_t0, i64 0, i64 0), double* getelementptr inbounds ([3 x double], [3 x double]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_table_y0, i64 0, i64 0), i64 3, i1 true)
   %p6 = getelementptr inbounds double, double* %w, i64 6
   store double %v6, double* %p6, align 8
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tables(double %t, double* %w)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tables(double %t, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 15
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tables(double %t, double* %w)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tables(double %t, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tables(double %t, double* %w)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tables(double %t, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tables(double %t, double* %w)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tables(double %t, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -242,7 +242,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -273,7 +273,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -331,83 +331,83 @@ ends:
 }
 
 
-define internal void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 7
   %v2 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 11
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 32, i1 false)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_tape_src, i64 0, i64 0))
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape(double* %v2, double* %v1, i64 0, i64 4, i64 1, i64* getelementptr inbounds ([5 x i64], [5 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([4 x i64], [4 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 8, i1 false)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_scatter(double* %J, double* %v1, i64 1, i64 1, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 11
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_col, i64 0, i64 0))
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_scatter(double* %J, double* %v1, i64 1, i64 0, i64 1, i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([1 x i64], [1 x i64]* @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 128)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 128)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 56)
   %w = bitcast i8* %raw to double*
@@ -423,7 +423,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 2
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -431,15 +431,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare i8* @malloc(i64)
@@ -448,33 +448,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -503,7 +503,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 0
   %v2 = load double, double* %v1, align 8
@@ -531,7 +531,7 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 5
   %v2 = load double, double* %v1, align 8
@@ -551,19 +551,19 @@ entry:
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 
-define void @_bgc_rc_table_3dc6ac781eb88f3c3cd07f3a905373c5_b7f9c43d68ef_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_rc_table_9bbafef844f9bdfee79f64ab7ed6f9c9_4cbf1ab322a0_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-1 0 1 2", dtype=np.int64, sep=" "),
@@ -582,8 +582,6 @@ _N, _NP, _NG = 1, 2, 0
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 1
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0", dtype=np.int64, sep=" ")
 

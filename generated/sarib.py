@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "sarib"
 MODEL_FILE = "sarib.yaml"
-MODEL_HASH = "b733328dfe92f6eb4a84ff89ed9a4899"
+MODEL_HASH = "780955a0cca84f79ea03ad8e77ee4340"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 28.0, "rtol": 1e-05, "atol": 1e-05, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899", sys.modules[__name__])
-__name__ = "_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899"
+    sys.modules.setdefault("_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340", sys.modules[__name__])
+__name__ = "_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "leg_1.beater.m.px", "leg_1.beater.m.py", "leg_1.beater.m.pz", "leg_1.beater.J.px", "leg_1.beater.J.py", "leg_1.beater.J.pz", "leg_1.bar.m.px", "leg_1.bar.m.py", "leg_1.bar.m.pz", "leg_1.bar.J.px", "leg_1.bar.J.py", "leg_1.bar.J.pz", "leg_2.beater.m.px", "leg_2.beater.m.py", "leg_2.beater.m.pz", "leg_2.beater.J.px", "leg_2.beater.J.py", "leg_2.beater.J.pz", "leg_2.bar.m.px", "leg_2.bar.m.py", "leg_2.bar.m.pz", "leg_2.bar.J.px", "leg_2.bar.J.py", "leg_2.bar.J.pz", "leg_3.beater.m.px", "leg_3.beater.m.py", "leg_3.beater.m.pz", "leg_3.beater.J.px", "leg_3.beater.J.py", "leg_3.beater.J.pz", "leg_3.bar.m.px", "leg_3.bar.m.py", "leg_3.bar.m.pz", "leg_3.bar.J.px", "leg_3.bar.J.py", "leg_3.bar.J.pz", "leg_4.beater.m.px", "leg_4.beater.m.py", "leg_4.beater.m.pz", "leg_4.beater.J.px", "leg_4.beater.J.py", "leg_4.beater.J.pz", "leg_4.bar.m.px", "leg_4.bar.m.py", "leg_4.bar.m.pz", "leg_4.bar.J.px", "leg_4.bar.J.py", "leg_4.bar.J.pz", "attach_pumping.tx.spring.q", "membrane_roll.rx.spring.q", "membrane_pitch.rx.spring.q", "membrane_pumping.tx.spring.q", "leg_1.hinge.rx.spring.q", "leg_2.hinge.rx.spring.q", "leg_3.hinge.rx.spring.q", "leg_4.hinge.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "attach_int_1.x", "attach_int_1.ax", "attach_int_1.y", "attach_int_1.ay", "attach_int_1.z", "attach_int_1.az", "attach_int_2.x", "attach_int_2.ax", "attach_int_2.y", "attach_int_2.ay", "attach_int_2.z", "attach_int_2.az", "membrane_int_1.x", "membrane_int_1.ax", "membrane_int_1.y", "membrane_int_1.ay", "membrane_int_1.z", "membrane_int_1.az", "membrane_int_2.x", "membrane_int_2.ax", "membrane_int_2.y", "membrane_int_2.ay", "membrane_int_2.z", "membrane_int_2.az", "leg_1.beater.x", "leg_1.beater.ax", "leg_1.beater.y", "leg_1.beater.ay", "leg_1.beater.z", "leg_1.beater.az", "leg_1.bar.x", "leg_1.bar.ax", "leg_1.bar.y", "leg_1.bar.ay", "leg_1.bar.z", "leg_1.bar.az", "leg_2.beater.x", "leg_2.beater.ax", "leg_2.beater.y", "leg_2.beater.ay", "leg_2.beater.z", "leg_2.beater.az", "leg_2.bar.x", "leg_2.bar.ax", "leg_2.bar.y", "leg_2.bar.ay", "leg_2.bar.z", "leg_2.bar.az", "leg_3.beater.x", "leg_3.beater.ax", "leg_3.beater.y", "leg_3.beater.ay", "leg_3.beater.z", "leg_3.beater.az", "leg_3.bar.x", "leg_3.bar.ax", "leg_3.bar.y", "leg_3.bar.ay", "leg_3.bar.z", "leg_3.bar.az", "leg_4.beater.x", "leg_4.beater.ax", "leg_4.beater.y", "leg_4.beater.ay", "leg_4.beater.z", "leg_4.beater.az", "leg_4.bar.x", "leg_4.bar.ax", "leg_4.bar.y", "leg_4.bar.ay", "leg_4.bar.z", "leg_4.bar.az", )
 PARAM_NAMES = ("beater_mass", "leg_1.k_hinge", "leg_1.c_hinge", "leg_2.k_hinge", "leg_2.c_hinge", "leg_3.k_hinge", "leg_3.c_hinge", "leg_4.k_hinge", "leg_4.c_hinge", "attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_roll__stiffness", "attach_roll__damping", "attach_roll__rot_stiffness", "attach_roll__rot_damping", "attach_roll__tx_load", "attach_roll__ty_load", "attach_roll__tz_load", "attach_roll__ry_load", "attach_roll__rz_load", "attach_roll__rx_k", "attach_roll__rx_c", "attach_roll__rx_preload", "attach_pitch__stiffness", "attach_pitch__damping", "attach_pitch__rot_stiffness", "attach_pitch__rot_damping", "attach_pitch__tx_load", "attach_pitch__ty_load", "attach_pitch__tz_load", "attach_pitch__ry_load", "attach_pitch__rz_load", "attach_pitch__rx_k", "attach_pitch__rx_c", "attach_pitch__rx_preload", "membrane_roll__stiffness", "membrane_roll__damping", "membrane_roll__rot_stiffness", "membrane_roll__rot_damping", "membrane_roll__tx_load", "membrane_roll__ty_load", "membrane_roll__tz_load", "membrane_roll__ry_load", "membrane_roll__rz_load", "membrane_roll__rx_k", "membrane_roll__rx_c", "membrane_roll__rx_preload", "membrane_pitch__stiffness", "membrane_pitch__damping", "membrane_pitch__rot_stiffness", "membrane_pitch__rot_damping", "membrane_pitch__tx_load", "membrane_pitch__ty_load", "membrane_pitch__tz_load", "membrane_pitch__ry_load", "membrane_pitch__rz_load", "membrane_pitch__rx_k", "membrane_pitch__rx_c", "membrane_pitch__rx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "leg_1.hinge__stiffness", "leg_1.hinge__damping", "leg_1.hinge__rot_stiffness", "leg_1.hinge__rot_damping", "leg_1.hinge__tx_load", "leg_1.hinge__ty_load", "leg_1.hinge__tz_load", "leg_1.hinge__ry_load", "leg_1.hinge__rz_load", "leg_1.bar_bottom__stiffness", "leg_1.bar_bottom__damping", "leg_1.bar_bottom__rot_stiffness", "leg_1.bar_bottom__rot_damping", "leg_1.bar_bottom__tx_load", "leg_1.bar_bottom__ty_load", "leg_1.bar_bottom__tz_load", "leg_1.bar_top__stiffness", "leg_1.bar_top__damping", "leg_1.bar_top__rot_stiffness", "leg_1.bar_top__rot_damping", "leg_1.bar_top__tx_load", "leg_1.bar_top__ty_load", "leg_1.bar_top__tz_load", "leg_2.hinge__stiffness", "leg_2.hinge__damping", "leg_2.hinge__rot_stiffness", "leg_2.hinge__rot_damping", "leg_2.hinge__tx_load", "leg_2.hinge__ty_load", "leg_2.hinge__tz_load", "leg_2.hinge__ry_load", "leg_2.hinge__rz_load", "leg_2.bar_bottom__stiffness", "leg_2.bar_bottom__damping", "leg_2.bar_bottom__rot_stiffness", "leg_2.bar_bottom__rot_damping", "leg_2.bar_bottom__tx_load", "leg_2.bar_bottom__ty_load", "leg_2.bar_bottom__tz_load", "leg_2.bar_top__stiffness", "leg_2.bar_top__damping", "leg_2.bar_top__rot_stiffness", "leg_2.bar_top__rot_damping", "leg_2.bar_top__tx_load", "leg_2.bar_top__ty_load", "leg_2.bar_top__tz_load", "leg_3.hinge__stiffness", "leg_3.hinge__damping", "leg_3.hinge__rot_stiffness", "leg_3.hinge__rot_damping", "leg_3.hinge__tx_load", "leg_3.hinge__ty_load", "leg_3.hinge__tz_load", "leg_3.hinge__ry_load", "leg_3.hinge__rz_load", "leg_3.bar_bottom__stiffness", "leg_3.bar_bottom__damping", "leg_3.bar_bottom__rot_stiffness", "leg_3.bar_bottom__rot_damping", "leg_3.bar_bottom__tx_load", "leg_3.bar_bottom__ty_load", "leg_3.bar_bottom__tz_load", "leg_3.bar_top__stiffness", "leg_3.bar_top__damping", "leg_3.bar_top__rot_stiffness", "leg_3.bar_top__rot_damping", "leg_3.bar_top__tx_load", "leg_3.bar_top__ty_load", "leg_3.bar_top__tz_load", "leg_4.hinge__stiffness", "leg_4.hinge__damping", "leg_4.hinge__rot_stiffness", "leg_4.hinge__rot_damping", "leg_4.hinge__tx_load", "leg_4.hinge__ty_load", "leg_4.hinge__tz_load", "leg_4.hinge__ry_load", "leg_4.hinge__rz_load", "leg_4.bar_bottom__stiffness", "leg_4.bar_bottom__damping", "leg_4.bar_bottom__rot_stiffness", "leg_4.bar_bottom__rot_damping", "leg_4.bar_bottom__tx_load", "leg_4.bar_bottom__ty_load", "leg_4.bar_bottom__tz_load", "leg_4.bar_top__stiffness", "leg_4.bar_top__damping", "leg_4.bar_top__rot_stiffness", "leg_4.bar_top__rot_damping", "leg_4.bar_top__tx_load", "leg_4.bar_top__ty_load", "leg_4.bar_top__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", "excitation__roll", "excitation__pitch", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b"
+_KERNEL_PREFIX = "_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f"
 KERNEL_FUNCTIONS = 61
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -125,27 +125,27 @@ declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr = external constant [1843 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr = external constant [1843 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src = external constant [5394 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src = external constant [5394 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_row = external constant [3218 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_col = external constant [3218 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_zero = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_zero = external constant [3218 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_k = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_k = external constant [3218 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_i = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_i = external constant [3218 x i64]
 
-@_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_j = external constant [3218 x i64]
+@_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_j = external constant [3218 x i64]
 
 ; Solve A X = B in place (B: n x m, row-major) by LU with partial pivoting, as the numba
 ; code before it: A is copied to LU; a pivot not above 1e-13 of the largest |A| (or a
 ; NaN in A) is a singular configuration and fills X with NaN, which stops the run where
 ; the simulator reports it.
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU) nounwind {
 entry:
   %k.v = alloca i64
   %i.v = alloca i64
@@ -424,130 +424,130 @@ done:
 }
 
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 18, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 18, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 2, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble) nounwind {
 entry:
   br label %sparse
 sparse:
   br label %dense
 dense:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 13, i64 %m, double* %A, double* %X, double* %LU)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 13, i64 %m, double* %A, double* %X, double* %LU)
   br label %done
 done:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_6(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_7(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_8(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_9(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_10(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_11(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_5(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_6(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_7(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_8(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_9(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_10(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_11(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_12(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_13(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_14(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_15(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_16(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_17(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_18(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_3(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_4(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -606,7 +606,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -637,7 +637,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -695,15 +695,15 @@ ends:
 }
 
 
-define internal void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 3483
   %v2 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 8877
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 1473600, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 0, i64 467, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 0, i64 467, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   %v5 = getelementptr inbounds double, double* %w, i64 55577
   %v6 = bitcast double* %v5 to i8*
   %v7 = getelementptr inbounds double, double* %w, i64 53777
@@ -712,8 +712,8 @@ entry:
   %v9 = getelementptr inbounds double, double* %w, i64 55577
   %v10 = getelementptr inbounds double, double* %w, i64 2454
   %v11 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 100, double* %v10, double* %v10, double* %v10, double* %v9, double* %v11, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 485, i64 926, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 100, double* %v10, double* %v10, double* %v10, double* %v9, double* %v11, i1 false)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 485, i64 926, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   %v12 = getelementptr inbounds double, double* %w, i64 101477
   %v13 = bitcast double* %v12 to i8*
   %v14 = getelementptr inbounds double, double* %w, i64 101277
@@ -722,8 +722,8 @@ entry:
   %v16 = getelementptr inbounds double, double* %w, i64 101477
   %v17 = getelementptr inbounds double, double* %w, i64 3104
   %v18 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 100, double* %v17, double* %v17, double* %v17, double* %v16, double* %v18, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 928, i64 1036, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block1(i64 100, double* %v17, double* %v17, double* %v17, double* %v16, double* %v18, i1 false)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 928, i64 1036, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   %v19 = getelementptr inbounds double, double* %w, i64 112477
   %v20 = bitcast double* %v19 to i8*
   %v21 = getelementptr inbounds double, double* %w, i64 112277
@@ -732,8 +732,8 @@ entry:
   %v23 = getelementptr inbounds double, double* %w, i64 112477
   %v24 = getelementptr inbounds double, double* %w, i64 3114
   %v25 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 100, double* %v24, double* %v24, double* %v24, double* %v23, double* %v25, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1038, i64 1110, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block2(i64 100, double* %v24, double* %v24, double* %v24, double* %v23, double* %v25, i1 false)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 1038, i64 1110, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   %v26 = getelementptr inbounds double, double* %w, i64 119877
   %v27 = bitcast double* %v26 to i8*
   %v28 = getelementptr inbounds double, double* %w, i64 119677
@@ -742,8 +742,8 @@ entry:
   %v30 = getelementptr inbounds double, double* %w, i64 119877
   %v31 = getelementptr inbounds double, double* %w, i64 3124
   %v32 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 100, double* %v31, double* %v31, double* %v31, double* %v30, double* %v32, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1112, i64 1292, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block3(i64 100, double* %v31, double* %v31, double* %v31, double* %v30, double* %v32, i1 false)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 1112, i64 1292, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   %v33 = getelementptr inbounds double, double* %w, i64 138077
   %v34 = bitcast double* %v33 to i8*
   %v35 = getelementptr inbounds double, double* %w, i64 136777
@@ -752,76 +752,76 @@ entry:
   %v37 = getelementptr inbounds double, double* %w, i64 138077
   %v38 = getelementptr inbounds double, double* %w, i64 3145
   %v39 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 100, double* %v38, double* %v38, double* %v38, double* %v37, double* %v39, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape(double* %v2, double* %v1, i64 1305, i64 1842, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block4(i64 100, double* %v38, double* %v38, double* %v38, double* %v37, double* %v39, i1 false)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape(double* %v2, double* %v1, i64 1305, i64 1842, i64 100, i64* getelementptr inbounds ([1843 x i64], [1843 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([5394 x i64], [5394 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 184832, i1 false)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 152, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_scatter(double* %J, double* %v1, i64 3218, i64 152, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 8877
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_scatter(double* %J, double* %v1, i64 3218, i64 0, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_scatter(double* %J, double* %v1, i64 3218, i64 0, i64 100, i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([3218 x i64], [3218 x i64]* @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1544616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1544616)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 27864)
   %w = bitcast i8* %raw to double*
@@ -837,7 +837,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 8
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -845,81 +845,81 @@ exit:
   ret void
 }
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -936,45 +936,45 @@ declare void @llvm.memcpy.p0i8.p0i8.i64(i8*, i8*, i64, i1)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_lu(i64 %n, i64 %m, double* noalias %A, double* noalias %B, double* noalias %LU)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block1(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block2(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block3(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block4(i64 %m, double* noalias %A, double* noalias %K, double* noalias %F, double* noalias %X, double* noalias %LU, i1 %assemble)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 81
   %v2 = load double, double* %v1, align 8
@@ -2688,7 +2688,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
   %v2 = load double, double* %v1, align 8
@@ -4015,7 +4015,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 210
   %v2 = load double, double* %v1, align 8
@@ -5661,7 +5661,7 @@ entry:
   %v1425 = getelementptr inbounds double, double* %w, i64 2436
   %v1426 = getelementptr inbounds double, double* %w, i64 2454
   %v1427 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
   %v1428 = getelementptr inbounds double, double* %w, i64 309
   %v1429 = bitcast double* %v1428 to i8*
   %v1430 = getelementptr inbounds double, double* %w, i64 2436
@@ -5670,7 +5670,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 315
   %v2 = load double, double* %v1, align 8
@@ -7657,7 +7657,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 228
   %v2 = load double, double* %v1, align 8
@@ -8665,7 +8665,7 @@ entry:
   %v863 = getelementptr inbounds double, double* %w, i64 3102
   %v864 = getelementptr inbounds double, double* %w, i64 3104
   %v865 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 1, double* %v864, double* %v864, double* %v864, double* %v863, double* %v865, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block1(i64 1, double* %v864, double* %v864, double* %v864, double* %v863, double* %v865, i1 true)
   %v866 = getelementptr inbounds double, double* %w, i64 1242
   %v867 = bitcast double* %v866 to i8*
   %v868 = getelementptr inbounds double, double* %w, i64 3102
@@ -8674,7 +8674,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1241
   %v2 = load double, double* %v1, align 8
@@ -9485,7 +9485,7 @@ entry:
   %v699 = getelementptr inbounds double, double* %w, i64 3112
   %v700 = getelementptr inbounds double, double* %w, i64 3114
   %v701 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 1, double* %v700, double* %v700, double* %v700, double* %v699, double* %v701, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block2(i64 1, double* %v700, double* %v700, double* %v700, double* %v699, double* %v701, i1 true)
   %v702 = getelementptr inbounds double, double* %w, i64 1352
   %v703 = bitcast double* %v702 to i8*
   %v704 = getelementptr inbounds double, double* %w, i64 3112
@@ -9494,7 +9494,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1351
   %v2 = load double, double* %v1, align 8
@@ -10214,7 +10214,7 @@ entry:
   %v643 = getelementptr inbounds double, double* %w, i64 3122
   %v644 = getelementptr inbounds double, double* %w, i64 3124
   %v645 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 1, double* %v644, double* %v644, double* %v644, double* %v643, double* %v645, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block3(i64 1, double* %v644, double* %v644, double* %v644, double* %v643, double* %v645, i1 true)
   %v646 = getelementptr inbounds double, double* %w, i64 1427
   %v647 = bitcast double* %v646 to i8*
   %v648 = getelementptr inbounds double, double* %w, i64 3122
@@ -10223,7 +10223,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1426
   %v2 = load double, double* %v1, align 8
@@ -11766,7 +11766,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1521
   %v2 = load double, double* %v1, align 8
@@ -12914,7 +12914,7 @@ entry:
   %v1016 = getelementptr inbounds double, double* %w, i64 3132
   %v1017 = getelementptr inbounds double, double* %w, i64 3145
   %v1018 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 1, double* %v1017, double* %v1017, double* %v1017, double* %v1016, double* %v1018, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block4(i64 1, double* %v1017, double* %v1017, double* %v1017, double* %v1016, double* %v1018, i1 true)
   %v1019 = getelementptr inbounds double, double* %w, i64 1527
   %v1020 = bitcast double* %v1019 to i8*
   %v1021 = getelementptr inbounds double, double* %w, i64 3132
@@ -12923,7 +12923,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1230
   %v2 = load double, double* %v1, align 8
@@ -14849,7 +14849,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1106
   %v2 = load double, double* %v1, align 8
@@ -16581,7 +16581,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_rhs_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2308
   %v2 = load double, double* %v1, align 8
@@ -16958,7 +16958,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 81
   %v2 = load double, double* %v1, align 8
@@ -18672,7 +18672,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 212
   %v2 = load double, double* %v1, align 8
@@ -19999,7 +19999,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 210
   %v2 = load double, double* %v1, align 8
@@ -21645,7 +21645,7 @@ entry:
   %v1425 = getelementptr inbounds double, double* %w, i64 2436
   %v1426 = getelementptr inbounds double, double* %w, i64 2454
   %v1427 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 1, double* %v1426, double* %v1426, double* %v1426, double* %v1425, double* %v1427, i1 true)
   %v1428 = getelementptr inbounds double, double* %w, i64 309
   %v1429 = bitcast double* %v1428 to i8*
   %v1430 = getelementptr inbounds double, double* %w, i64 2436
@@ -21654,7 +21654,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 318
   %v2 = load double, double* %v1, align 8
@@ -23539,7 +23539,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1009
   %v2 = load double, double* %v1, align 8
@@ -25000,7 +25000,7 @@ entry:
   %v1232 = getelementptr inbounds double, double* %w, i64 3102
   %v1233 = getelementptr inbounds double, double* %w, i64 3104
   %v1234 = getelementptr inbounds double, double* %w, i64 3108
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block1(i64 1, double* %v1233, double* %v1233, double* %v1233, double* %v1232, double* %v1234, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block1(i64 1, double* %v1233, double* %v1233, double* %v1233, double* %v1232, double* %v1234, i1 true)
   %v1235 = getelementptr inbounds double, double* %w, i64 1242
   %v1236 = bitcast double* %v1235 to i8*
   %v1237 = getelementptr inbounds double, double* %w, i64 3102
@@ -25009,7 +25009,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_5(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 10
   %v2 = load double, double* %v1, align 8
@@ -25850,7 +25850,7 @@ entry:
   %v722 = getelementptr inbounds double, double* %w, i64 3112
   %v723 = getelementptr inbounds double, double* %w, i64 3114
   %v724 = getelementptr inbounds double, double* %w, i64 3118
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block2(i64 1, double* %v723, double* %v723, double* %v723, double* %v722, double* %v724, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block2(i64 1, double* %v723, double* %v723, double* %v723, double* %v722, double* %v724, i1 true)
   %v725 = getelementptr inbounds double, double* %w, i64 1352
   %v726 = bitcast double* %v725 to i8*
   %v727 = getelementptr inbounds double, double* %w, i64 3112
@@ -25859,7 +25859,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_6(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 10
   %v2 = load double, double* %v1, align 8
@@ -26611,7 +26611,7 @@ entry:
   %v668 = getelementptr inbounds double, double* %w, i64 3122
   %v669 = getelementptr inbounds double, double* %w, i64 3124
   %v670 = getelementptr inbounds double, double* %w, i64 3128
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block3(i64 1, double* %v669, double* %v669, double* %v669, double* %v668, double* %v670, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block3(i64 1, double* %v669, double* %v669, double* %v669, double* %v668, double* %v670, i1 true)
   %v671 = getelementptr inbounds double, double* %w, i64 1427
   %v672 = bitcast double* %v671 to i8*
   %v673 = getelementptr inbounds double, double* %w, i64 3122
@@ -26620,7 +26620,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_7(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 19
   %v2 = load double, double* %v1, align 8
@@ -28175,7 +28175,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_8(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1421
   %v2 = load double, double* %v1, align 8
@@ -29346,7 +29346,7 @@ entry:
   %v1032 = getelementptr inbounds double, double* %w, i64 3132
   %v1033 = getelementptr inbounds double, double* %w, i64 3145
   %v1034 = getelementptr inbounds double, double* %w, i64 3314
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block4(i64 1, double* %v1033, double* %v1033, double* %v1033, double* %v1032, double* %v1034, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block4(i64 1, double* %v1033, double* %v1033, double* %v1033, double* %v1032, double* %v1034, i1 true)
   %v1035 = getelementptr inbounds double, double* %w, i64 1527
   %v1036 = bitcast double* %v1035 to i8*
   %v1037 = getelementptr inbounds double, double* %w, i64 3132
@@ -29355,7 +29355,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_9(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1535
   %v2 = load double, double* %v1, align 8
@@ -31310,7 +31310,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_10(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 139
   %v2 = load double, double* %v1, align 8
@@ -33487,7 +33487,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_11(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 40
   %v2 = load double, double* %v1, align 8
@@ -36168,7 +36168,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_12(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 323
   %v2 = load double, double* %v1, align 8
@@ -38957,7 +38957,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_13(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 54
   %v2 = load double, double* %v1, align 8
@@ -41636,7 +41636,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_14(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1115
   %v2 = load double, double* %v1, align 8
@@ -44311,7 +44311,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_15(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 70
   %v2 = load double, double* %v1, align 8
@@ -46881,7 +46881,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_16(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %p, i64 22
   %v2 = load double, double* %v1, align 8
@@ -49660,7 +49660,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_17(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 1989
   %v2 = load double, double* %v1, align 8
@@ -52336,7 +52336,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_jac_18(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %out, i64 4944
   store double 0x3FF0000000000000, double* %v1, align 8
@@ -54300,7 +54300,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 69
   %v2 = load double, double* %v1, align 8
@@ -56061,7 +56061,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 170
   %v2 = load double, double* %v1, align 8
@@ -57324,7 +57324,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 289
   %v2 = load double, double* %v1, align 8
@@ -58910,7 +58910,7 @@ entry:
   %v1401 = getelementptr inbounds double, double* %w, i64 2436
   %v1402 = getelementptr inbounds double, double* %w, i64 2454
   %v1403 = getelementptr inbounds double, double* %w, i64 2778
-  call void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_block0(i64 1, double* %v1402, double* %v1402, double* %v1402, double* %v1401, double* %v1403, i1 true)
+  call void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_block0(i64 1, double* %v1402, double* %v1402, double* %v1402, double* %v1401, double* %v1403, i1 true)
   %v1404 = getelementptr inbounds double, double* %w, i64 309
   %v1405 = bitcast double* %v1404 to i8*
   %v1406 = getelementptr inbounds double, double* %w, i64 2436
@@ -58919,7 +58919,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_3(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 172
   %v2 = load double, double* %v1, align 8
@@ -60861,7 +60861,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_out_4(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 188
   %v2 = load double, double* %v1, align 8
@@ -61588,7 +61588,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 83
   %v2 = load double, double* %v1, align 8
@@ -61691,14 +61691,14 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_b733328dfe92f6eb4a84ff89ed9a4899_3cf84191e61b_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_780955a0cca84f79ea03ad8e77ee4340_f105186a482f_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 54 55 56 57 58 59 60 61 62 63 64 65 66 67 68 69 70 71 72 73 74 75 76 77 78 79 80 81 82 83 84 85 86 87 89 91 92 98 104 105 106 108 109 111 113 119 121 122 123 124 125 131 134 138 139 141 143 144 146 152 158 160 162 164 170 172 173 174 175 176 182 185 189 190 192 194 195 197 203 209 211 213 215 221 223 224 225 226 227 233 236 240 241 243 245 246 248 254 260 262 264 266 272 274 275 276 277 278 284 287 291 292 294 296 297 299 301 303 304 306 308 310 311 312 315 316 317 318 319 321 323 327 328 330 332 334 339 344 356 361 363 365 370 375 377 379 382 387 392 396 397 399 404 416 418 420 425 430 432 434 437 442 447 451 452 454 455 456 460 462 467 472 476 478 483 488 492 494 500 506 510 516 520 524 525 531 537 543 549 550 556 560 564 568 574 578 582 586 592 596 600 604 610 614 618 622 626 630 634 638 644 648 652 656 662 666 670 674 680 686 692 696 700 704 710 716 720 724 728 732 736 740 746 754 762 770 774 778 782 786 790 796 804 812 820 824 828 832 833 841 849 857 863 869 870 871 872 873 875 877 878 879 880 882 884 885 886 887 889 891 894 897 900 903 906 909 912 918 921 922 924 926 929 935 938 939 941 943 946 952 955 956 958 960 963 965 967 969 971 974 976 978 980 982 985 987 990 993 996 999 1002 1005 1011 1013 1014 1016 1018 1020 1022 1028 1030 1031 1033 1035 1037 1039 1045 1047 1048 1050 1052 1054 1056 1062 1068 1070 1071 1073 1075 1077 1079 1081 1083 1085 1091 1097 1099 1100 1102 1104 1106 1108 1110 1112 1114 1120 1126 1128 1129 1131 1133 1135 1137 1139 1141 1143 1145 1147 1149 1151 1153 1155 1161 1163 1164 1166 1168 1170 1172 1178 1180 1181 1183 1185 1187 1189 1195 1197 1198 1200 1202 1204 1206 1208 1210 1212 1221 1230 1239 1240 1241 1242 1243 1244 1245 1246 1247 1248 1254 1260 1266 1267 1268 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1269 1271 1272 1274 1276 1277 1279 1281 1282 1284 1290 1296 1302 1308 1314 1317 1318 1320 1326 1332 1335 1336 1338 1344 1350 1353 1354 1356 1362 1368 1374 1380 1382 1383 1385 1391 1393 1394 1396 1402 1404 1405 1407 1413 1419 1421 1427 1429 1430 1432 1438 1440 1441 1443 1449 1451 1452 1454 1456 1458 1460 1463 1468 1474 1480 1486 1488 1494 1497 1501 1502 1504 1506 1507 1509 1515 1521 1527 1529 1535 1538 1542 1543 1545 1547 1548 1550 1556 1562 1568 1570 1576 1579 1583 1584 1586 1588 1589 1591 1597 1603 1609 1611 1617 1620 1624 1625 1627 1629 1630 1632 1634 1636 1638 1641 1646 1651 1657 1663 1665 1670 1672 1676 1677 1679 1681 1682 1684 1689 1695 1701 1703 1708 1710 1714 1715 1717 1719 1720 1722 1727 1733 1739 1741 1746 1748 1752 1753 1755 1757 1758 1760 1765 1771 1777 1779 1784 1786 1790 1791 1793 1795 1796 1798 1800 1802 1804 1807 1812 1814 1816 1818 1820 1826 1827 1833 1839 1845 1847 1849 1851 1857 1859 1860 1861 1863 1865 1874 1880 1886 1892 1898 1904 1910 1916 1922 1924 1925 1927 1929 1935 1939 1943 1947 1953 1957 1961 1965 1971 1973 1974 1976 1978 1980 1982 1984 1990 1991 1997 2003 2009 2011 2013 2015 2021 2023 2024 2025 2027 2029 2038 2044 2050 2056 2062 2068 2074 2080 2086 2088 2089 2091 2093 2099 2103 2107 2111 2117 2121 2125 2129 2135 2137 2138 2140 2142 2144 2146 2148 2154 2155 2161 2167 2173 2175 2177 2179 2185 2187 2188 2189 2191 2193 2202 2208 2214 2220 2226 2232 2238 2244 2250 2252 2253 2255 2257 2263 2267 2271 2275 2281 2285 2289 2293 2299 2301 2302 2304 2306 2308 2310 2312 2318 2319 2325 2331 2337 2339 2341 2343 2349 2351 2352 2353 2355 2357 2366 2372 2378 2384 2390 2396 2402 2408 2414 2416 2417 2419 2421 2427 2431 2435 2439 2445 2449 2453 2457 2463 2465 2466 2468 2470 2472 2474 2476 2491 2493 2495 2497 2499 2501 2503 2505 2507 2509 2511 2513 2515 2517 2519 2521 2536 2538 2540 2542 2544 2546 2548 2550 2552 2554 2556 2558 2560 2562 2564 2566 2581 2587 2593 2599 2601 2607 2613 2615 2621 2627 2629 2635 2641 2643 2649 2650 2657 2659 2665 2671 2673 2679 2681 2687 2689 2695 2697 2703 2704 2711 2713 2719 2721 2723 2725 2727 2733 2734 2735 2736 2737 2738 2739 2742 2744 2746 2747 2749 2751 2753 2754 2755 2756 2757 2761 2763 2764 2765 2767 2768 2769 2771 2773 2774 2775 2775 2775 2777 2778 2780 2786 2790 2797 2798 2799 2800 2801 2803 2804 2810 2816 2817 2819 2821 2823 2825 2831 2833 2835 2836 2838 2844 2848 2855 2856 2857 2858 2859 2861 2862 2868 2874 2875 2877 2879 2881 2883 2889 2891 2893 2894 2896 2902 2906 2913 2914 2915 2916 2917 2919 2920 2926 2932 2933 2935 2937 2939 2941 2947 2949 2951 2952 2954 2960 2964 2971 2972 2973 2974 2975 2977 2978 2984 2990 2991 2993 2995 2997 2999 3005 3007 3009 3010 3012 3018 3021 3026 3031 3033 3035 3040 3045 3047 3048 3052 3054 3055 3056 3058 3059 3060 3062 3064 3065 3066 3066 3066 3068 3069 3071 3077 3081 3088 3094 3100 3101 3103 3109 3111 3113 3114 3116 3122 3126 3133 3139 3145 3146 3148 3154 3156 3158 3159 3161 3167 3171 3178 3184 3190 3191 3193 3199 3201 3203 3204 3206 3212 3216 3223 3229 3235 3236 3238 3244 3246 3248 3249 3251 3257 3260 3265 3270 3272 3274 3279 3284 3286 3287 3291 3293 3294 3295 3297 3298 3299 3301 3303 3304 3305 3305 3305 3307 3308 3310 3316 3319 3326 3332 3338 3339 3341 3347 3349 3351 3352 3354 3360 3363 3370 3376 3382 3383 3385 3391 3393 3395 3396 3398 3404 3407 3414 3420 3426 3427 3429 3435 3437 3439 3440 3442 3448 3451 3458 3464 3470 3471 3473 3479 3481 3483 3484 3486 3492 3494 3500 3504 3510 3514 3518 3519 3520 3521 3527 3531 3535 3539 3543 3547 3551 3557 3561 3565 3569 3573 3577 3581 3585 3589 3593 3597 3601 3607 3611 3615 3619 3623 3629 3635 3638 3641 3644 3647 3650 3653 3656 3659 3660 3662 3665 3667 3669 3672 3673 3675 3677 3679 3682 3683 3685 3687 3689 3694 3697 3700 3703 3709 3711 3712 3714 3716 3718 3720 3722 3724 3726 3731 3737 3739 3740 3742 3744 3746 3748 3750 3752 3754 3759 3765 3767 3768 3769 3771 3773 3775 3777 3779 3781 3787 3789 3790 3792 3794 3796 3798 3804 3806 3807 3809 3811 3813 3815 3821 3823 3824 3825 3827 3829 3831 3837 3840 3846 3852 3858 3859 3860 3861 3866 3870 3871 3872 3873 3873 3873 3873 3873 3873 3873 3873 3873 3873 3873 3873 3873 3873 3879 3885 3891 3897 3899 3900 3902 3908 3910 3911 3913 3919 3921 3922 3923 3925 3927 3929 3931 3933 3935 3941 3943 3945 3947 3949 3951 3953 3959 3961 3963 3965 3967 3969 3971 3977 3983 3989 3990 3996 4002 4004 4010 4016 4018 4024 4030 4032 4038 4044 4046 4052 4053 4061 4063 4069 4075 4076 4082 4084 4090 4092 4098 4100 4106 4108 4114 4115 4123 4129 4131 4133 4135 4137 4142 4143 4144 4145 4146 4147 4148 4153 4154 4155 4159 4161 4162 4164 4165 4171 4173 4175 4176 4178 4180 4185 4189 4191 4197 4199 4201 4202 4204 4206 4211 4215 4217 4223 4225 4227 4228 4230 4232 4234 4236 4238 4241 4243 4245 4247 4250 4252 4254 4256 4259 4265 4267 4273 4279 4280 4286 4287 4291 4293 4299 4305 4306 4312 4313 4317 4318 4319 4320 4321 4322 4323 4325 4327 4329 4331 4337 4338 4344 4345 4348 4350 4356 4362 4364 4370 4376 4378 4381 4382 4383 4385 4386 4387 4388 4389 4390 4391 4396 4397 4398 4402 4404 4405 4407 4408 4414 4416 4418 4419 4421 4423 4428 4432 4434 4440 4442 4444 4445 4447 4449 4454 4458 4460 4466 4468 4470 4471 4473 4475 4477 4479 4481 4484 4486 4488 4490 4493 4495 4497 4499 4502 4508 4510 4516 4522 4523 4529 4530 4534 4536 4542 4548 4549 4555 4556 4560 4561 4562 4563 4564 4565 4566 4568 4570 4572 4574 4580 4581 4587 4588 4591 4593 4599 4605 4607 4613 4619 4621 4624 4625 4626 4628 4629 4630 4631 4632 4633 4634 4639 4640 4641 4645 4647 4648 4650 4651 4657 4659 4661 4662 4664 4666 4671 4675 4677 4683 4685 4687 4688 4690 4692 4697 4701 4703 4709 4711 4713 4714 4716 4718 4720 4722 4724 4727 4729 4731 4733 4736 4738 4740 4742 4745 4751 4753 4759 4765 4766 4772 4773 4777 4779 4785 4791 4792 4798 4799 4803 4804 4805 4806 4807 4808 4809 4811 4813 4815 4817 4823 4824 4830 4831 4834 4836 4842 4848 4850 4856 4862 4864 4867 4868 4869 4871 4872 4873 4874 4875 4876 4877 4882 4883 4884 4888 4890 4891 4893 4894 4900 4902 4904 4905 4907 4909 4914 4918 4920 4926 4928 4930 4931 4933 4935 4940 4944 4946 4952 4954 4956 4957 4959 4961 4963 4965 4967 4970 4972 4974 4976 4979 4981 4983 4985 4988 4994 4996 5002 5008 5009 5015 5016 5020 5022 5028 5034 5035 5041 5042 5046 5047 5048 5049 5050 5051 5052 5054 5056 5058 5060 5066 5067 5073 5074 5077 5079 5085 5091 5093 5099 5105 5107 5110 5111 5112 5114 5115 5116 5117 5118 5119 5120 5121 5122 5123 5124 5125 5126 5127 5128 5129 5134 5135 5139 5140 5147 5148 5153 5154 5158 5159 5166 5167 5172 5173 5177 5178 5185 5186 5191 5192 5196 5197 5204 5205 5210 5211 5215 5216 5223 5224 5229 5230 5234 5235 5242 5243 5248 5249 5253 5254 5261 5262 5267 5268 5272 5273 5280 5281 5286 5287 5291 5292 5299 5300 5305 5306 5310 5311 5318 5319 5324 5325 5329 5330 5337 5338 5343 5344 5348 5349 5356 5357 5362 5363 5367 5368 5375 5376 5381 5382 5386 5387 5394", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-88 -89 -90 -91 -92 -93 -12 -10 -8 -59 -51 -47 -56 -48 -44 -61 -54 -50 -57 -49 -45 -62 -53 -49 -58 -50 -46 -63 -56 -52 -59 -51 -47 -29 -31 -33 -35 -37 -39 -9 -4 -3 -88 -89 -90 -91 -92 -93 -12 -10 -8 -59 -51 -47 -56 -48 -44 -61 -54 -50 -57 -49 -45 -62 -53 -49 -58 -50 -46 -63 -56 -52 -59 -51 -47 -29 -31 -33 -35 -37 -39 -9 -4 -3 -19 -20 -21 49 50 49 8 7 54 55 56 12 13 14 87 88 89 90 -22 -72 -6 -11 92 93 -5 95 93 95 92 94 96 97 87 88 89 98 84 -52 100 -40 102 54 55 56 12 13 14 55 12 13 101 103 104 105 -60 106 107 99 108 109 91 110 60 61 62 18 19 20 87 88 89 112 -22 -75 92 93 95 93 95 92 114 115 116 87 88 89 117 84 -53 119 -41 121 60 61 62 18 19 20 61 18 19 120 122 123 124 -63 125 126 118 127 128 113 129 66 67 68 24 25 26 87 88 89 131 -22 -78 92 93 95 93 95 92 133 134 135 87 88 89 136 84 -54 138 -42 140 66 67 68 24 25 26 67 24 25 139 141 142 143 -66 144 145 137 146 147 132 148 72 73 74 30 31 32 87 88 89 150 -22 -81 92 93 95 93 95 92 152 153 154 87 88 89 155 84 -55 157 -43 159 72 73 74 30 31 32 73 30 31 158 160 161 162 -69 163 164 156 165 166 151 167 79 80 79 38 37 -28 -34 76 77 76 35 34 40 176 -28 -17 -2 178 -1 180 82 83 82 41 179 181 182 183 -14 184 185 49 6 48 49 78 80 36 37 38 78 80 36 37 38 89 187 188 169 189 190 -22 -23 -24 -34 -36 -38 78 80 36 37 38 79 36 -30 -36 75 77 33 34 35 75 77 33 34 35 76 33 82 39 198 -30 -18 81 83 39 40 41 81 83 39 40 41 179 181 200 201 -15 202 203 78 80 36 37 38 89 187 188 170 192 205 -22 -23 -24 -34 -36 -38 78 79 -32 -38 75 77 33 34 35 75 77 33 34 35 75 76 81 82 212 -32 -16 81 83 39 40 41 81 83 39 40 41 179 181 214 215 -13 216 217 92 95 219 220 87 88 221 84 48 50 6 7 8 48 50 6 7 8 219 220 223 224 225 85 48 50 6 7 8 48 50 6 7 8 219 220 227 228 229 86 222 226 230 170 192 205 175 197 211 169 189 190 175 211 169 190 174 196 210 169 189 190 175 197 169 189 174 196 169 189 -7 180 178 237 182 183 176 180 178 237 200 201 198 180 178 237 214 215 212 238 239 240 183 201 215 -25 174 196 210 176 198 212 196 210 198 212 174 210 176 212 174 196 176 198 238 239 240 244 245 246 196 210 198 212 174 210 176 212 174 196 176 198 174 196 210 182 200 214 196 210 200 214 174 210 182 214 174 196 182 200 238 239 240 252 253 254 196 210 200 214 174 210 182 214 174 196 182 200 196 210 189 190 174 210 169 190 175 211 169 190 174 210 169 190 87 223 227 170 192 205 175 197 169 189 174 196 169 189 87 223 170 192 89 187 188 170 192 205 187 188 192 205 89 188 170 205 89 187 170 192 95 92 93 87 88 89 95 92 93 223 224 187 95 92 93 227 228 188 187 188 192 205 89 188 170 205 89 187 170 192 271 272 273 274 275 276 89 187 188 169 189 190 187 188 189 190 89 188 169 190 89 187 169 189 187 188 189 190 89 188 169 190 89 187 169 189 271 272 273 282 283 284 89 187 171 193 -22 -23 -34 -36 89 187 169 189 -22 -23 -34 -36 89 187 170 192 -22 -23 -34 -36 223 227 192 205 87 227 170 205 223 227 192 205 87 227 170 205 87 223 170 192 271 272 273 291 292 293 89 188 171 207 -22 -24 -34 -38 89 188 169 190 -22 -24 -34 -38 89 188 170 205 -22 -24 -34 -38 196 210 189 190 197 211 189 190 197 211 189 190 -26 187 188 193 207 -23 -24 -36 -38 187 188 189 190 -23 -24 -36 -38 187 188 192 205 -23 -24 -36 -38 222 226 230 169 189 190 222 226 230 171 193 207 -27 172 186 309 177 310 308 311 194 204 314 199 315 313 316 208 218 319 213 320 318 321 173 195 209 174 196 210 175 197 211 171 193 207 169 170 171 189 192 193 190 205 207 327 328 329 302 295 286 326 306 330 331 332 307 333 171 169 189 190 327 328 329 303 296 287 335 305 336 337 191 338 339 169 170 192 205 327 328 329 304 297 288 341 231 342 343 206 344 345 170 334 340 346 347 308 333 193 339 189 345 192 349 350 351 352 313 333 207 339 190 345 205 354 355 356 357 318 169 189 190 170 192 205 171 193 207 173 174 175 195 196 197 209 210 211 362 363 364 248 249 250 247 365 366 243 367 368 248 368 249 368 250 362 363 364 256 257 258 255 372 373 251 374 375 256 375 257 375 258 362 363 364 183 201 215 241 379 380 381 242 382 183 382 201 382 215 362 363 364 299 233 235 327 328 329 300 261 264 386 387 388 232 389 390 299 390 233 390 235 390 300 390 261 390 264 362 363 364 259 260 236 327 328 329 298 262 265 397 398 399 234 400 401 259 401 260 401 236 401 298 401 262 401 265 362 363 364 173 195 209 327 328 329 173 195 209 408 409 410 411 301 412 173 412 195 412 209 412 173 412 195 412 209 339 303 339 296 339 287 345 304 345 297 345 288 327 328 329 289 290 266 425 294 426 263 427 428 289 428 290 428 266 327 328 329 268 269 270 432 277 433 267 434 435 268 435 269 435 270 327 328 329 279 280 281 439 285 440 278 441 442 279 442 280 442 281 333 302 333 295 333 286 416 394 405 429 436 443 446 419 422 417 395 406 430 437 444 447 420 423 418 396 407 431 438 445 448 421 424 359 360 361 312 317 322 348 353 358 413 391 402 383 369 376 414 392 403 384 370 377 415 393 404 385 371 378 323 324 325 186 473 485 177 486 204 474 488 199 489 218 475 491 213 492 171 193 207 476 477 478 169 170 171 470 471 472 189 192 193 470 471 472 190 205 207 470 471 472 495 496 497 302 295 286 494 306 498 499 500 307 169 189 190 476 477 478 495 496 497 303 296 287 502 305 503 504 191 505 170 192 205 476 477 478 495 496 497 304 297 288 507 231 508 509 206 510 173 174 175 482 483 484 195 196 197 482 483 484 209 210 211 482 483 484 512 513 514 248 249 250 247 515 516 243 517 512 513 514 256 257 258 255 519 520 251 521 512 513 514 183 201 215 241 523 524 525 242 512 513 514 173 195 209 495 496 497 173 195 209 527 528 495 496 497 289 290 266 530 294 531 263 532 495 496 497 268 269 270 534 277 535 267 536 495 496 497 279 280 281 538 285 539 278 540 501 171 506 169 511 170 542 543 544 545 111 130 149 168 54 55 56 12 13 14 223 224 187 547 -23 -73 94 96 97 223 224 187 549 85 54 55 56 12 13 14 55 12 13 101 103 551 552 -61 553 554 550 555 556 548 557 60 61 62 18 19 20 223 224 187 559 -23 -76 114 115 116 223 224 187 561 85 60 61 62 18 19 20 61 18 19 120 122 563 564 -64 565 566 562 567 568 560 569 66 67 68 24 25 26 223 224 187 571 -23 -79 133 134 135 223 224 187 573 85 66 67 68 24 25 26 67 24 25 139 141 575 576 -67 577 578 574 579 580 572 581 72 73 74 30 31 32 223 224 187 583 -23 -82 152 153 154 223 224 187 585 85 72 73 74 30 31 32 73 30 31 158 160 587 588 -70 589 590 586 591 592 584 593 501 193 506 189 511 192 595 596 597 598 558 570 582 594 54 56 12 13 14 227 228 188 600 -24 -74 94 96 97 227 228 188 602 86 54 56 12 13 14 54 55 101 103 604 605 -62 606 607 603 608 609 601 610 60 62 18 19 20 227 228 188 612 -24 -77 114 115 116 227 228 188 614 86 60 62 18 19 20 60 61 120 122 616 617 -65 618 619 615 620 621 613 622 66 68 24 25 26 227 228 188 624 -24 -80 133 134 135 227 228 188 626 86 66 68 24 25 26 66 67 139 141 628 629 -68 630 631 627 632 633 625 634 72 74 30 31 32 227 228 188 636 -24 -83 152 153 154 227 228 188 638 86 72 74 30 31 32 72 73 158 160 640 641 -71 642 643 639 644 645 637 646 501 207 506 190 511 205 648 649 650 651 611 623 635 647 92 93 87 88 223 224 227 228 271 272 273 654 655 656 -84 658 102 100 90 104 105 658 102 100 547 551 552 658 102 100 600 604 605 87 88 223 224 227 228 659 660 661 662 663 664 657 665 666 -87 667 668 669 654 87 88 223 224 227 228 104 551 604 223 224 227 228 551 604 87 88 227 228 104 604 87 88 223 224 104 551 271 272 273 672 673 674 223 224 227 228 551 604 87 88 227 228 104 604 87 88 223 224 104 551 659 660 661 676 677 678 675 679 680 671 681 682 672 89 187 188 104 551 604 187 188 551 604 89 188 104 604 89 187 104 551 271 272 273 685 686 687 187 188 551 604 89 188 104 604 89 187 104 551 659 660 661 689 690 691 688 692 693 684 694 695 685 87 88 223 224 227 228 271 272 273 697 698 699 -85 701 121 119 112 123 124 701 121 119 559 563 564 701 121 119 612 616 617 87 88 223 224 227 228 702 703 704 705 706 707 700 708 709 -89 710 711 712 697 87 88 223 224 227 228 123 563 616 223 224 227 228 563 616 87 88 227 228 123 616 87 88 223 224 123 563 271 272 273 715 716 717 223 224 227 228 563 616 87 88 227 228 123 616 87 88 223 224 123 563 702 703 704 719 720 721 718 722 723 714 724 725 715 89 187 188 123 563 616 187 188 563 616 89 188 123 616 89 187 123 563 271 272 273 728 729 730 187 188 563 616 89 188 123 616 89 187 123 563 702 703 704 732 733 734 731 735 736 727 737 738 728 87 88 223 224 227 228 271 272 273 740 741 742 -86 744 140 138 131 142 143 744 140 138 571 575 576 744 140 138 624 628 629 87 88 223 224 227 228 745 746 747 748 749 750 743 751 752 -90 753 754 755 740 87 88 223 224 227 228 142 575 628 223 224 227 228 575 628 87 88 227 228 142 628 87 88 223 224 142 575 271 272 273 758 759 760 223 224 227 228 575 628 87 88 227 228 142 628 87 88 223 224 142 575 745 746 747 762 763 764 761 765 766 757 767 768 758 89 187 188 142 575 628 187 188 575 628 89 188 142 628 89 187 142 575 271 272 273 771 772 773 187 188 575 628 89 188 142 628 89 187 142 575 745 746 747 775 776 777 774 778 779 770 780 781 771 87 88 223 224 227 228 271 272 273 783 784 785 -88 787 159 157 150 161 162 787 159 157 583 587 588 787 159 157 636 640 641 87 88 223 224 227 228 788 789 790 791 792 793 786 794 795 -91 796 797 798 783 87 88 223 224 227 228 161 587 640 223 224 227 228 587 640 87 88 227 228 161 640 87 88 223 224 161 587 271 272 273 801 802 803 223 224 227 228 587 640 87 88 227 228 161 640 87 88 223 224 161 587 788 789 790 805 806 807 804 808 809 800 810 811 801 89 187 188 161 587 640 187 188 587 640 89 188 161 640 89 187 161 587 271 272 273 814 815 816 187 188 587 640 89 188 161 640 89 187 161 587 788 789 790 818 819 820 817 821 822 813 823 824 814 533 291 537 274 541 282 670 683 696 713 726 739 756 769 782 799 812 825 826 827 828 669 655 682 673 695 686 712 698 725 716 738 729 755 741 768 759 781 772 798 784 811 802 824 815 533 292 537 275 541 283 830 831 832 833 834 835 836 837 838 839 840 841 842 843 844 669 656 682 674 695 687 712 699 725 717 738 730 755 742 768 760 781 773 798 785 811 803 824 816 533 293 537 276 541 284 846 847 848 849 850 851 852 853 854 855 856 857 858 859 860 829 845 861 87 223 227 111 558 611 88 224 228 111 558 611 89 187 188 863 864 130 570 623 88 224 228 130 570 623 89 187 188 866 867 149 582 635 88 224 228 149 582 635 89 187 188 869 870 168 594 647 88 224 228 168 594 647 89 187 188 872 873 545 598 651 88 224 228 875 653 862 865 868 871 874 876 95 93 829 845 861 88 224 228 111 558 611 87 223 227 880 864 130 570 623 87 223 227 882 867 149 582 635 87 223 227 884 870 168 594 647 87 223 227 886 873 545 598 651 87 223 227 888 878 879 881 883 885 887 889 95 92 829 845 861 89 187 188 880 863 882 866 884 869 886 872 891 892 893 894 895 896 546 599 652 877 890 897 176 -99 -17 46 47 46 5 4 -97 -99 43 44 43 2 1 -97 178 180 913 914 182 183 915 185 912 908 917 918 916 920 904 921 922 918 919 923 916 927 928 904 929 51 52 53 9 10 11 51 52 9 10 931 932 182 183 176 -76 -17 -42 934 -41 -55 936 937 934 51 52 53 9 10 11 935 938 939 931 940 932 -64 941 942 178 237 180 237 180 178 944 945 946 182 183 176 947 185 943 948 949 933 950 57 58 59 15 16 17 57 58 15 16 952 953 182 183 176 -79 -17 -43 955 -40 -58 957 958 955 57 58 59 15 16 17 956 959 960 952 961 953 -67 962 963 178 237 180 237 180 178 965 966 967 182 183 176 968 185 964 969 970 954 971 63 64 65 21 22 23 63 64 21 22 973 974 182 183 176 -82 -17 -45 976 -44 -57 978 979 976 63 64 65 21 22 23 977 980 981 973 982 974 -70 983 984 178 237 180 237 180 178 986 987 988 182 183 176 989 185 985 990 991 975 992 69 70 71 27 28 29 69 70 27 28 994 995 182 183 176 -85 -17 -48 997 -46 -60 999 1000 997 69 70 71 27 28 29 998 1001 1002 994 1003 995 -73 1004 1005 178 237 180 237 180 178 1007 1008 1009 182 183 176 1010 185 1006 1011 1012 996 1013 930 951 972 993 1014 487 198 -100 -18 45 47 3 4 5 45 47 3 4 5 46 3 -98 -100 42 44 0 1 2 42 44 0 1 2 43 0 -98 913 914 200 201 1025 203 1024 1020 1027 1028 1026 1030 1016 1031 1032 1028 1029 1033 1026 1037 1038 1016 1039 51 52 53 9 10 11 51 52 9 10 1041 1042 200 201 198 -77 -18 51 52 53 9 10 11 935 938 939 1041 1044 1042 -65 1045 1046 944 945 946 200 201 198 1048 203 1047 1049 1050 1043 1051 57 58 59 15 16 17 57 58 15 16 1053 1054 200 201 198 -80 -18 57 58 59 15 16 17 956 959 960 1053 1056 1054 -68 1057 1058 965 966 967 200 201 198 1060 203 1059 1061 1062 1055 1063 63 64 65 21 22 23 63 64 21 22 1065 1066 200 201 198 -83 -18 63 64 65 21 22 23 977 980 981 1065 1068 1066 -71 1069 1070 986 987 988 200 201 198 1072 203 1071 1073 1074 1067 1075 69 70 71 27 28 29 69 70 27 28 1077 1078 200 201 198 -86 -18 69 70 71 27 28 29 998 1001 1002 1077 1080 1078 -74 1081 1082 1007 1008 1009 200 201 198 1084 203 1083 1085 1086 1079 1087 1040 1052 1064 1076 1088 490 212 -96 -16 45 47 3 4 5 45 47 3 4 5 45 46 -95 -96 42 44 0 1 2 42 44 0 1 2 42 43 -94 913 914 214 215 1099 217 1098 1094 1101 1102 1100 1104 1090 1105 1106 1102 1103 1107 1100 1111 1112 1090 1113 51 52 53 9 10 11 51 52 10 1115 1116 214 215 212 -78 -16 51 52 53 9 10 11 935 938 939 1115 1118 1116 -66 1119 1120 944 945 946 214 215 212 1122 217 1121 1123 1124 1117 1125 57 58 59 15 16 17 57 58 16 1127 1128 214 215 212 -81 -16 57 58 59 15 16 17 956 959 960 1127 1130 1128 -69 1131 1132 965 966 967 214 215 212 1134 217 1133 1135 1136 1129 1137 63 64 65 21 22 23 63 64 22 1139 1140 214 215 212 -84 -16 63 64 65 21 22 23 977 980 981 1139 1142 1140 -72 1143 1144 986 987 988 214 215 212 1146 217 1145 1147 1148 1141 1149 69 70 71 27 28 29 69 70 28 1151 1152 214 215 212 -87 -16 69 70 71 27 28 29 998 1001 1002 1151 1154 1152 -75 1155 1156 1007 1008 1009 214 215 212 1158 217 1157 1159 1160 1153 1161 1114 1126 1138 1150 1162 493 178 237 907 1019 1093 182 200 214 907 1093 182 214 906 1018 1092 182 200 214 907 1019 182 200 906 1018 182 200 1021 911 1023 911 1023 1097 906 1018 1092 1023 1097 1018 1092 911 1097 906 1092 911 1023 906 1018 1023 1097 1018 1092 911 1097 906 1092 911 1023 906 1018 909 1021 1095 906 1018 1092 1021 1095 1018 1092 909 1095 906 1092 909 1021 906 1018 1021 1095 1018 1092 909 1095 906 1092 909 1021 906 1018 1018 1092 200 214 906 1092 182 214 1018 1092 200 214 906 1092 182 214 906 1018 182 200 238 239 240 1189 1190 1191 1019 1093 200 214 1019 1093 200 214 907 1093 182 214 907 1019 182 200 238 239 240 1194 1195 1196 238 239 240 905 1017 1091 909 1021 1095 910 1022 1096 911 1023 1097 905 1017 1091 906 1018 1092 907 1019 1093 909 910 911 1205 909 1095 1206 1170 1207 1021 1022 1023 1208 1095 1208 909 1205 911 1097 1212 1172 1213 1214 1097 1214 911 1209 1023 1097 1217 1171 1218 1219 1097 1219 1023 1205 1209 1174 1175 1176 905 906 907 1017 1018 1019 1091 1092 1093 1223 1224 1225 1177 1178 1179 1222 1226 1227 1173 1228 1229 1174 1229 1175 1229 1176 1229 1177 1229 1178 1229 1179 1205 1209 1181 1182 1183 1223 1224 1225 1184 1185 1186 1236 1237 1238 1180 1239 1240 1181 1240 1182 1240 1183 1240 1184 1240 1185 1240 1186 1205 1209 910 1022 1096 1223 1224 1225 910 1022 1096 1247 1248 1249 1250 1251 910 1251 1022 1251 1096 1251 910 1251 1022 1251 1096 1223 1224 1225 1193 1166 1168 1258 1197 1259 1165 1260 1261 1193 1261 1166 1261 1168 1223 1224 1225 1187 1188 1169 1265 1192 1266 1167 1267 1268 1187 1268 1188 1268 1169 1223 1224 1225 905 1017 1091 1272 1198 1273 1274 1275 905 1275 1017 1275 1091 1211 1216 1221 1254 1232 1243 1095 1096 1097 1276 1262 1269 1255 1233 1244 1277 1263 1270 1256 1234 1245 1278 1264 1271 1257 1235 1246 1202 1203 1204 1210 1215 1252 1230 1241 1220 1253 1231 1242 1199 1200 1201 905 906 907 1297 1298 1299 1017 1018 1019 1297 1298 1299 1091 1092 1093 1297 1298 1299 1305 1306 1307 1193 1166 1168 1308 1197 1309 1165 1310 1305 1306 1307 1187 1188 1169 1312 1192 1313 1167 1314 1305 1306 1307 905 1017 1091 1316 1198 1317 1318 1319 905 1311 1194 1315 1189 526 183 518 244 522 252 1320 1321 1322 1323 1324 1325 1319 1017 1311 1195 1315 1190 526 201 518 245 522 253 1327 1328 1329 1330 1331 1332 1319 1091 1311 1196 1315 1191 526 215 518 246 522 254 1334 1335 1336 1337 1338 1339 1326 1333 1340 182 200 214 930 1040 1114 183 201 215 1342 951 1052 1126 183 201 215 951 1052 1126 176 198 212 1344 1345 972 1064 1138 183 201 215 972 1064 1138 176 198 212 1347 1348 993 1076 1150 183 201 215 993 1076 1150 176 198 212 1350 1351 1014 1088 1162 183 201 215 1014 1088 1162 176 198 212 1353 1354 487 490 493 183 201 215 1356 1164 1341 1343 1346 1349 1352 1355 1357 180 237 1326 1333 1340 183 201 215 930 1040 1114 182 200 214 1361 951 1052 1126 182 200 214 1363 1345 972 1064 1138 182 200 214 1365 1348 993 1076 1150 182 200 214 1367 1351 1014 1088 1162 182 200 214 1369 1354 487 490 493 182 200 214 1371 1359 1360 1362 1364 1366 1368 1370 1372 1326 1333 1340 176 198 212 1363 1344 1365 1347 1367 1350 1369 1353 1374 1375 1376 1377 1378 1015 1089 1163 1358 1373 1379 931 932 90 -76 -72 100 102 1387 1388 104 105 1389 107 934 936 937 934 1391 1392 1393 931 940 932 1394 942 1395 1390 1396 1386 1397 1398 111 1041 1042 547 -77 -73 1387 1388 551 552 1401 554 1391 1392 1393 1041 1044 1042 1403 1046 1404 1402 1405 1400 1406 1407 558 1115 1116 600 -78 -74 1387 1388 604 605 1410 607 1391 1392 1393 1115 1118 1116 1412 1120 1413 1411 1414 1409 1415 1416 611 669 662 682 676 695 689 1418 1419 1420 669 663 682 677 695 690 1422 1423 1424 669 664 682 678 695 691 1426 1427 1428 1421 1425 1429 90 547 600 658 100 1421 1425 1429 104 551 604 1398 1407 1416 105 552 605 1433 111 558 611 105 552 605 1435 1431 1432 1434 1436 658 102 1421 1425 1429 105 552 605 1398 1407 1416 104 551 604 1440 111 558 611 104 551 604 1442 1438 1439 1441 1443 1399 1408 1417 1430 1437 1444 1398 951 1407 1052 1416 1126 934 937 1398 1407 1416 940 1044 1118 1455 951 1052 1126 940 1044 1118 1457 1454 1456 1458 936 937 1398 1407 1416 931 1041 1115 1398 1407 1416 932 1042 1116 1461 1462 951 1052 1126 931 1041 1115 951 1052 1126 932 1042 1116 1464 1465 1460 1463 1466 1455 1457 1468 1469 1451 1452 1453 1459 1467 1470 952 953 112 -79 -75 119 121 1478 1479 123 124 1480 126 955 957 958 955 1482 1483 1484 952 961 953 1485 963 1486 1481 1487 1477 1488 1489 130 1053 1054 559 -80 -76 1478 1479 563 564 1492 566 1482 1483 1484 1053 1056 1054 1494 1058 1495 1493 1496 1491 1497 1498 570 1127 1128 612 -81 -77 1478 1479 616 617 1501 619 1482 1483 1484 1127 1130 1128 1503 1132 1504 1502 1505 1500 1506 1507 623 712 705 725 719 738 732 1509 1510 1511 712 706 725 720 738 733 1513 1514 1515 712 707 725 721 738 734 1517 1518 1519 1512 1516 1520 112 559 612 701 119 1512 1516 1520 123 563 616 1489 1498 1507 124 564 617 1524 130 570 623 124 564 617 1526 1522 1523 1525 1527 701 121 1512 1516 1520 124 564 617 1489 1498 1507 123 563 616 1531 130 570 623 123 563 616 1533 1529 1530 1532 1534 1490 1499 1508 1521 1528 1535 1489 972 1498 1064 1507 1138 955 958 1489 1498 1507 961 1056 1130 1546 972 1064 1138 961 1056 1130 1548 1545 1547 1549 957 958 1489 1498 1507 952 1053 1127 1489 1498 1507 953 1054 1128 1552 1553 972 1064 1138 952 1053 1127 972 1064 1138 953 1054 1128 1555 1556 1551 1554 1557 1546 1548 1559 1560 1542 1543 1544 1550 1558 1561 973 974 131 -82 -78 138 140 1569 1570 142 143 1571 145 976 978 979 976 1573 1574 1575 973 982 974 1576 984 1577 1572 1578 1568 1579 1580 149 1065 1066 571 -83 -79 1569 1570 575 576 1583 578 1573 1574 1575 1065 1068 1066 1585 1070 1586 1584 1587 1582 1588 1589 582 1139 1140 624 -84 -80 1569 1570 628 629 1592 631 1573 1574 1575 1139 1142 1140 1594 1144 1595 1593 1596 1591 1597 1598 635 755 748 768 762 781 775 1600 1601 1602 755 749 768 763 781 776 1604 1605 1606 755 750 768 764 781 777 1608 1609 1610 1603 1607 1611 131 571 624 744 138 1603 1607 1611 142 575 628 1580 1589 1598 143 576 629 1615 149 582 635 143 576 629 1617 1613 1614 1616 1618 744 140 1603 1607 1611 143 576 629 1580 1589 1598 142 575 628 1622 149 582 635 142 575 628 1624 1620 1621 1623 1625 1581 1590 1599 1612 1619 1626 1580 993 1589 1076 1598 1150 976 979 1580 1589 1598 982 1068 1142 1637 993 1076 1150 982 1068 1142 1639 1636 1638 1640 978 979 1580 1589 1598 973 1065 1139 1580 1589 1598 974 1066 1140 1643 1644 993 1076 1150 973 1065 1139 993 1076 1150 974 1066 1140 1646 1647 1642 1645 1648 1637 1639 1650 1651 1633 1634 1635 1641 1649 1652 994 995 150 -85 -81 157 159 1660 1661 161 162 1662 164 997 999 1000 997 1664 1665 1666 994 1003 995 1667 1005 1668 1663 1669 1659 1670 1671 168 1077 1078 583 -86 -82 1660 1661 587 588 1674 590 1664 1665 1666 1077 1080 1078 1676 1082 1677 1675 1678 1673 1679 1680 594 1151 1152 636 -87 -83 1660 1661 640 641 1683 643 1664 1665 1666 1151 1154 1152 1685 1156 1686 1684 1687 1682 1688 1689 647 798 791 811 805 824 818 1691 1692 1693 798 792 811 806 824 819 1695 1696 1697 798 793 811 807 824 820 1699 1700 1701 1694 1698 1702 150 583 636 787 157 1694 1698 1702 161 587 640 1671 1680 1689 162 588 641 1706 168 594 647 162 588 641 1708 1704 1705 1707 1709 787 159 1694 1698 1702 162 588 641 1671 1680 1689 161 587 640 1713 168 594 647 161 587 640 1715 1711 1712 1714 1716 1672 1681 1690 1703 1710 1717 1671 1014 1680 1088 1689 1162 997 1000 1671 1680 1689 1003 1080 1154 1728 1014 1088 1162 1003 1080 1154 1730 1727 1729 1731 999 1000 1671 1680 1689 994 1077 1151 1671 1680 1689 995 1078 1152 1734 1735 1014 1088 1162 994 1077 1151 1014 1088 1162 995 1078 1152 1737 1738 1733 1736 1739 1728 1730 1741 1742 1724 1725 1726 1732 1740 1743 1110 524 529 499 666 709 752 795 84 49 50 95 92 8 85 50 95 92 8 86 49 50 95 92 93 7 8 185 82 83 180 178 41 203 83 180 178 41 217 82 83 180 178 237 40 41 926 43 44 2 1302 1303 1036 44 2 1302 1303 1110 43 44 1 2 1302 1303 1304 927 46 47 5 1297 1298 1037 47 5 1297 1298 1111 46 47 4 5 1297 1298 1299 473 76 77 35 482 483 474 77 35 482 483 475 76 77 34 35 482 483 484 476 79 80 38 470 471 477 80 38 470 471 478 79 80 37 38 470 471 472 107 55 56 658 102 14 554 56 658 102 14 607 55 56 658 102 100 13 14 942 52 53 936 934 11 1046 53 936 934 11 1120 52 53 936 934 937 10 11 126 61 62 701 121 20 566 62 701 121 20 619 61 62 701 121 119 19 20 963 58 59 957 955 17 1058 59 957 955 17 1132 58 59 957 955 958 16 17 145 67 68 744 140 26 578 68 744 140 26 631 67 68 744 140 138 25 26 984 64 65 978 976 23 1070 65 978 976 23 1144 64 65 978 976 979 22 23 164 73 74 787 159 32 590 74 787 159 32 643 73 74 787 159 157 31 32 1005 70 71 999 997 29 1082 71 999 997 29 1156 70 71 999 997 1000 28 29", dtype=np.int64, sep=" "),
@@ -61717,8 +61717,6 @@ _N, _NP, _NG = 152, 179, 14
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 152
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 24 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 26 27 27 27 27 27 27 27 27 27 27 27 27 27 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 28 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 29 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 30 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 31 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 32 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 33 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 34 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 35 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 36 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 37 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 38 39 39 39 39 39 39 39 39 39 39 39 39 39 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 40 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 41 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 42 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 43 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 44 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 45 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 46 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 47 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 48 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 49 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 50 51 51 51 51 51 51 51 51 51 51 51 51 51 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 52 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 53 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 54 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 55 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 56 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 57 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 58 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 59 60 60 60 60 60 60 60 60 60 60 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 61 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 62 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 63 64 64 64 64 64 64 64 64 64 64 64 64 65 65 65 65 65 65 65 65 65 65 65 65 66 66 66 66 66 66 66 66 66 66 66 66 67 67 67 67 67 67 67 67 67 67 67 67 68 69 69 69 69 70 71 71 71 72 73 73 73 73 73 74 75 75 75 75 76 77 77 77 78 79 79 79 79 79 80 80 80 80 80 80 80 80 81 81 81 81 81 81 81 81 81 81 81 81 82 82 82 82 82 82 82 82 82 83 83 83 83 83 83 83 83 83 83 83 83 84 84 84 84 84 84 84 84 84 84 85 85 85 85 85 85 85 85 85 85 85 85 86 86 86 86 86 86 86 86 87 87 87 87 87 87 87 87 87 87 87 87 88 88 88 88 88 88 88 88 88 89 89 89 89 89 89 89 89 89 89 89 89 90 90 90 90 90 90 90 90 90 90 91 91 91 91 91 91 91 91 91 91 91 91 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 92 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 93 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 94 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 95 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 96 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 97 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 98 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 99 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 100 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 101 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 102 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 103 104 105 105 105 105 106 107 107 107 108 109 109 109 109 109 110 111 111 111 111 112 113 113 113 114 115 115 115 115 115 116 117 117 117 117 118 119 119 119 120 121 121 121 121 121 122 123 123 123 123 124 125 125 125 126 127 127 127 127 127 128 129 129 129 129 130 131 131 131 132 133 133 133 133 133 134 135 135 135 135 136 137 137 137 138 139 139 139 139 139 140 141 141 141 141 142 143 143 143 144 145 145 145 145 145 146 147 147 147 147 148 149 149 149 150 151 151 151 151 151", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 16 17 24 28 29 36 40 41 48 52 53 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 104 105 107 109 116 117 119 121 128 129 131 133 140 141 143 145 0 1 2 3 4 5 6 7 8 9 10 11 13 16 17 25 28 29 37 40 41 49 52 53 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 105 106 107 109 117 118 119 121 129 130 131 133 141 142 143 145 0 1 2 3 4 5 6 7 8 9 10 11 14 16 17 26 28 29 38 40 41 50 52 53 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 105 107 108 109 117 119 120 121 129 131 132 133 141 143 144 145 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 36 37 38 39 40 41 48 49 50 51 52 53 61 62 63 64 65 66 67 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 104 105 106 107 108 109 116 117 118 119 120 121 128 129 130 131 132 133 140 141 142 143 144 145 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 36 37 38 39 40 41 48 49 50 51 52 53 61 62 63 64 65 66 67 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 104 105 106 107 108 109 116 117 118 119 120 121 128 129 130 131 132 133 140 141 142 143 144 145 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 24 25 26 27 28 29 36 37 38 39 40 41 48 49 50 51 52 53 61 62 63 64 65 66 67 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 104 105 106 107 108 109 116 117 118 119 120 121 128 129 130 131 132 133 140 141 142 143 144 145 0 1 2 3 4 5 6 7 8 9 10 11 18 21 22 23 30 33 34 35 42 45 46 47 54 57 58 59 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 80 86 92 93 94 95 96 97 98 99 100 101 102 103 110 111 113 115 122 123 125 127 134 135 137 139 146 147 149 151 0 1 2 3 4 5 6 7 8 9 10 11 19 21 22 23 31 33 34 35 43 45 46 47 55 57 58 59 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 82 88 92 93 94 95 96 97 98 99 100 101 102 103 111 112 113 115 123 124 125 127 135 136 137 139 147 148 149 151 0 1 2 3 4 5 6 7 8 9 10 11 20 21 22 23 32 33 34 35 44 45 46 47 56 57 58 59 60 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 84 90 92 93 94 95 96 97 98 99 100 101 102 103 111 113 114 115 123 125 126 127 135 137 138 139 147 149 150 151 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 54 55 56 57 58 59 60 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 80 81 82 83 84 85 86 87 88 89 90 91 92 93 94 95 96 97 98 99 100 101 102 103 110 111 112 113 114 115 122 123 124 125 126 127 134 135 136 137 138 139 146 147 148 149 150 151 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 54 55 56 57 58 59 60 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 80 81 82 83 84 85 86 87 88 89 90 91 92 93 94 95 96 97 98 99 100 101 102 103 110 111 112 113 114 115 122 123 124 125 126 127 134 135 136 137 138 139 146 147 148 149 150 151 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 30 31 32 33 34 35 42 43 44 45 46 47 54 55 56 57 58 59 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 81 83 85 87 89 91 92 93 94 95 96 97 98 99 100 101 102 103 110 111 112 113 114 115 122 123 124 125 126 127 134 135 136 137 138 139 146 147 148 149 150 151 0 3 4 5 12 16 17 18 21 22 23 68 71 73 104 105 107 109 110 111 113 115 1 3 4 5 13 16 17 19 21 22 23 69 70 71 73 105 106 107 109 111 112 113 115 2 3 4 5 14 16 17 20 21 22 23 69 71 72 73 105 107 108 109 111 113 114 115 3 4 5 15 16 17 64 69 71 73 105 107 109 0 1 2 3 4 5 12 13 14 15 16 17 18 19 20 21 22 23 64 68 69 70 71 72 73 104 105 106 107 108 109 110 111 112 113 114 115 0 1 2 3 4 5 12 13 14 15 16 17 18 19 20 21 22 23 64 68 69 70 71 72 73 104 105 106 107 108 109 110 111 112 113 114 115 6 9 10 11 12 16 17 18 21 22 23 74 77 79 104 105 107 109 110 111 113 115 7 9 10 11 13 16 17 19 21 22 23 75 76 77 79 105 106 107 109 111 112 113 115 8 9 10 11 14 16 17 20 21 22 23 75 77 78 79 105 107 108 109 111 113 114 115 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 74 75 76 77 78 79 104 105 106 107 108 109 110 111 112 113 114 115 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 74 75 76 77 78 79 104 105 106 107 108 109 110 111 112 113 114 115 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 74 75 76 77 78 79 104 105 106 107 108 109 110 111 112 113 114 115 0 3 4 5 24 28 29 30 33 34 35 68 71 73 116 117 119 121 122 123 125 127 1 3 4 5 25 28 29 31 33 34 35 69 70 71 73 117 118 119 121 123 124 125 127 2 3 4 5 26 28 29 32 33 34 35 69 71 72 73 117 119 120 121 123 125 126 127 3 4 5 27 28 29 65 69 71 73 117 119 121 0 1 2 3 4 5 24 25 26 27 28 29 30 31 32 33 34 35 65 68 69 70 71 72 73 116 117 118 119 120 121 122 123 124 125 126 127 0 1 2 3 4 5 24 25 26 27 28 29 30 31 32 33 34 35 65 68 69 70 71 72 73 116 117 118 119 120 121 122 123 124 125 126 127 6 9 10 11 24 28 29 30 33 34 35 74 77 79 116 117 119 121 122 123 125 127 7 9 10 11 25 28 29 31 33 34 35 75 76 77 79 117 118 119 121 123 124 125 127 8 9 10 11 26 28 29 32 33 34 35 75 77 78 79 117 119 120 121 123 125 126 127 6 7 8 9 10 11 24 25 26 28 29 30 31 32 33 34 35 74 75 76 77 78 79 116 117 118 119 120 121 122 123 124 125 126 127 6 7 8 9 10 11 24 25 26 28 29 30 31 32 33 34 35 74 75 76 77 78 79 116 117 118 119 120 121 122 123 124 125 126 127 6 7 8 9 10 11 24 25 26 28 29 30 31 32 33 34 35 74 75 76 77 78 79 116 117 118 119 120 121 122 123 124 125 126 127 0 3 4 5 36 40 41 42 45 46 47 68 71 73 128 129 131 133 134 135 137 139 1 3 4 5 37 40 41 43 45 46 47 69 70 71 73 129 130 131 133 135 136 137 139 2 3 4 5 38 40 41 44 45 46 47 69 71 72 73 129 131 132 133 135 137 138 139 3 4 5 39 40 41 66 69 71 73 129 131 133 0 1 2 3 4 5 36 37 38 39 40 41 42 43 44 45 46 47 66 68 69 70 71 72 73 128 129 130 131 132 133 134 135 136 137 138 139 0 1 2 3 4 5 36 37 38 39 40 41 42 43 44 45 46 47 66 68 69 70 71 72 73 128 129 130 131 132 133 134 135 136 137 138 139 6 9 10 11 36 40 41 42 45 46 47 74 77 79 128 129 131 133 134 135 137 139 7 9 10 11 37 40 41 43 45 46 47 75 76 77 79 129 130 131 133 135 136 137 139 8 9 10 11 38 40 41 44 45 46 47 75 77 78 79 129 131 132 133 135 137 138 139 6 7 8 9 10 11 36 37 38 40 41 42 43 44 45 46 47 74 75 76 77 78 79 128 129 130 131 132 133 134 135 136 137 138 139 6 7 8 9 10 11 36 37 38 40 41 42 43 44 45 46 47 74 75 76 77 78 79 128 129 130 131 132 133 134 135 136 137 138 139 6 7 8 9 10 11 36 37 38 40 41 42 43 44 45 46 47 74 75 76 77 78 79 128 129 130 131 132 133 134 135 136 137 138 139 0 3 4 5 48 52 53 54 57 58 59 68 71 73 140 141 143 145 146 147 149 151 1 3 4 5 49 52 53 55 57 58 59 69 70 71 73 141 142 143 145 147 148 149 151 2 3 4 5 50 52 53 56 57 58 59 69 71 72 73 141 143 144 145 147 149 150 151 3 4 5 51 52 53 67 69 71 73 141 143 145 0 1 2 3 4 5 48 49 50 51 52 53 54 55 56 57 58 59 67 68 69 70 71 72 73 140 141 142 143 144 145 146 147 148 149 150 151 0 1 2 3 4 5 48 49 50 51 52 53 54 55 56 57 58 59 67 68 69 70 71 72 73 140 141 142 143 144 145 146 147 148 149 150 151 6 9 10 11 48 52 53 54 57 58 59 74 77 79 140 141 143 145 146 147 149 151 7 9 10 11 49 52 53 55 57 58 59 75 76 77 79 141 142 143 145 147 148 149 151 8 9 10 11 50 52 53 56 57 58 59 75 77 78 79 141 143 144 145 147 149 150 151 6 7 8 9 10 11 48 49 50 52 53 54 55 56 57 58 59 74 75 76 77 78 79 140 141 142 143 144 145 146 147 148 149 150 151 6 7 8 9 10 11 48 49 50 52 53 54 55 56 57 58 59 74 75 76 77 78 79 140 141 142 143 144 145 146 147 148 149 150 151 6 7 8 9 10 11 48 49 50 52 53 54 55 56 57 58 59 74 75 76 77 78 79 140 141 142 143 144 145 146 147 148 149 150 151 8 9 10 60 75 77 78 79 84 90 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 3 4 5 15 16 17 69 71 73 105 107 109 3 4 5 27 28 29 69 71 73 117 119 121 3 4 5 39 40 41 69 71 73 129 131 133 3 4 5 51 52 53 69 71 73 141 143 145 0 3 4 71 73 1 3 4 73 2 3 4 5 71 73 6 9 10 77 79 7 9 10 79 8 9 10 11 77 79 6 9 10 74 77 79 80 86 9 10 11 75 77 79 81 83 85 87 89 91 7 9 10 75 76 77 79 82 88 9 10 11 75 77 79 81 83 85 87 89 91 8 9 10 60 75 77 78 79 84 90 9 10 11 75 77 79 81 83 85 87 89 91 6 9 10 74 77 79 80 86 9 10 11 75 77 79 81 83 85 87 89 91 7 9 10 75 76 77 79 82 88 9 10 11 75 77 79 81 83 85 87 89 91 8 9 10 60 75 77 78 79 84 90 9 10 11 75 77 79 81 83 85 87 89 91 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 0 1 2 3 4 5 6 7 8 9 10 11 61 62 63 68 69 70 71 72 73 74 75 76 77 78 79 92 93 94 95 96 97 98 99 100 101 102 103 12 15 16 107 109 13 15 16 109 14 15 16 17 107 109 18 21 22 113 115 19 21 22 115 20 21 22 23 113 115 24 27 28 119 121 25 27 28 121 26 27 28 29 119 121 30 33 34 125 127 31 33 34 127 32 33 34 35 125 127 36 39 40 131 133 37 39 40 133 38 39 40 41 131 133 42 45 46 137 139 43 45 46 139 44 45 46 47 137 139 48 51 52 143 145 49 51 52 145 50 51 52 53 143 145 54 57 58 149 151 55 57 58 151 56 57 58 59 149 151", dtype=np.int64, sep=" ")
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "sarib_one_leg"
 MODEL_FILE = "sarib_one_leg.yaml"
-MODEL_HASH = "0719ea7d1ca2720ab01e6a3301edd78e"
+MODEL_HASH = "c0eb031faf495acc62f71cc954e9dfd9"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 28.0, "rtol": 1e-05, "atol": 1e-05, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e", sys.modules[__name__])
-__name__ = "_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e"
+    sys.modules.setdefault("_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9", sys.modules[__name__])
+__name__ = "_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9"
 
 STATE_NAMES = ("fuselage.m.px", "fuselage.m.py", "fuselage.m.pz", "fuselage.J.px", "fuselage.J.py", "fuselage.J.pz", "mgb.m.px", "mgb.m.py", "mgb.m.pz", "mgb.J.px", "mgb.J.py", "mgb.J.pz", "beater_1.m.px", "beater_1.m.py", "beater_1.m.pz", "beater_1.J.px", "beater_1.J.py", "beater_1.J.pz", "bar_1.m.px", "bar_1.m.py", "bar_1.m.pz", "bar_1.J.px", "bar_1.J.py", "bar_1.J.pz", "attach_pumping.tx.spring.q", "membrane_pumping.tx.spring.q", "hinge_1.rx.spring.q", "fuselage.x", "fuselage.ax", "fuselage.y", "fuselage.ay", "fuselage.z", "fuselage.az", "mgb.x", "mgb.ax", "mgb.y", "mgb.ay", "mgb.z", "mgb.az", "beater_1.x", "beater_1.ax", "beater_1.y", "beater_1.ay", "beater_1.z", "beater_1.az", "bar_1.x", "bar_1.ax", "bar_1.y", "bar_1.ay", "bar_1.z", "bar_1.az", )
 PARAM_NAMES = ("attach_pumping__stiffness", "attach_pumping__damping", "attach_pumping__rot_stiffness", "attach_pumping__rot_damping", "attach_pumping__ty_load", "attach_pumping__tz_load", "attach_pumping__rx_load", "attach_pumping__ry_load", "attach_pumping__rz_load", "attach_pumping__tx_k", "attach_pumping__tx_c", "attach_pumping__tx_preload", "membrane_pumping__stiffness", "membrane_pumping__damping", "membrane_pumping__rot_stiffness", "membrane_pumping__rot_damping", "membrane_pumping__ty_load", "membrane_pumping__tz_load", "membrane_pumping__rx_load", "membrane_pumping__ry_load", "membrane_pumping__rz_load", "membrane_pumping__tx_k", "membrane_pumping__tx_c", "membrane_pumping__tx_preload", "hinge_1__stiffness", "hinge_1__damping", "hinge_1__rot_stiffness", "hinge_1__rot_damping", "hinge_1__tx_load", "hinge_1__ty_load", "hinge_1__tz_load", "hinge_1__ry_load", "hinge_1__rz_load", "hinge_1__rx_k", "hinge_1__rx_c", "hinge_1__rx_preload", "bar_bottom_1__stiffness", "bar_bottom_1__damping", "bar_bottom_1__rot_stiffness", "bar_bottom_1__rot_damping", "bar_bottom_1__tx_load", "bar_bottom_1__ty_load", "bar_bottom_1__tz_load", "bar_top_1__stiffness", "bar_top_1__damping", "bar_top_1__rot_stiffness", "bar_top_1__rot_damping", "bar_top_1__tx_load", "bar_top_1__ty_load", "bar_top_1__tz_load", "excitation__constant", "excitation__frequency", "excitation__sine", "excitation__chirp", "excitation__pumping", )
@@ -108,7 +108,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771"
+_KERNEL_PREFIX = "_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6"
 KERNEL_FUNCTIONS = 25
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -121,58 +121,58 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_ptr = external constant [548 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape_ptr = external constant [548 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_src = external constant [1678 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape_src = external constant [1678 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_row = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_col = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_zero = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_zero = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_k = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_k = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_i = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_i = external constant [842 x i64]
 
-@_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_j = external constant [842 x i64]
+@_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_j = external constant [842 x i64]
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_1(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 29582
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_1(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_2(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -231,7 +231,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -262,7 +262,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -320,83 +320,83 @@ ends:
 }
 
 
-define internal void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 554
   %v2 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 2232
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 218800, i1 false)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape(double* %v2, double* %v1, i64 0, i64 547, i64 50, i64* getelementptr inbounds ([548 x i64], [548 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1678 x i64], [1678 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_tape_src, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape(double* %v2, double* %v1, i64 0, i64 547, i64 50, i64* getelementptr inbounds ([548 x i64], [548 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([1678 x i64], [1678 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 20808, i1 false)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 51, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_scatter(double* %J, double* %v1, i64 842, i64 51, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 2232
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_scatter(double* %J, double* %v1, i64 842, i64 0, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_col, i64 0, i64 0))
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_scatter(double* %J, double* %v1, i64 842, i64 0, i64 50, i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([842 x i64], [842 x i64]* @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 237064)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 237064)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 4432)
   %w = bitcast i8* %raw to double*
@@ -412,7 +412,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -420,21 +420,21 @@ exit:
   ret void
 }
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -447,33 +447,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 46
   %v2 = load double, double* %v1, align 8
@@ -2175,7 +2175,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_rhs_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 298
   %v2 = load double, double* %v1, align 8
@@ -3756,7 +3756,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 46
   %v2 = load double, double* %v1, align 8
@@ -6468,7 +6468,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_1(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 29
   %v2 = load double, double* %v1, align 8
@@ -9181,7 +9181,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_jac_2(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 433
   %v2 = load double, double* %v1, align 8
@@ -10337,7 +10337,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 40
   %v2 = load double, double* %v1, align 8
@@ -11920,7 +11920,7 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 48
   %v2 = load double, double* %v1, align 8
@@ -11953,14 +11953,14 @@ entry:
   ret void
 }
 
-define void @_bgc_sarib_one_leg_0719ea7d1ca2720ab01e6a3301edd78e_3f5a28c3f771_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_sarib_one_leg_c0eb031faf495acc62f71cc954e9dfd9_55a03b5159c6_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 33 35 37 38 44 45 47 48 50 52 58 60 61 62 63 64 70 73 77 78 80 82 83 85 86 87 88 89 91 93 94 98 99 101 106 111 113 117 118 120 125 130 132 136 137 139 145 146 147 151 153 158 163 165 169 171 176 181 183 187 189 195 196 202 208 214 222 230 238 244 247 248 249 251 253 268 274 280 290 300 310 316 319 320 322 324 339 345 351 361 371 381 387 390 391 393 395 398 400 406 412 418 420 426 429 433 434 436 438 439 441 443 445 447 450 452 457 463 469 471 476 478 482 483 485 487 488 490 492 494 496 499 501 503 509 515 521 523 525 527 533 534 540 546 552 554 556 558 564 566 567 568 570 572 581 587 593 599 605 611 617 623 629 631 632 634 636 642 646 650 654 660 664 668 672 678 680 681 683 685 691 695 699 703 709 713 717 721 727 729 730 732 734 740 744 748 752 758 762 766 770 776 778 779 781 783 789 793 797 801 807 811 815 819 825 827 828 830 832 838 840 842 844 846 848 850 856 858 860 862 864 866 868 874 880 886 892 894 900 901 905 907 913 919 921 927 928 932 934 940 942 945 946 947 948 949 950 951 953 954 955 959 961 962 964 970 974 981 982 983 984 985 987 988 994 1000 1001 1003 1005 1007 1009 1015 1017 1019 1020 1022 1024 1026 1028 1031 1034 1036 1040 1042 1043 1045 1051 1055 1062 1068 1074 1075 1077 1083 1085 1087 1088 1090 1092 1094 1096 1099 1102 1106 1108 1109 1110 1112 1118 1121 1128 1134 1140 1141 1143 1149 1151 1153 1154 1156 1158 1160 1162 1165 1168 1170 1171 1175 1176 1178 1180 1181 1185 1186 1188 1190 1192 1194 1196 1198 1200 1202 1210 1211 1215 1216 1218 1220 1222 1224 1226 1228 1230 1232 1239 1241 1243 1245 1247 1249 1251 1253 1255 1257 1266 1272 1278 1279 1285 1291 1293 1299 1300 1305 1307 1313 1319 1320 1326 1328 1334 1335 1340 1346 1348 1350 1351 1352 1353 1354 1355 1356 1361 1362 1363 1367 1369 1370 1372 1373 1379 1381 1383 1384 1386 1388 1393 1397 1399 1405 1407 1409 1410 1412 1414 1419 1423 1425 1431 1433 1435 1436 1438 1440 1442 1444 1446 1449 1451 1453 1455 1458 1460 1462 1464 1467 1473 1475 1481 1487 1488 1494 1495 1499 1501 1507 1513 1514 1520 1521 1525 1526 1527 1528 1529 1530 1531 1533 1535 1537 1539 1545 1546 1552 1553 1556 1558 1564 1570 1572 1578 1584 1586 1589 1590 1591 1593 1594 1595 1596 1597 1598 1599 1600 1601 1602 1603 1608 1609 1613 1614 1621 1622 1627 1628 1632 1633 1640 1641 1646 1647 1651 1652 1659 1660 1665 1666 1670 1671 1678", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-29 -20 -16 -19 -11 -10 -17 -8 -5 -18 -9 -6 -29 -20 -16 -19 -11 -10 -17 -8 -5 -18 -9 -6 -23 -24 -25 15 16 17 3 4 5 19 20 19 8 7 27 28 29 30 -43 -30 -26 32 -2 -1 34 32 34 -2 33 35 36 28 29 30 37 24 -13 39 -7 41 15 16 17 3 4 5 16 3 4 40 42 43 44 -36 45 46 47 38 48 31 49 -4 51 -3 53 22 23 22 11 10 52 54 55 56 -27 58 59 21 23 9 10 11 21 23 9 10 11 22 9 52 54 61 62 -28 64 65 21 23 9 10 11 21 23 9 10 11 21 22 52 54 67 68 -21 70 71 60 66 72 57 63 69 -2 34 74 75 28 29 76 24 18 20 6 7 8 18 20 6 7 8 19 6 74 75 78 79 81 25 18 20 6 7 8 18 20 6 7 8 18 19 74 75 83 84 86 26 77 82 87 57 63 69 -12 53 51 89 55 56 57 53 51 89 61 62 63 53 51 89 67 68 69 80 85 63 69 -31 -32 -34 -35 30 85 57 69 -30 -32 -33 -35 30 80 57 63 -30 -31 -33 -34 90 91 92 93 94 95 73 88 96 97 -42 98 99 100 57 30 80 85 55 57 61 63 67 69 -30 -31 -32 -33 -34 -35 60 66 72 55 61 67 77 82 87 55 61 67 80 85 61 63 67 69 -31 -32 -34 -35 30 85 55 57 67 69 -30 -32 -33 -35 30 80 55 57 61 63 -30 -31 -33 -34 90 91 92 105 106 107 103 104 108 109 102 110 111 55 30 80 85 56 57 62 63 68 69 -30 -31 -32 -33 -34 -35 60 66 72 56 62 68 77 82 87 56 62 68 80 85 62 63 68 69 -31 -32 -34 -35 30 85 56 57 68 69 -30 -32 -33 -35 30 80 56 57 62 63 -30 -31 -33 -34 90 91 92 116 117 118 114 115 119 120 113 121 122 56 101 112 123 124 50 15 16 17 3 4 5 126 78 79 80 -44 -31 33 35 36 78 79 80 128 25 15 16 17 3 4 5 16 3 4 40 42 130 131 -37 132 133 134 129 135 127 136 100 63 111 61 122 62 138 139 140 141 137 15 17 3 4 5 143 83 84 85 -45 -32 33 35 36 83 84 85 145 26 15 17 3 4 5 15 16 40 42 147 148 -38 149 150 151 146 152 144 153 100 69 111 67 122 68 155 156 157 158 154 32 -2 34 32 28 29 30 -2 34 32 78 79 80 -2 34 32 83 84 85 -2 28 29 78 79 83 84 161 162 163 164 165 166 -49 168 41 39 27 43 44 168 41 39 126 130 131 168 41 39 143 147 148 28 29 78 79 83 84 169 170 171 172 173 174 167 175 176 -50 177 178 179 164 43 130 147 28 29 78 79 83 84 130 147 78 79 83 84 43 147 28 29 83 84 43 130 28 29 78 79 161 162 163 182 183 184 130 147 78 79 83 84 43 147 28 29 83 84 43 130 28 29 78 79 169 170 171 186 187 188 185 189 190 181 191 192 182 43 130 147 30 80 85 130 147 80 85 43 147 30 85 43 130 30 80 161 162 163 195 196 197 130 147 80 85 43 147 30 85 43 130 30 80 169 170 171 199 200 201 198 202 203 194 204 205 195 28 78 83 56 62 68 78 83 62 68 28 83 56 68 28 78 56 62 90 91 92 208 209 210 78 83 62 68 28 83 56 68 28 78 56 62 161 162 163 212 213 214 211 215 216 207 217 218 212 30 80 85 56 62 68 80 85 62 68 30 85 56 68 30 80 56 62 90 91 92 221 222 223 80 85 62 68 30 85 56 68 30 80 56 62 161 162 163 225 226 227 224 228 229 220 230 231 225 30 80 85 55 61 67 80 85 61 67 30 85 55 67 30 80 55 61 90 91 92 234 235 236 80 85 61 67 30 85 55 67 30 80 55 61 161 162 163 238 239 240 237 241 242 233 243 244 238 180 193 206 219 232 245 179 165 192 183 205 196 218 213 231 226 244 239 247 248 249 250 251 252 179 166 192 184 205 197 218 214 231 227 244 240 254 255 256 257 258 259 246 253 260 28 78 83 50 137 154 29 79 84 50 137 154 30 80 85 262 263 124 141 158 29 79 84 265 160 261 264 266 34 32 246 253 260 29 79 84 50 137 154 28 78 83 270 263 124 141 158 28 78 83 272 268 269 271 273 34 -2 246 253 260 30 80 85 270 262 275 276 277 125 142 159 267 274 278 57 -33 51 53 286 287 55 56 288 59 289 285 290 12 13 14 0 1 2 12 13 0 1 292 293 55 56 57 -46 -33 -15 295 -14 -22 297 298 295 12 13 14 0 1 2 296 299 300 292 301 293 -39 302 303 51 89 53 89 53 51 305 306 307 55 56 57 308 59 304 309 310 294 311 100 57 111 55 122 56 313 314 315 291 312 316 63 -34 286 287 61 62 319 65 320 318 321 12 13 14 0 1 2 12 13 0 1 323 324 61 62 63 -47 -34 12 13 14 0 1 2 296 299 300 323 326 324 -40 327 328 305 306 307 61 62 63 330 65 329 331 332 325 333 100 63 111 61 122 62 335 336 337 322 334 338 286 287 67 68 340 71 341 -7 342 343 12 13 14 0 1 2 12 13 1 345 346 67 68 69 -48 -35 12 13 14 0 1 2 296 299 300 345 348 346 -41 349 350 305 306 307 67 68 69 352 71 351 353 354 347 355 100 69 111 67 122 68 357 358 359 344 356 360 51 89 61 90 92 55 67 364 363 365 366 67 63 90 92 57 69 369 368 370 371 69 218 208 231 221 244 234 100 93 111 105 122 116 367 372 373 374 375 376 377 378 57 91 92 63 69 381 380 382 383 69 218 209 231 222 244 235 100 94 111 106 122 117 384 385 386 387 388 389 390 366 55 371 57 383 63 218 210 231 223 244 236 100 95 111 107 122 118 392 393 394 395 396 397 398 399 400 379 391 401 55 61 67 344 291 322 56 62 68 403 312 334 356 56 62 68 312 334 356 57 63 69 405 406 316 338 360 56 62 68 408 362 402 404 407 409 53 89 379 391 401 56 62 68 344 291 322 55 61 67 413 312 334 356 55 61 67 415 406 316 338 360 55 61 67 417 411 412 414 416 418 379 391 401 57 63 69 415 405 420 421 317 339 361 410 419 422 292 293 27 -46 -43 39 41 430 431 43 44 432 46 295 297 298 295 434 435 436 292 301 293 437 303 438 433 439 429 440 441 50 323 324 126 -47 -44 430 431 130 131 444 133 434 435 436 323 326 324 446 328 447 445 448 443 449 450 137 345 346 143 -48 -45 430 431 147 148 453 150 434 435 436 345 348 346 455 350 456 454 457 452 458 459 154 179 172 192 186 205 199 461 462 463 179 173 192 187 205 200 465 466 467 179 174 192 188 205 201 469 470 471 464 468 472 27 126 143 168 39 464 468 472 43 130 147 441 450 459 44 131 148 476 50 137 154 44 131 148 478 474 475 477 479 168 41 464 468 472 44 131 148 441 450 459 43 130 147 483 50 137 154 43 130 147 485 481 482 484 486 442 451 460 473 480 487 441 312 450 334 459 356 295 298 441 450 459 301 326 348 498 312 334 356 301 326 348 500 497 499 501 297 298 441 450 459 292 323 345 441 450 459 293 324 346 504 505 312 334 356 292 323 345 312 334 356 293 324 346 507 508 503 506 509 498 500 511 512 494 495 496 502 510 513 341 97 176 24 19 20 34 8 -2 25 20 34 8 -2 26 19 20 34 32 7 8 -2 59 22 23 53 51 11 65 23 53 51 11 71 22 23 53 51 89 10 11 46 16 17 168 41 5 133 17 168 41 5 150 16 17 168 41 39 4 5 303 13 14 297 295 2 328 14 297 295 2 350 13 14 297 295 298 1 2", dtype=np.int64, sep=" "),
@@ -11979,8 +11979,6 @@ _N, _NP, _NG = 51, 55, 4
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 51
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 1 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 5 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 6 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 7 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 8 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 9 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 10 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 11 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 12 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 13 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 14 15 15 15 15 15 15 15 15 15 15 15 15 15 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 16 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 17 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 18 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 19 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 20 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 21 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 22 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 23 24 24 24 24 24 24 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 25 26 26 26 26 26 26 26 26 26 26 26 26 27 28 28 28 28 29 30 30 30 31 32 32 32 32 32 33 34 34 34 34 35 36 36 36 37 38 38 38 38 38 39 40 40 40 40 41 42 42 42 43 44 44 44 44 44 45 46 46 46 46 47 48 48 48 49 50 50 50 50 50", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 1 2 3 4 5 6 7 8 9 10 11 12 16 17 25 27 28 29 30 31 32 33 34 35 36 37 38 39 40 42 44 0 1 2 3 4 5 6 7 8 9 10 11 13 16 17 25 27 28 29 30 31 32 33 34 35 36 37 38 40 41 42 44 0 1 2 3 4 5 6 7 8 9 10 11 14 16 17 25 27 28 29 30 31 32 33 34 35 36 37 38 40 42 43 44 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 25 26 27 28 29 30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 0 1 2 3 4 5 9 10 11 12 13 14 15 16 17 26 27 28 29 30 31 32 34 36 38 39 40 41 42 43 44 0 1 2 3 4 6 7 8 9 10 11 18 21 22 23 25 27 28 29 30 31 32 33 34 35 36 37 38 45 46 48 50 0 1 2 3 4 6 7 8 9 10 11 19 21 22 23 25 27 28 29 30 31 32 33 34 35 36 37 38 46 47 48 50 0 1 2 3 4 6 7 8 9 10 11 20 21 22 23 24 25 27 28 29 30 31 32 33 34 35 36 37 38 46 48 49 50 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 27 28 29 30 31 32 33 34 35 36 37 38 45 46 47 48 49 50 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 24 25 27 28 29 30 31 32 33 34 35 36 37 38 45 46 47 48 49 50 0 1 2 3 4 5 6 7 8 9 10 11 18 19 20 21 22 23 25 27 28 29 30 31 32 33 34 35 36 37 38 45 46 47 48 49 50 0 3 4 5 12 16 17 18 21 22 23 27 30 32 39 40 42 44 45 46 48 50 1 3 4 5 13 16 17 19 21 22 23 28 29 30 32 40 41 42 44 46 47 48 50 2 3 4 5 14 16 17 20 21 22 23 28 30 31 32 40 42 43 44 46 48 49 50 3 4 5 15 16 17 26 28 30 32 40 42 44 0 1 2 3 4 5 12 13 14 15 16 17 18 19 20 21 22 23 26 27 28 29 30 31 32 39 40 41 42 43 44 45 46 47 48 49 50 0 1 2 3 4 5 12 13 14 15 16 17 18 19 20 21 22 23 26 27 28 29 30 31 32 39 40 41 42 43 44 45 46 47 48 49 50 6 9 10 11 12 16 17 18 21 22 23 33 36 38 39 40 42 44 45 46 48 50 7 9 10 11 13 16 17 19 21 22 23 34 35 36 38 40 41 42 44 46 47 48 50 8 9 10 11 14 16 17 20 21 22 23 34 36 37 38 40 42 43 44 46 48 49 50 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 6 7 8 9 10 11 12 13 14 16 17 18 19 20 21 22 23 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 8 9 10 34 36 38 0 1 2 3 4 6 7 8 9 10 11 27 28 29 30 31 32 33 34 35 36 37 38 3 4 5 15 16 17 28 30 32 40 42 44 0 3 4 30 32 1 3 4 32 2 3 4 5 30 32 6 9 10 36 38 7 9 10 38 8 9 10 11 36 38 12 15 16 42 44 13 15 16 44 14 15 16 17 42 44 18 21 22 48 50 19 21 22 50 20 21 22 23 48 50", dtype=np.int64, sep=" ")
 

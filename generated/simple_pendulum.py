@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "simple_pendulum"
 MODEL_FILE = "simple_pendulum.yaml"
-MODEL_HASH = "3cea791a0cb8abb6cbbeb99dad4cd5d4"
+MODEL_HASH = "4610a9c1538bf3a2afbcf8745f39e28b"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 10.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "po
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4", sys.modules[__name__])
-__name__ = "_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4"
+    sys.modules.setdefault("_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b", sys.modules[__name__])
+__name__ = "_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b"
 
 STATE_NAMES = ("bob.m.px", "bob.m.py", "bob.m.pz", "bob.J.px", "bob.J.py", "bob.J.pz", "bob.x", "bob.ax", "bob.y", "bob.ay", "bob.z", "bob.az", )
 PARAM_NAMES = ("pin__stiffness", "pin__damping", "pin__rot_stiffness", "pin__rot_damping", "pin__tx_load", "pin__ty_load", "pin__tz_load", "pin__ry_load", "pin__rz_load", )
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67"
+_KERNEL_PREFIX = "_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,55 +118,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape_ptr = external constant [70 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape_ptr = external constant [70 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape_src = external constant [175 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape_src = external constant [175 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_row = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_row = external constant [65 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_col = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_col = external constant [65 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_zero = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_zero = external constant [65 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_k = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_k = external constant [65 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_i = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_i = external constant [65 x i64]
 
-@_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_j = external constant [65 x i64]
+@_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_j = external constant [65 x i64]
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 1073
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -225,7 +225,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -256,7 +256,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -314,83 +314,83 @@ ends:
 }
 
 
-define internal void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 70
   %v2 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 245
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 6624, i1 false)
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_tape_src, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape(double* %v2, double* %v1, i64 0, i64 69, i64 12, i64* getelementptr inbounds ([70 x i64], [70 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([175 x i64], [175 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_scatter(double* %J, double* %v1, i64 65, i64 12, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 245
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_col, i64 0, i64 0))
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_scatter(double* %J, double* %v1, i64 65, i64 0, i64 12, i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([65 x i64], [65 x i64]* @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 8680)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 560)
   %w = bitcast i8* %raw to double*
@@ -406,7 +406,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 3
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -414,15 +414,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -435,33 +435,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -824,7 +824,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 7
   %v2 = load double, double* %v1, align 8
@@ -1498,7 +1498,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 6
   %v2 = load double, double* %v1, align 8
@@ -1524,7 +1524,7 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -1536,14 +1536,14 @@ entry:
   ret void
 }
 
-define void @_bgc_simple_pendulum_3cea791a0cb8abb6cbbeb99dad4cd5d4_dc5752c79f67_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_simple_pendulum_4610a9c1538bf3a2afbcf8745f39e28b_52819b63ce10_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 11 13 14 15 20 22 26 28 29 31 36 38 43 45 49 51 52 54 55 57 59 61 62 66 68 69 71 72 73 79 85 89 90 92 94 95 101 105 106 108 110 112 114 116 122 128 130 136 142 148 150 151 152 153 154 155 156 157 162 163 167 168 175", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-6 -3 -2 -6 -3 -2 3 5 0 1 2 6 -10 -4 -1 3 5 0 1 2 4 0 9 8 10 11 12 -7 13 7 14 3 5 0 1 2 16 -11 3 5 0 1 2 3 4 9 8 18 19 20 -8 21 17 22 23 4 2 25 -12 4 5 1 9 8 27 28 29 -9 30 26 31 -5 18 9 33 8 10 6 11 9 33 8 27 25 28 35 36 10 27 37 34 38 39 27 10 9 33 8 18 16 19 42 36 18 27 43 41 44 45 27 39 10 45 18 47 48 49 40 46 10 18 27 15 23 32 11 19 28 51 50 49 40 46 6 16 25 49 40 46 11 19 28 15 23 32 10 18 27 55 54 15 24 32 52 53 56 -7 4 5 9 33 2 -8 5 9 33 2 -9 4 5 9 33 8 1 2", dtype=np.int64, sep=" "),
@@ -1562,8 +1562,6 @@ _N, _NP, _NG = 12, 9, 1
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 12
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("0 0 0 0 0 0 0 1 1 1 1 1 1 1 2 2 2 2 2 2 3 3 3 3 3 3 3 3 3 3 3 3 4 4 4 4 4 4 5 5 5 5 5 5 5 5 5 5 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("0 3 5 6 7 9 11 1 3 5 7 8 9 11 2 3 5 9 10 11 0 1 2 3 4 5 6 7 8 9 10 11 3 4 5 7 9 11 0 1 2 3 4 5 6 7 8 9 10 11 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" ")
 

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 MODEL_NAME = "tumbling_box"
 MODEL_FILE = "tumbling_box.yaml"
-MODEL_HASH = "42069aa981a133211b76defc3f3ffa11"
+MODEL_HASH = "5499b19c8c0566703af987e3723b9be4"
 BGC_VERSION = "0.1.0"
 METHOD = "parasitic"
 # the model file's run settings (simulation:), which `bgc simulate` takes from here when
@@ -38,8 +38,8 @@ SETTINGS = {"t_end": 5.0, "rtol": 1e-08, "atol": 1e-10, "solver": "native", "poi
 # name, the same however this file is imported (package.module, a bare name on sys.path,
 # a file path), keeps one cache valid for all of them.
 if __name__ in sys.modules:
-    sys.modules.setdefault("_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11", sys.modules[__name__])
-__name__ = "_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11"
+    sys.modules.setdefault("_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4", sys.modules[__name__])
+__name__ = "_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4"
 
 STATE_NAMES = ("box.m.px", "box.m.py", "box.m.pz", "box.J.px", "box.J.py", "box.J.pz", "box.x", "box.ax", "box.y", "box.ay", "box.z", "box.az", )
 PARAM_NAMES = ()
@@ -105,7 +105,7 @@ def max_step(p):
 # the linear block solves and the wrappers below. w is the workspace of one call: a slot
 # per assigned symbol, a region per linear block, the Jacobian's partials and tape.
 # ---------------------------------------------------------------------------------------
-_KERNEL_PREFIX = "_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a"
+_KERNEL_PREFIX = "_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c"
 KERNEL_FUNCTIONS = 22
 _KERNEL_IR = """\
 declare double @llvm.cos.f64(double)
@@ -118,55 +118,55 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape_ptr = external constant [23 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape_ptr = external constant [23 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape_src = external constant [38 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape_src = external constant [38 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_row = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_row = external constant [21 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_col = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_col = external constant [21 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_zero = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_zero = external constant [21 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_k = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_k = external constant [21 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_i = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_i = external constant [21 x i64]
 
-@_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_j = external constant [21 x i64]
+@_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_j = external constant [21 x i64]
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
   %scratch = getelementptr inbounds double, double* %w, i64 184
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs(double %t, double* %x, double* %p, double* %w, double* %scratch)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) nounwind {
 entry:
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con_0(double %t, double* %x, double* %p, double* %w, double* %out)
   ret void
 }
 
-define internal void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
+define internal void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape(double* noalias %d, double* noalias %pv, i64 %start, i64 %stop, i64 %nc, i64* %ptr, i64* %src) noinline nounwind {
 entry:
   %none = icmp sge i64 %start, %stop
   br i1 %none, label %exit, label %row
@@ -225,7 +225,7 @@ exit:
   ret void
 }
 
-define internal void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
+define internal void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_scatter(double* noalias %J, double* noalias %d, i64 %nnz, i64 %n, i64 %nc, i64* %ii, i64* %jj, i64* %row, i64* %col) nounwind {
 entry:
   %none = icmp sle i64 %nnz, 0
   br i1 %none, label %exit, label %loop
@@ -256,7 +256,7 @@ exit:
 
 ; np.interp(t, tt, yy) (held at the end values outside, NaN for NaN), or with %slope
 ; the slope of the segment t lies in (0 outside), as the numba code had it
-define internal double @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
+define internal double @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_interp(double %t, double* %tt, double* %yy, i64 %n, i1 %slope) nounwind {
 entry:
   br label %scan
 scan:
@@ -314,83 +314,83 @@ ends:
 }
 
 
-define internal void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
+define internal void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_tape(double %t, double* noalias %x, double* noalias %p, double* noalias %w) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 36
   %v2 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac(double %t, double* %x, double* %p, double* %w, double* %v1)
   %v3 = getelementptr inbounds double, double* %w, i64 74
   %v4 = bitcast double* %v3 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v4, i8 0, i64 880, i1 false)
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_tape_src, i64 0, i64 0))
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape(double* %v2, double* %v1, i64 0, i64 22, i64 5, i64* getelementptr inbounds ([23 x i64], [23 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape_ptr, i64 0, i64 0), i64* getelementptr inbounds ([38 x i64], [38 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_tape_src, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_tape(double %t, double* %x, double* %p, double* %w)
   %v2 = getelementptr inbounds double, double* %J, i64 0
   %v3 = bitcast double* %v2 to i8*
   call void @llvm.memset.p0i8.i64(i8* %v3, i8 0, i64 1152, i1 false)
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_scatter(double* %J, double* %v1, i64 21, i64 12, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_i, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_j, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %w, i64 74
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_tape(double %t, double* %x, double* %p, double* %w)
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_col, i64 0, i64 0))
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_tape(double %t, double* %x, double* %p, double* %w)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_scatter(double* %J, double* %v1, i64 21, i64 0, i64 5, i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_zero, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_k, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_row, i64 0, i64 0), i64* getelementptr inbounds ([21 x i64], [21 x i64]* @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_col, i64 0, i64 0))
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_full(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jacv_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 1568)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_vals(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con_entry(double %t, double* %x, double* %p, double* %out) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con(double %t, double* %x, double* %p, double* %w, double* %out)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con(double %t, double* %x, double* %p, double* %w, double* %out)
   call void @free(i8* %raw)
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y) nounwind {
 entry:
   %raw = call i8* @malloc(i64 288)
   %w = bitcast i8* %raw to double*
@@ -406,7 +406,7 @@ body:
   %xi = getelementptr inbounds double, double* %X, i64 %xo
   %yo = mul i64 %i, 5
   %yi = getelementptr inbounds double, double* %Y, i64 %yo
-  call void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
+  call void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out(double %tv, double* %xi, double* %p, double* %w, double* %yi)
   %next = add i64 %i, 1
   br label %head
 exit:
@@ -414,15 +414,15 @@ exit:
   ret void
 }
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 """
 _KERNEL_IR_STRAIGHT = """\
 declare double @llvm.cos.f64(double)
@@ -435,33 +435,33 @@ declare void @free(i8*)
 
 declare void @llvm.memset.p0i8.i64(i8*, i8, i64, i1)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_full(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_vals(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %J)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jacv_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jacv_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con_entry(double %t, double* %x, double* %p, double* %out)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con_entry(double %t, double* %x, double* %p, double* %out)
 
-declare void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
+declare void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out_at(double* %t, double* %X, i64 %k, double* %p, double* %Y)
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_rhs_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -587,7 +587,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_jac_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -773,7 +773,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_out_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 3
   %v2 = load double, double* %v1, align 8
@@ -837,7 +837,7 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_guard_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   %v1 = getelementptr inbounds double, double* %x, i64 9
   %v2 = load double, double* %v1, align 8
@@ -849,14 +849,14 @@ entry:
   ret void
 }
 
-define void @_bgc_tumbling_box_42069aa981a133211b76defc3f3ffa11_21617e618f4a_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
+define void @_bgc_tumbling_box_5499b19c8c0566703af987e3723b9be4_4a4a59c4f03c_con_0(double %t, double* noalias %x, double* noalias %p, double* noalias %w, double* noalias %out) noinline nounwind {
 entry:
   ret void
 }
 """
 # the kernels' integer tables (the instance loops' rows, the Jacobian's tape, the linear
-# blocks' plans), which the IR declares external: LLVM is given their addresses (as text
-# numpy parses: as IR they were most of a large model's text and of its parse)
+# blocks' plans), which the IR declares external: LLVM is given their addresses (as IR
+# text they were most of a large model's module and of its parse)
 _KERNEL_DATA = {
     "tape_ptr": np.fromstring("0 1 2 3 4 5 6 7 9 11 13 14 15 16 17 18 19 20 25 26 30 31 38", dtype=np.int64, sep=" "),
     "tape_src": np.fromstring("-5 -4 -5 -4 -1 -2 -3 5 6 4 6 4 5 -1 -1 -1 7 8 9 10 2 3 4 5 1 11 3 4 5 1 12 2 3 4 5 6 0 1", dtype=np.int64, sep=" "),
@@ -875,8 +875,6 @@ _N, _NP, _NG = 12, 0, 1
 # model's own, its Schur complement (``jac``), is dense; the native integrator factors
 # its Newton matrices on it (``jac_augmented``)
 JAC_SIZE = 12
-# (as text numpy parses: a list display of A02's 27 669 entries cost Python 0.04 s to
-# compile, this 1 ms)
 JAC_I = np.fromstring("3 3 4 4 5 5 6 7 7 7 7 8 9 9 9 10 11 11 11 11 11", dtype=np.int64, sep=" ")
 JAC_J = np.fromstring("4 5 3 5 3 4 0 3 4 9 11 1 3 4 11 2 3 4 5 9 11", dtype=np.int64, sep=" ")
 

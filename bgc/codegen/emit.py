@@ -99,8 +99,15 @@ def _ir_block(text: str) -> str:
     return '"""\\\n' + text + '"""'
 
 
+def _int64s(values) -> str:
+    """A numpy int64 array of integers as text numpy parses: a list display of A02's
+    Jacobian pattern (27 669 entries) cost Python 0.04 s to compile, this 1 ms."""
+    return f'np.fromstring("{" ".join(map(str, values))}", dtype=np.int64, sep=" ")'
+
+
 _ENV.filters["pystr"] = py_str
 _ENV.filters["irblock"] = _ir_block
+_ENV.filters["int64s"] = _int64s
 _ENV.filters["doc"] = _doc
 _ENV.filters["ident"] = _ident
 def _defines(item) -> list:
@@ -268,12 +275,11 @@ def render(system: EquationSystem) -> str:
         _ident(sym.name, "symbol")
     canonical = f"_bgc_{_ident(m.name, 'model name')}_{model_hash(m.digest, system.variant)}"
     kern = kernels.lower(system, kernels.PLACEHOLDER, progs, jt, memo, data=True)
-    data = [(name, " ".join(map(str, values))) for name, values in kern.data.items()]
     # the kernels' names: the module's and its IR's digest, with their tables' (one model
     # compiled with other options is other code; two such modules in one process must not
     # share a name)
-    digest = hashlib.sha256("\n".join([kern.ir, kern.ir_straight] + [
-        f"{name} {text}" for name, text in data]).encode()).hexdigest()[:12]
+    digest = hashlib.sha256("\n".join([kern.ir, kern.ir_straight, repr(kern.data)]).encode()
+                            ).hexdigest()[:12]
     prefix = f"{canonical}_{digest}"
     ir = kern.ir.replace(kernels.PLACEHOLDER, prefix)
     ir_straight = kern.ir_straight.replace(kernels.PLACEHOLDER, prefix)
@@ -283,7 +289,8 @@ def render(system: EquationSystem) -> str:
         version=__version__, source=Path(m.file).name, method=system.method, name=m.name,
         settings=[(f.name, _literal(getattr(m.settings, f.name))) for f in fields(m.settings)],
         model_hash=model_hash(m.digest, system.variant),
-        canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight, data=data,
+        canonical=canonical, prefix=prefix, ir=ir, ir_straight=ir_straight,
+        data=kern.data,
         n_functions=ir.count("\ndefine ") + ir_straight.count("\ndefine "),
         n_work=kern.n_work, n_eval=kern.n_eval, n_schur=kern.n_schur,
         lstsq=any(b.rank >= 0 for b in kern.blocks),
